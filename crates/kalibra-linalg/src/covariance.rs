@@ -1,0 +1,257 @@
+use nalgebra::linalg::Cholesky;
+use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, Storage, U1};
+
+use crate::{Alloc, LinalgError, check_finite};
+
+/// Largest relative asymmetry `|a_ij - a_ji| / sqrt(|a_ii a_jj|)` accepted from a matrix that
+/// is meant to be symmetric. Products such as `F P F^T` leave asymmetry of a few ulps; anything
+/// near this bound is a bug in the caller, not rounding.
+pub const SYMMETRY_TOLERANCE: f64 = 1e-8;
+
+/// A symmetric positive definite matrix with its Cholesky factor.
+///
+/// The invariant is checked once, at construction: the matrix is finite, symmetric to
+/// [`SYMMETRY_TOLERANCE`] (then made exactly symmetric), and its Cholesky factorisation
+/// succeeds. Afterwards every solve, quadratic form and log-determinant reuses the factor.
+///
+/// ```
+/// use kalibra_linalg::{Covariance, LinalgError, Matrix2};
+///
+/// let ok = Covariance::new(Matrix2::new(2.0, 0.5, 0.5, 1.0))?;
+/// assert!((ok.log_det() - (2.0f64 * 1.0 - 0.25).ln()).abs() < 1e-14);
+///
+/// let indefinite = Covariance::new(Matrix2::new(1.0, 2.0, 2.0, 1.0));
+/// assert!(matches!(indefinite, Err(LinalgError::NotPositiveDefinite { .. })));
+/// # Ok::<(), LinalgError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Covariance<D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    matrix: OMatrix<f64, D, D>,
+    chol: Cholesky<f64, D>,
+}
+
+impl<D: Dim> Covariance<D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// Checks `matrix` and factorises it.
+    ///
+    /// # Errors
+    /// [`LinalgError::DimensionMismatch`] if it is not square, [`LinalgError::NonFinite`] if it
+    /// holds NaN or an infinity, [`LinalgError::NotSymmetric`] beyond [`SYMMETRY_TOLERANCE`],
+    /// [`LinalgError::NotPositiveDefinite`] if the Cholesky factorisation fails.
+    pub fn new(matrix: OMatrix<f64, D, D>) -> Result<Self, LinalgError> {
+        Self::named(matrix, "covariance")
+    }
+
+    /// As [`Covariance::new`], with the name the errors report (for example `"innovation
+    /// covariance S"`).
+    ///
+    /// # Errors
+    /// As [`Covariance::new`].
+    pub fn named(mut matrix: OMatrix<f64, D, D>, what: &'static str) -> Result<Self, LinalgError> {
+        check_square(&matrix, what)?;
+        check_finite(&matrix, what)?;
+        let asymmetry = relative_asymmetry(&matrix);
+        if asymmetry > SYMMETRY_TOLERANCE {
+            return Err(LinalgError::NotSymmetric { what, asymmetry });
+        }
+        crate::symmetrize(&mut matrix);
+        Self::from_symmetric(matrix, what)
+    }
+
+    /// Factorises a matrix the caller guarantees to be finite and exactly symmetric (the
+    /// filters' own products after [`symmetrize`](crate::symmetrize)); only positive
+    /// definiteness is checked.
+    ///
+    /// # Errors
+    /// [`LinalgError::NotPositiveDefinite`] if the Cholesky factorisation fails, which includes
+    /// NaN entries.
+    pub fn from_symmetric(
+        matrix: OMatrix<f64, D, D>,
+        what: &'static str,
+    ) -> Result<Self, LinalgError> {
+        match Cholesky::new(matrix.clone()) {
+            // A NaN pivot passes nalgebra's `> 0` test only as false, so NaN input lands in
+            // the error branch; the finite check on the factor's diagonal catches overflow.
+            Some(chol) if chol.l_dirty().diagonal().iter().all(|d| d.is_finite()) => {
+                Ok(Self { matrix, chol })
+            }
+            _ => Err(LinalgError::NotPositiveDefinite { what }),
+        }
+    }
+
+    /// A diagonal covariance from its (positive, finite) variances.
+    ///
+    /// # Errors
+    /// [`LinalgError::NonFinite`] or [`LinalgError::NotPositiveDefinite`] for a bad variance.
+    pub fn from_diagonal(variances: &OVector<f64, D>) -> Result<Self, LinalgError> {
+        Self::named(OMatrix::from_diagonal(variances), "diagonal covariance")
+    }
+
+    /// The matrix.
+    pub fn matrix(&self) -> &OMatrix<f64, D, D> {
+        &self.matrix
+    }
+
+    /// The Cholesky decomposition `L L^T` of the matrix.
+    pub fn cholesky(&self) -> &Cholesky<f64, D> {
+        &self.chol
+    }
+
+    /// The lower-triangular factor `L` (a fresh matrix with zeros above the diagonal).
+    pub fn factor(&self) -> OMatrix<f64, D, D> {
+        self.chol.l()
+    }
+
+    /// Dimension of the (square) matrix.
+    pub fn dim(&self) -> usize {
+        self.matrix.nrows()
+    }
+
+    /// Consumes the value, returning the matrix.
+    pub fn into_matrix(self) -> OMatrix<f64, D, D> {
+        self.matrix
+    }
+
+    /// Solves `C x = b` for `x` with the stored factor.
+    ///
+    /// # Errors
+    /// [`LinalgError::DimensionMismatch`] if `b` has the wrong number of rows (possible only with
+    /// `Dyn` dimensions).
+    pub fn solve<C: Dim, S>(&self, b: &Matrix<f64, D, C, S>) -> Result<OMatrix<f64, D, C>, LinalgError>
+    where
+        S: Storage<f64, D, C>,
+        DefaultAllocator: nalgebra::allocator::Allocator<D, C>,
+    {
+        crate::check_dim(self.dim(), b.nrows(), "right-hand side")?;
+        Ok(self.chol.solve(b))
+    }
+
+    /// The quadratic form `v^T C^-1 v`, computed as `|L^-1 v|^2` (one triangular solve).
+    ///
+    /// # Errors
+    /// [`LinalgError::DimensionMismatch`] if `v` has the wrong length (possible only with `Dyn`
+    /// dimensions).
+    pub fn quad_form<S>(&self, v: &Matrix<f64, D, U1, S>) -> Result<f64, LinalgError>
+    where
+        S: Storage<f64, D, U1>,
+    {
+        crate::check_dim(self.dim(), v.nrows(), "vector")?;
+        let mut w = v.clone_owned();
+        // The factor is non-singular by construction, so the solve cannot fail.
+        self.chol.l_dirty().solve_lower_triangular_unchecked_mut(&mut w);
+        Ok(w.norm_squared())
+    }
+
+    /// `ln det C`, from the factor's diagonal.
+    pub fn log_det(&self) -> f64 {
+        self.chol.ln_determinant()
+    }
+
+    /// `tr(C^-1 B)` for a square `B` of the same size, by a solve.
+    ///
+    /// # Errors
+    /// [`LinalgError::DimensionMismatch`] if `b` has the wrong size.
+    pub fn trace_solve(&self, b: &OMatrix<f64, D, D>) -> Result<f64, LinalgError> {
+        crate::check_dim(self.dim(), b.ncols(), "matrix")?;
+        Ok(self.solve(b)?.trace())
+    }
+
+    /// The explicit inverse. Prefer [`Covariance::solve`]; this exists for reporting.
+    pub fn inverse(&self) -> OMatrix<f64, D, D> {
+        self.chol.inverse()
+    }
+}
+
+fn check_square<D: Dim>(m: &OMatrix<f64, D, D>, what: &'static str) -> Result<(), LinalgError>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    crate::check_dim(m.nrows(), m.ncols(), what)
+}
+
+/// Largest `|a_ij - a_ji| / sqrt(|a_ii a_jj|)`, with an absolute fallback when a diagonal is 0.
+pub(crate) fn relative_asymmetry<D: Dim>(m: &OMatrix<f64, D, D>) -> f64
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = m.nrows();
+    let mut worst = 0.0f64;
+    for j in 0..n {
+        for i in (j + 1)..n {
+            let diff = (m[(i, j)] - m[(j, i)]).abs();
+            if diff == 0.0 {
+                continue;
+            }
+            let scale = (m[(i, i)] * m[(j, j)]).abs().sqrt();
+            let rel = if scale > 0.0 { diff / scale } else { f64::INFINITY };
+            worst = worst.max(rel);
+        }
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{DMatrix, DVector, Matrix3, Vector3};
+    use approx::assert_relative_eq;
+
+    fn spd3() -> Matrix3<f64> {
+        Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0)
+    }
+
+    #[test]
+    fn quad_form_and_solve_match_the_inverse() {
+        let c = Covariance::new(spd3()).unwrap();
+        let v = Vector3::new(0.3, -1.0, 2.0);
+        let inv = spd3().try_inverse().unwrap();
+        assert_relative_eq!(c.quad_form(&v).unwrap(), (v.transpose() * inv * v)[0], epsilon = 1e-13);
+        assert_relative_eq!(c.solve(&v).unwrap(), inv * v, epsilon = 1e-13);
+        assert_relative_eq!(c.log_det(), spd3().determinant().ln(), epsilon = 1e-13);
+        assert_relative_eq!(c.trace_solve(&Matrix3::identity()).unwrap(), inv.trace(), epsilon = 1e-13);
+    }
+
+    #[test]
+    fn rejects_bad_input_with_typed_errors() {
+        let mut nan = spd3();
+        nan[(1, 1)] = f64::NAN;
+        assert!(matches!(Covariance::new(nan), Err(LinalgError::NonFinite { .. })));
+        let mut inf = spd3();
+        inf[(0, 2)] = f64::INFINITY;
+        assert!(matches!(Covariance::new(inf), Err(LinalgError::NonFinite { .. })));
+        let mut asym = spd3();
+        asym[(0, 1)] += 0.1;
+        assert!(matches!(Covariance::new(asym), Err(LinalgError::NotSymmetric { .. })));
+        let indefinite = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, 1.0));
+        assert!(matches!(
+            Covariance::new(indefinite),
+            Err(LinalgError::NotPositiveDefinite { .. })
+        ));
+        let not_square = DMatrix::<f64>::zeros(2, 3);
+        assert!(matches!(
+            Covariance::<nalgebra::Dyn>::new(not_square),
+            Err(LinalgError::DimensionMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn dynamic_size_checks_operand_dimensions() {
+        let c = Covariance::new(DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 2.0]))).unwrap();
+        let wrong = DVector::from_vec(vec![1.0, 2.0, 3.0]);
+        assert!(matches!(c.quad_form(&wrong), Err(LinalgError::DimensionMismatch { .. })));
+        assert!(matches!(c.solve(&wrong), Err(LinalgError::DimensionMismatch { .. })));
+    }
+
+    #[test]
+    fn rounding_asymmetry_is_accepted_and_removed() {
+        let mut m = spd3();
+        m[(0, 1)] += 1e-14;
+        let c = Covariance::new(m).unwrap();
+        assert_eq!(c.matrix()[(0, 1)], c.matrix()[(1, 0)]);
+    }
+}

@@ -1,0 +1,73 @@
+//! The matrix vocabulary of kalibra.
+//!
+//! # What this crate is for
+//! Every other kalibra crate speaks in the types and kernels defined here:
+//!
+//! * nalgebra matrices generic over their dimensions, fixed to `f64`. A dimension is a
+//!   [`Dim`]: [`Const<N>`](Const) (aliases [`U1`] .. [`U9`]) for sizes known at compile time,
+//!   which live on the stack and compile to straight-line code, or [`Dyn`] for sizes known only
+//!   at run time. One generic implementation serves both.
+//! * [`Alloc`], one bound-alias trait that collects the allocator bounds a filter over a state
+//!   dimension `N` and a measurement dimension `M` needs, so each signature carries one line:
+//!   `where DefaultAllocator: Alloc<N, M>`.
+//! * [`Covariance`], a checked symmetric positive definite matrix that keeps its Cholesky
+//!   factor, so solves, quadratic forms and log-determinants never refactorise.
+//! * [`PsdMatrix`], a checked symmetric positive *semi*-definite matrix with a square-root
+//!   factor, for process noise that is often rank-deficient (`Q = G G^T`).
+//! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`joseph_update`],
+//!   [`standard_update`], [`symmetrize`], and [`sigma_sqrt`], a matrix square root for sigma
+//!   points with a documented fallback.
+//!
+//! It is not a general linear-algebra library: it has no per-operation backend traits and no
+//! large-matrix kernels (faer comes in behind a feature once a benchmark shows it pays, for state
+//! dimensions of about 32 and more).
+//!
+//! # Notation
+//! `P` is a state covariance (n x n), `F` a transition Jacobian, `Q` a process-noise covariance,
+//! `H` a measurement Jacobian (m x n), `R` a measurement-noise covariance, `S = H P H^T + R` the
+//! innovation covariance and `K = P H^T S^-1` the gain.
+//!
+//! # Numerical choices
+//! * `f64` throughout.
+//! * Never an explicit inverse where a solve will do: [`Covariance::solve`] and
+//!   [`Covariance::quad_form`] use the stored Cholesky factor (a quadratic form is one triangular
+//!   solve, `|L^-1 v|^2`).
+//! * A matrix passed as a covariance must be symmetric to a relative tolerance of
+//!   [`SYMMETRY_TOLERANCE`]; it is then made exactly symmetric (mean of the two triangles) before
+//!   factorisation, so rounding from earlier products does not reject good input.
+//! * Semi-definite factors use a pivot tolerance relative to each diagonal entry
+//!   ([`PIVOT_TOLERANCE`]), so widely different scales in one matrix are not confused.
+//!
+//! # Example
+//! ```
+//! use kalibra_linalg::{Covariance, Matrix2, Vector2};
+//!
+//! let s = Covariance::new(Matrix2::new(4.0, 1.0, 1.0, 3.0))?;
+//! let nu = Vector2::new(1.0, -2.0);
+//! // nu^T S^-1 nu through the Cholesky factor, no inverse formed.
+//! let nis = s.quad_form(&nu)?;
+//! let direct = (nu.transpose() * s.matrix().try_inverse().unwrap() * nu)[0];
+//! assert!((nis - direct).abs() < 1e-12);
+//! # Ok::<(), kalibra_linalg::LinalgError>(())
+//! ```
+
+mod alloc;
+mod covariance;
+mod error;
+mod kernels;
+mod psd;
+
+pub use alloc::Alloc;
+pub use covariance::{Covariance, SYMMETRY_TOLERANCE};
+pub use error::LinalgError;
+pub use kernels::{
+    check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
+};
+pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
+
+pub use nalgebra;
+pub use nalgebra::{
+    Const, DMatrix, DVector, DefaultAllocator, Dim, DimName, Dyn, Matrix2, Matrix3, Matrix4,
+    OMatrix, OVector, SMatrix, SVector, U1, U2, U3, U4, U5, U6, U7, U8, U9, Vector2, Vector3,
+    Vector4,
+};

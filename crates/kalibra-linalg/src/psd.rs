@@ -1,0 +1,232 @@
+//! Square roots of symmetric positive semi-definite matrices.
+
+use nalgebra::linalg::Cholesky;
+use nalgebra::{DefaultAllocator, Dim, OMatrix};
+
+use crate::covariance::relative_asymmetry;
+use crate::{Alloc, LinalgError, SYMMETRY_TOLERANCE, check_finite};
+
+/// Relative pivot tolerance of [`semidefinite_factor`]: a pivot `d_j` of the elimination with
+/// `|d_j| <= PIVOT_TOLERANCE * a_jj` is treated as an exact zero (a rank deficiency, such as
+/// the `Q = G G^T` of a discrete white-noise-acceleration model, whose pivots come out as a few
+/// ulps of either sign). Measured against each column's own diagonal, so a matrix holding both
+/// `1e6` and `1e-6` variances is not mistaken for a singular one.
+pub const PIVOT_TOLERANCE: f64 = 1e-10;
+
+/// How [`sigma_sqrt`] obtained its factor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SqrtMethod {
+    /// The standard Cholesky factorisation succeeded: the matrix is positive definite.
+    Cholesky,
+    /// Cholesky failed and the semi-definite factorisation ([`semidefinite_factor`]) was used:
+    /// the matrix is singular to working precision; the factor has zero columns where the
+    /// matrix has no variance.
+    SemiDefinite,
+}
+
+/// A lower-triangular `L` with `L L^T = A` for a symmetric positive semi-definite `A`.
+///
+/// This is the Cholesky elimination with one change: a pivot within [`PIVOT_TOLERANCE`] of zero
+/// (relative to its diagonal entry) zeroes its column instead of failing, after checking that
+/// the rest of the column is zero too (otherwise `A` is indefinite). The returned rank counts the
+/// non-zero columns.
+///
+/// ```
+/// use kalibra_linalg::{semidefinite_factor, Matrix2};
+/// // Rank one: [1 1; 1 1] = [1 0; 1 0] [1 0; 1 0]^T.
+/// let (l, rank) = semidefinite_factor(&Matrix2::new(1.0, 1.0, 1.0, 1.0), "Q")?;
+/// assert_eq!(rank, 1);
+/// assert!((l * l.transpose() - Matrix2::new(1.0, 1.0, 1.0, 1.0)).norm() < 1e-15);
+/// # Ok::<(), kalibra_linalg::LinalgError>(())
+/// ```
+///
+/// # Errors
+/// [`LinalgError::NotPositiveSemiDefinite`] for a clearly negative pivot or a zero pivot with a
+/// non-zero column, [`LinalgError::NonFinite`] for NaN or infinite entries,
+/// [`LinalgError::DimensionMismatch`] if `a` is not square.
+pub fn semidefinite_factor<D: Dim>(
+    a: &OMatrix<f64, D, D>,
+    what: &'static str,
+) -> Result<(OMatrix<f64, D, D>, usize), LinalgError>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = a.nrows();
+    crate::check_dim(n, a.ncols(), what)?;
+    check_finite(a, what)?;
+    let (nr, nc) = a.shape_generic();
+    let mut l = OMatrix::<f64, D, D>::zeros_generic(nr, nc);
+    let mut rank = 0;
+    for j in 0..n {
+        let ajj = a[(j, j)];
+        let mut d = ajj;
+        for k in 0..j {
+            d -= l[(j, k)] * l[(j, k)];
+        }
+        let tol = PIVOT_TOLERANCE * ajj.abs();
+        if d > tol {
+            let ljj = d.sqrt();
+            l[(j, j)] = ljj;
+            for i in (j + 1)..n {
+                let mut s = a[(i, j)];
+                for k in 0..j {
+                    s -= l[(i, k)] * l[(j, k)];
+                }
+                l[(i, j)] = s / ljj;
+            }
+            rank += 1;
+        } else if d >= -tol {
+            // A zero pivot of a PSD matrix forces a zero column of the Schur complement: for
+            // PSD S, |S_ij| <= sqrt(S_ii S_jj). Anything larger means A is indefinite.
+            for i in (j + 1)..n {
+                let mut s = a[(i, j)];
+                for k in 0..j {
+                    s -= l[(i, k)] * l[(j, k)];
+                }
+                let bound = 10.0 * PIVOT_TOLERANCE.sqrt() * (a[(i, i)].abs() * ajj.abs()).sqrt();
+                if s.abs() > bound {
+                    return Err(LinalgError::NotPositiveSemiDefinite { what, index: j, pivot: d });
+                }
+            }
+        } else {
+            return Err(LinalgError::NotPositiveSemiDefinite { what, index: j, pivot: d });
+        }
+    }
+    Ok((l, rank))
+}
+
+/// A matrix square root `L` (lower triangular, `L L^T = P`) for generating sigma points.
+///
+/// Tries the standard Cholesky factorisation first. When it fails, which happens for a
+/// covariance that is singular to working precision (a state with no uncertainty left, a
+/// rank-deficient initial covariance), it falls back to [`semidefinite_factor`], which zeroes the
+/// columns of directions without variance: the sigma points then collapse onto the mean along
+/// those directions, which is the correct limit. A clearly indefinite `P` is an error, never
+/// silently repaired.
+///
+/// # Errors
+/// As [`semidefinite_factor`].
+pub fn sigma_sqrt<D: Dim>(
+    p: &OMatrix<f64, D, D>,
+    what: &'static str,
+) -> Result<(OMatrix<f64, D, D>, SqrtMethod), LinalgError>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    if let Some(chol) = Cholesky::new(p.clone()) {
+        let l = chol.unpack();
+        if l.iter().all(|v| v.is_finite()) {
+            return Ok((l, SqrtMethod::Cholesky));
+        }
+    }
+    let (l, _) = semidefinite_factor(p, what)?;
+    Ok((l, SqrtMethod::SemiDefinite))
+}
+
+/// A symmetric positive semi-definite matrix with a square-root factor: the type for noise
+/// covariances, which are often rank-deficient (`Q = G G^T`), and for sampling.
+///
+/// Checked once at construction: finite, symmetric to [`SYMMETRY_TOLERANCE`] (then made exactly
+/// symmetric), and factorable by [`semidefinite_factor`].
+#[derive(Clone, Debug)]
+pub struct PsdMatrix<D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    matrix: OMatrix<f64, D, D>,
+    factor: OMatrix<f64, D, D>,
+    rank: usize,
+}
+
+impl<D: Dim> PsdMatrix<D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// Checks and factorises `matrix`.
+    ///
+    /// # Errors
+    /// [`LinalgError::NonFinite`], [`LinalgError::NotSymmetric`],
+    /// [`LinalgError::NotPositiveSemiDefinite`] or [`LinalgError::DimensionMismatch`].
+    pub fn new(matrix: OMatrix<f64, D, D>) -> Result<Self, LinalgError> {
+        Self::named(matrix, "noise covariance")
+    }
+
+    /// As [`PsdMatrix::new`], with the name the errors report.
+    ///
+    /// # Errors
+    /// As [`PsdMatrix::new`].
+    pub fn named(mut matrix: OMatrix<f64, D, D>, what: &'static str) -> Result<Self, LinalgError> {
+        crate::check_dim(matrix.nrows(), matrix.ncols(), what)?;
+        check_finite(&matrix, what)?;
+        let asymmetry = relative_asymmetry(&matrix);
+        if asymmetry > SYMMETRY_TOLERANCE {
+            return Err(LinalgError::NotSymmetric { what, asymmetry });
+        }
+        crate::symmetrize(&mut matrix);
+        let (factor, rank) = semidefinite_factor(&matrix, what)?;
+        Ok(Self { matrix, factor, rank })
+    }
+
+    /// The matrix.
+    pub fn matrix(&self) -> &OMatrix<f64, D, D> {
+        &self.matrix
+    }
+
+    /// The lower-triangular factor `L`, `L L^T = A`.
+    pub fn factor(&self) -> &OMatrix<f64, D, D> {
+        &self.factor
+    }
+
+    /// Numerical rank (non-zero columns of the factor).
+    pub fn rank(&self) -> usize {
+        self.rank
+    }
+
+    /// Dimension of the (square) matrix.
+    pub fn dim(&self) -> usize {
+        self.matrix.nrows()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Matrix2, Matrix4, SMatrix, Vector4};
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn factors_a_rank_deficient_white_noise_acceleration_q() {
+        let t = 1.0;
+        let g = SMatrix::<f64, 4, 2>::new(t * t / 2.0, 0.0, 0.0, t * t / 2.0, t, 0.0, 0.0, t);
+        let q = g * g.transpose();
+        let psd = PsdMatrix::new(q).unwrap();
+        assert_eq!(psd.rank(), 2);
+        assert_relative_eq!(psd.factor() * psd.factor().transpose(), q, epsilon = 1e-14);
+    }
+
+    #[test]
+    fn matches_cholesky_on_definite_input() {
+        let p = Matrix4::from_diagonal(&Vector4::new(4.0, 3.0, 2.0, 1.0)) + Matrix4::repeat(0.1);
+        let (l, rank) = semidefinite_factor(&p, "P").unwrap();
+        assert_eq!(rank, 4);
+        assert_relative_eq!(l, Cholesky::new(p).unwrap().l(), epsilon = 1e-14);
+        assert_eq!(sigma_sqrt(&p, "P").unwrap().1, SqrtMethod::Cholesky);
+    }
+
+    #[test]
+    fn falls_back_on_singular_and_rejects_indefinite() {
+        let singular = Matrix2::new(1.0, 1.0, 1.0, 1.0);
+        let (l, how) = sigma_sqrt(&singular, "P").unwrap();
+        assert_eq!(how, SqrtMethod::SemiDefinite);
+        assert_relative_eq!(l * l.transpose(), singular, epsilon = 1e-15);
+        let indefinite = Matrix2::new(0.0, 1.0, 1.0, 0.0);
+        assert!(matches!(
+            sigma_sqrt(&indefinite, "P"),
+            Err(LinalgError::NotPositiveSemiDefinite { .. })
+        ));
+        let negative = Matrix2::new(1.0, 0.0, 0.0, -1.0);
+        assert!(matches!(PsdMatrix::new(negative), Err(LinalgError::NotPositiveSemiDefinite { .. })));
+        assert_eq!(PsdMatrix::new(Matrix2::zeros()).unwrap().rank(), 0);
+    }
+}
