@@ -1,0 +1,23 @@
+//! Gaussian sampling through a square-root factor.
+
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, U1};
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+/// A vector of independent standard normal draws of dimension `d`.
+pub fn standard_normal<D: Dim, R: Rng + ?Sized>(d: D, rng: &mut R) -> OVector<f64, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    OVector::<f64, D>::from_fn_generic(d, U1, |_, _| StandardNormal.sample(rng))
+}
+
+/// A draw of `N(0, L L^T)` as `L n`, `n` standard normal. `L` may be rank-deficient (a
+/// semi-definite factor), which samples exactly from a singular covariance.
+pub fn sample_with_factor<D: Dim, R: Rng + ?Sized>(l: &OMatrix<f64, D, D>, rng: &mut R) -> OVector<f64, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = standard_normal(l.shape_generic().1, rng);
+    l * n
+}
