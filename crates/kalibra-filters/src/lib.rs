@@ -1,1 +1,53 @@
-//! placeholder
+//! Kalman-type filters for kalibra.
+//!
+//! # What this crate is for
+//! * [`Filter`]: a recursive estimator stepped by `predict` and `update`, with provided methods
+//!   that run it over a measurement sequence from anywhere (a simulation, a log file, a sensor),
+//!   with gaps where a step has no measurement.
+//! * [`Kf`] (linear models) and [`Ekf`] (nonlinear models), sharing one numerical core.
+//! * [`StepRecord`]: what each update computed (prior and posterior, innovation, `S`, `K`, `H`,
+//!   `R`, `F`, and the split of the prior covariance into `F P+ F^T` and `Q` that the J1/J2
+//!   metrics need), so metrics never recompute and never see the filter.
+//!
+//! The unscented filters, the shifted Rayleigh filter and the constant-gain filter implement
+//! the same trait and yield the same record.
+//!
+//! # Notation
+//! `x-_k, P-_k` the prior (predicted) estimate at step `k`, `x+_k, P+_k` the posterior;
+//! `nu_k = z_k - h_k(x-_k)` the innovation, `S_k = H_k P-_k H_k^T + R_k`, `K_k = P-_k H_k^T S_k^-1`.
+//!
+//! # Numerical choices
+//! * Joseph-form covariance update by default ([`UpdateForm`]), symmetrised after every
+//!   prediction and update.
+//! * The gain is a Cholesky solve with `S`, whose factor the record keeps for NIS and
+//!   likelihoods; no explicit inverse.
+//! * A failing step returns a typed [`FilterError`] and leaves the filter as it was.
+//! * With `Const` dimensions a step allocates nothing: every matrix, the record included, lives
+//!   inline.
+//!
+//! # Example
+//! ```
+//! use kalibra_filters::{Ekf, Filter};
+//! use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary};
+//! use kalibra_linalg::{Matrix4, U4, Vector1, Vector2, Vector4};
+//!
+//! let cv = Kinematic::constant_velocity(2, 1.0)?.dynamics(U4)?;
+//! let sensor = Bearing::new(U4, [0, 1], BearingReference::XAxis, 1e-4, Stationary(Vector2::zeros()))?;
+//! let mut ekf = Ekf::new(cv, sensor, Vector4::new(100.0, 10.0, -1.0, 0.0), Matrix4::identity() * 10.0)?;
+//! ekf.predict()?;
+//! let record = ekf.update(&Vector1::new(0.11))?;
+//! assert!(record.nis() >= 0.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod core;
+mod error;
+mod filter;
+mod kalman;
+mod record;
+
+pub use crate::core::{FilterOptions, InitialCheck, UpdateForm};
+pub use error::FilterError;
+pub use filter::{Filter, Start};
+pub use kalman::{Ekf, Kf};
+pub use record::{Estimate, StepRecord};

@@ -69,5 +69,5 @@ pub use nalgebra;
 pub use nalgebra::{
     Const, DMatrix, DVector, DefaultAllocator, Dim, DimName, Dyn, Matrix2, Matrix3, Matrix4,
     OMatrix, OVector, SMatrix, SVector, U1, U2, U3, U4, U5, U6, U7, U8, U9, Vector2, Vector3,
-    Vector4, Vector6,
+    Vector1, Vector4, Vector6,
 };

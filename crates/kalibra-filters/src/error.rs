@@ -1,0 +1,61 @@
+use kalibra_linalg::LinalgError;
+use kalibra_models::ModelError;
+
+/// Why a filter step failed. The filter's state is left as it was before the failing call.
+///
+/// Messages are lowercase fragments that read after "failed to ...: ".
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FilterError {
+    /// A covariance that must be positive definite is not (a singular innovation covariance
+    /// `S`, an indefinite initial covariance).
+    #[error("{what} is not positive definite at step {step}")]
+    NotPositiveDefinite {
+        /// Which matrix.
+        what: &'static str,
+        /// The step index.
+        step: usize,
+    },
+    /// An input or a computed quantity is NaN or infinite.
+    #[error("{what} is not finite at step {step}")]
+    NonFinite {
+        /// Which quantity.
+        what: &'static str,
+        /// The step index.
+        step: usize,
+    },
+    /// A dynamically sized input has the wrong size.
+    #[error("{what} has dimension {found}, expected {expected}")]
+    DimensionMismatch {
+        /// Which input.
+        what: &'static str,
+        /// The size required.
+        expected: usize,
+        /// The size given.
+        found: usize,
+    },
+    /// The initial estimate failed its check.
+    #[error("invalid initial estimate: {0}")]
+    Initial(#[source] LinalgError),
+    /// A model failed.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+}
+
+impl FilterError {
+    /// Attaches the step index to a linear-algebra failure.
+    pub(crate) fn at(step: usize, e: LinalgError) -> Self {
+        match e {
+            LinalgError::NonFinite { what } => FilterError::NonFinite { what, step },
+            LinalgError::DimensionMismatch { what, expected, found } => {
+                FilterError::DimensionMismatch { what, expected, found }
+            }
+            LinalgError::NotPositiveDefinite { what }
+            | LinalgError::NotPositiveSemiDefinite { what, .. }
+            | LinalgError::NotSymmetric { what, .. } => FilterError::NotPositiveDefinite { what, step },
+            // LinalgError is non-exhaustive: report any future variant as a definiteness failure
+            // of an unnamed matrix rather than panic.
+            _ => FilterError::NotPositiveDefinite { what: "matrix", step },
+        }
+    }
+}

@@ -1,0 +1,114 @@
+//! What one measurement update yields.
+
+use kalibra_linalg::{Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, propagate};
+
+/// A Gaussian estimate: mean and covariance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate<N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The mean `x`.
+    pub mean: OVector<f64, N>,
+    /// The covariance `P`.
+    pub cov: OMatrix<f64, N, N>,
+}
+
+/// Everything a measurement update at step `k` computed, so that metrics (NEES, NIS, J1/J2,
+/// NCI, surrogate bounds) need no recomputation and no access to the filter.
+///
+/// Notation (papers 000 and 003): the prior covariance splits as
+/// `P-_k = F P+_{k-1} F^T + Q_{k-1}`; [`StepRecord::propagated`] is the first term and
+/// [`StepRecord::process_noise`] the second, so `A_k = H_k (F P+ F^T) H_k^T` and
+/// `B_k = H_k Q H_k^T` ([`StepRecord::a`], [`StepRecord::b`]) with `S_k = A_k + B_k + R_k`.
+/// When several predictions run between updates, the split follows them: the propagated part
+/// is the last posterior carried through every prediction, the noise part everything added
+/// since. At an update with no prediction before it (a filter that starts by updating), the
+/// prior is all "propagated" and `B_k = 0`.
+#[derive(Clone, Debug)]
+pub struct StepRecord<N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    pub(crate) k: usize,
+    pub(crate) prior: Estimate<N>,
+    pub(crate) posterior: Estimate<N>,
+    pub(crate) predicted_measurement: OVector<f64, M>,
+    pub(crate) innovation: OVector<f64, M>,
+    pub(crate) s: Covariance<M>,
+    pub(crate) gain: OMatrix<f64, N, M>,
+    pub(crate) h: OMatrix<f64, M, N>,
+    pub(crate) r: OMatrix<f64, M, M>,
+    pub(crate) f: OMatrix<f64, N, N>,
+    pub(crate) propagated: OMatrix<f64, N, N>,
+    pub(crate) process_noise: OMatrix<f64, N, N>,
+}
+
+impl<N: Dim, M: Dim> StepRecord<N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The step index `k` of the update.
+    pub fn step(&self) -> usize {
+        self.k
+    }
+    /// The prior `x-_k, P-_k`.
+    pub fn prior(&self) -> &Estimate<N> {
+        &self.prior
+    }
+    /// The posterior `x+_k, P+_k`.
+    pub fn posterior(&self) -> &Estimate<N> {
+        &self.posterior
+    }
+    /// The predicted measurement `h_k(x-_k)`.
+    pub fn predicted_measurement(&self) -> &OVector<f64, M> {
+        &self.predicted_measurement
+    }
+    /// The innovation `nu_k = z_k - h_k(x-_k)` (through the measurement's residual, so wrapped
+    /// for angles).
+    pub fn innovation(&self) -> &OVector<f64, M> {
+        &self.innovation
+    }
+    /// The innovation covariance `S_k` with its Cholesky factor.
+    pub fn s(&self) -> &Covariance<M> {
+        &self.s
+    }
+    /// The gain `K_k`.
+    pub fn gain(&self) -> &OMatrix<f64, N, M> {
+        &self.gain
+    }
+    /// The measurement Jacobian `H_k` used (at the prior mean).
+    pub fn h(&self) -> &OMatrix<f64, M, N> {
+        &self.h
+    }
+    /// The measurement-noise covariance `R_k` used.
+    pub fn r(&self) -> &OMatrix<f64, M, M> {
+        &self.r
+    }
+    /// The transition Jacobian `F_{k-1}` of the last prediction into this step (at the previous
+    /// posterior mean); the identity if no prediction preceded the update.
+    pub fn f(&self) -> &OMatrix<f64, N, N> {
+        &self.f
+    }
+    /// `F P+_{k-1} F^T`: the part of the prior covariance carried from the last posterior.
+    pub fn propagated(&self) -> &OMatrix<f64, N, N> {
+        &self.propagated
+    }
+    /// `Q_{k-1}`: the part of the prior covariance added as process noise since the last update.
+    pub fn process_noise(&self) -> &OMatrix<f64, N, N> {
+        &self.process_noise
+    }
+    /// `A_k = H_k F P+_{k-1} F^T H_k^T` (paper 003, eq 10).
+    pub fn a(&self) -> OMatrix<f64, M, M> {
+        propagate(&self.h, &self.propagated)
+    }
+    /// `B_k = H_k Q_{k-1} H_k^T` (paper 003, eq 10); computed directly, never as `S - A - R`,
+    /// which would lose all precision for a tiny `Q`.
+    pub fn b(&self) -> OMatrix<f64, M, M> {
+        propagate(&self.h, &self.process_noise)
+    }
+    /// The normalised innovation squared `nu^T S^-1 nu`, from the stored factor of `S`.
+    pub fn nis(&self) -> f64 {
+        self.s.quad_form(&self.innovation).expect("innovation and S share the dimension M")
+    }
+}
