@@ -1,1 +1,45 @@
-//! placeholder
+//! Filter performance metrics for kalibra.
+//!
+//! # What this crate is for
+//! Metrics take data, never filters: errors, covariances, innovations, or a filter's step
+//! records, so they work on the logs of any filter, including filters outside kalibra.
+//!
+//! * [`nees`] and [`nis`]: normalised estimation error squared and normalised innovation
+//!   squared; [`ChiSquareBand`]: their two-sided acceptance interval for the average over runs.
+//! * Streaming accumulators for Monte Carlo studies: [`StepMean`] (average NEES, NIS, or any
+//!   per-step scalar) and [`SquaredErrors`] (RMSE per step, per component, for groups such as
+//!   position and velocity, and over time). They implement [`Merge`], so partial results from
+//!   parallel runs combine in a fixed order.
+//!
+//! # Notation
+//! `e_k = x_k - x+_k` the estimation error of one run at step `k`, `P+_k` the filter's
+//! covariance, `NEES_k = e^T P^-1 e` (chi-square with `n` degrees of freedom for a consistent
+//! filter), `nu_k, S_k` the innovation and its covariance, `NIS_k = nu^T S^-1 nu` (chi-square with
+//! `m`). Over `M` runs, ANEES is the mean NEES divided by `n` (paper 001's convention), whose
+//! consistent value is 1; the average NEES without the division is also reported.
+//!
+//! # Numerical choices
+//! Quadratic forms go through a Cholesky factor, never an inverse. Accumulators keep plain
+//! sums in `f64` (the sums of at most millions of non-negative terms lose no meaningful
+//! precision), which makes merging exact in a fixed order. Chi-square quantiles come from
+//! statrs.
+//!
+//! # Example
+//! ```
+//! use kalibra_metrics::{ChiSquareBand, StepMean};
+//! let mut anees = StepMean::new(1);
+//! for nees in [1.2, 3.1, 4.0, 0.5] {
+//!     anees.push(0, nees / 2.0)?; // n = 2
+//! }
+//! let band = ChiSquareBand::for_normalized_mean(2.0, 4, 0.95)?;
+//! assert!(band.contains(anees.mean(0)));
+//! # Ok::<(), kalibra_metrics::MetricsError>(())
+//! ```
+
+mod accumulate;
+mod consistency;
+mod error;
+
+pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
+pub use consistency::{ChiSquareBand, nees, nis};
+pub use error::MetricsError;

@@ -1,0 +1,239 @@
+//! Streaming accumulators: a Monte Carlo study pushes each run's per-step values and never holds
+//! the runs themselves.
+//!
+//! Accumulators hold plain sums, merged element by element ([`Merge`]), so a study that merges
+//! partial accumulators in a fixed order gets bit-identical results whatever the thread count.
+
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OVector};
+
+use crate::MetricsError;
+
+/// Combining two partial results of the same study. Merging is plain addition of sums, so the
+/// result depends only on the order of merges, which the caller fixes.
+pub trait Merge {
+    /// Adds `other`'s contents to `self`.
+    ///
+    /// # Panics
+    /// If the two accumulators were built with different shapes (a programming error: partial
+    /// accumulators of one study come from one constructor).
+    fn merge(&mut self, other: &Self);
+}
+
+impl<A: Merge, B: Merge> Merge for (A, B) {
+    fn merge(&mut self, other: &Self) {
+        self.0.merge(&other.0);
+        self.1.merge(&other.1);
+    }
+}
+
+impl<A: Merge, B: Merge, C: Merge> Merge for (A, B, C) {
+    fn merge(&mut self, other: &Self) {
+        self.0.merge(&other.0);
+        self.1.merge(&other.1);
+        self.2.merge(&other.2);
+    }
+}
+
+fn check_step(step: usize, steps: usize) -> Result<(), MetricsError> {
+    if step < steps { Ok(()) } else { Err(MetricsError::StepOutOfRange { step, steps }) }
+}
+
+/// The mean over runs of a scalar at each step (NEES, NIS, any per-step statistic).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepMean {
+    sum: Vec<f64>,
+    count: Vec<u64>,
+}
+
+impl StepMean {
+    /// An empty accumulator over `steps` steps.
+    pub fn new(steps: usize) -> Self {
+        Self { sum: vec![0.0; steps], count: vec![0; steps] }
+    }
+
+    /// The number of steps held.
+    pub fn steps(&self) -> usize {
+        self.sum.len()
+    }
+
+    /// Adds one run's value at `step`.
+    ///
+    /// # Errors
+    /// [`MetricsError::StepOutOfRange`] beyond the horizon.
+    pub fn push(&mut self, step: usize, value: f64) -> Result<(), MetricsError> {
+        check_step(step, self.steps())?;
+        self.sum[step] += value;
+        self.count[step] += 1;
+        Ok(())
+    }
+
+    /// Number of values pushed at `step` (0 beyond the horizon).
+    pub fn count(&self, step: usize) -> u64 {
+        self.count.get(step).copied().unwrap_or(0)
+    }
+
+    /// The mean at `step`; NaN where nothing was pushed.
+    pub fn mean(&self, step: usize) -> f64 {
+        match self.count.get(step) {
+            Some(&c) if c > 0 => self.sum[step] / c as f64,
+            _ => f64::NAN,
+        }
+    }
+
+    /// The means at every step.
+    pub fn means(&self) -> Vec<f64> {
+        (0..self.steps()).map(|k| self.mean(k)).collect()
+    }
+}
+
+impl Merge for StepMean {
+    fn merge(&mut self, other: &Self) {
+        assert_eq!(self.steps(), other.steps(), "merging accumulators of different horizons");
+        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
+            *a += b;
+        }
+        for (a, b) in self.count.iter_mut().zip(&other.count) {
+            *a += b;
+        }
+    }
+}
+
+/// Squared estimation errors per step and state component, summed over runs: the RMSE per
+/// component, for groups of components (position, velocity), per step and over time.
+///
+/// ```
+/// use kalibra_metrics::SquaredErrors;
+/// let mut acc = SquaredErrors::new(1, 4);
+/// acc.push_slice(0, &[3.0, 4.0, 1.0, 0.0])?;
+/// acc.push_slice(0, &[3.0, 4.0, 1.0, 0.0])?;
+/// assert_eq!(acc.rmse_group(0, &[0, 1])?, 5.0); // sqrt(mean over runs of 3^2 + 4^2)
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct SquaredErrors {
+    dim: usize,
+    sum: Vec<f64>,
+    count: Vec<u64>,
+}
+
+impl SquaredErrors {
+    /// An empty accumulator over `steps` steps of a `dim`-component state.
+    pub fn new(steps: usize, dim: usize) -> Self {
+        Self { dim, sum: vec![0.0; steps * dim], count: vec![0; steps] }
+    }
+
+    /// Number of steps held.
+    pub fn steps(&self) -> usize {
+        self.count.len()
+    }
+
+    /// Number of components.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Adds one run's error at `step`.
+    ///
+    /// # Errors
+    /// [`MetricsError::StepOutOfRange`] beyond the horizon, [`MetricsError::DimensionMismatch`]
+    /// for a wrong length.
+    pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
+        check_step(step, self.steps())?;
+        if error.len() != self.dim {
+            return Err(MetricsError::DimensionMismatch { what: "error vector", expected: self.dim, found: error.len() });
+        }
+        for (s, e) in self.sum[step * self.dim..(step + 1) * self.dim].iter_mut().zip(error) {
+            *s += e * e;
+        }
+        self.count[step] += 1;
+        Ok(())
+    }
+
+    /// Adds one run's error vector at `step`.
+    ///
+    /// # Errors
+    /// As [`SquaredErrors::push_slice`].
+    pub fn push<N: Dim>(&mut self, step: usize, error: &OVector<f64, N>) -> Result<(), MetricsError>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.push_slice(step, error.as_slice())
+    }
+
+    /// Mean squared error of component `i` at `step`.
+    ///
+    /// # Errors
+    /// [`MetricsError::StepOutOfRange`], or [`MetricsError::DimensionMismatch`] for a component
+    /// beyond the state.
+    pub fn mse(&self, step: usize, i: usize) -> Result<f64, MetricsError> {
+        check_step(step, self.steps())?;
+        if i >= self.dim {
+            return Err(MetricsError::DimensionMismatch { what: "component index", expected: self.dim, found: i });
+        }
+        let c = self.count[step];
+        Ok(if c == 0 { f64::NAN } else { self.sum[step * self.dim + i] / c as f64 })
+    }
+
+    /// RMSE of component `i` at `step`.
+    ///
+    /// # Errors
+    /// As [`SquaredErrors::mse`].
+    pub fn rmse(&self, step: usize, i: usize) -> Result<f64, MetricsError> {
+        Ok(self.mse(step, i)?.sqrt())
+    }
+
+    /// RMSE of a group of components at `step`: `sqrt(mean over runs of sum_{i in group} e_i^2)`
+    /// (the position RMSE of paper 001 for `group = [x, y]`).
+    ///
+    /// # Errors
+    /// As [`SquaredErrors::mse`].
+    pub fn rmse_group(&self, step: usize, group: &[usize]) -> Result<f64, MetricsError> {
+        let mut total = 0.0;
+        for &i in group {
+            total += self.mse(step, i)?;
+        }
+        Ok(total.sqrt())
+    }
+
+    /// The group RMSE at every step.
+    ///
+    /// # Errors
+    /// As [`SquaredErrors::mse`].
+    pub fn rmse_series(&self, group: &[usize]) -> Result<Vec<f64>, MetricsError> {
+        (0..self.steps()).map(|k| self.rmse_group(k, group)).collect()
+    }
+
+    /// RMSE over runs and over the steps `range`: `sqrt(mean over steps of MSE_k)`.
+    ///
+    /// # Errors
+    /// As [`SquaredErrors::mse`]; [`MetricsError::InvalidParameter`] for an empty range.
+    pub fn rmse_over_time(&self, group: &[usize], range: std::ops::Range<usize>) -> Result<f64, MetricsError> {
+        if range.is_empty() {
+            return Err(MetricsError::InvalidParameter { name: "step range length", value: 0.0 });
+        }
+        let len = range.len() as f64;
+        let mut total = 0.0;
+        for k in range {
+            let r = self.rmse_group(k, group)?;
+            total += r * r;
+        }
+        Ok((total / len).sqrt())
+    }
+}
+
+impl Merge for SquaredErrors {
+    fn merge(&mut self, other: &Self) {
+        assert_eq!((self.steps(), self.dim), (other.steps(), other.dim), "merging accumulators of different shapes");
+        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
+            *a += b;
+        }
+        for (a, b) in self.count.iter_mut().zip(&other.count) {
+            *a += b;
+        }
+    }
+}
+
+/// Plain mean of a series, ignoring nothing: a NaN in the series gives NaN.
+pub fn time_average(series: &[f64]) -> f64 {
+    series.iter().sum::<f64>() / series.len() as f64
+}

@@ -1,0 +1,88 @@
+//! Accumulators and consistency statistics against direct computations.
+
+use kalibra_linalg::{Matrix2, Vector2};
+use kalibra_metrics::{ChiSquareBand, Merge, MetricsError, SquaredErrors, StepMean, nees, time_average};
+use proptest::prelude::*;
+
+proptest! {
+    /// Splitting the runs into two partial accumulators and merging gives the sums of one
+    /// accumulator fed everything (to rounding: the order of additions differs).
+    #[test]
+    fn merged_partials_equal_one_accumulator(values in prop::collection::vec(prop::collection::vec(-1e3f64..1e3, 3), 1..40), split in 0usize..40) {
+        let split = split.min(values.len());
+        let steps = 2;
+        let mut whole = SquaredErrors::new(steps, 3);
+        let mut a = SquaredErrors::new(steps, 3);
+        let mut b = SquaredErrors::new(steps, 3);
+        let mut mw = StepMean::new(steps);
+        let (mut ma, mut mb) = (StepMean::new(steps), StepMean::new(steps));
+        for (i, v) in values.iter().enumerate() {
+            let k = i % steps;
+            whole.push_slice(k, v).unwrap();
+            mw.push(k, v[0]).unwrap();
+            if i < split { a.push_slice(k, v).unwrap(); ma.push(k, v[0]).unwrap(); } else { b.push_slice(k, v).unwrap(); mb.push(k, v[0]).unwrap(); }
+        }
+        a.merge(&b);
+        ma.merge(&mb);
+        for k in 0..steps {
+            prop_assert_eq!(ma.count(k), mw.count(k));
+            if mw.count(k) > 0 {
+                prop_assert!((ma.mean(k) - mw.mean(k)).abs() <= 1e-12 * (1.0 + mw.mean(k).abs()));
+                for i in 0..3 {
+                    let (x, y) = (a.mse(k, i).unwrap(), whole.mse(k, i).unwrap());
+                    prop_assert!((x - y).abs() <= 1e-12 * (1.0 + y));
+                }
+            }
+        }
+    }
+
+    /// The group RMSE is the root of the sum of the component MSEs, and never below any
+    /// component's RMSE.
+    #[test]
+    fn group_rmse_dominates_components(values in prop::collection::vec(prop::collection::vec(-10f64..10.0, 4), 1..20)) {
+        let mut acc = SquaredErrors::new(1, 4);
+        for v in &values { acc.push_slice(0, v).unwrap(); }
+        let group = acc.rmse_group(0, &[0, 2]).unwrap();
+        let direct = (values.iter().map(|v| v[0] * v[0] + v[2] * v[2]).sum::<f64>() / values.len() as f64).sqrt();
+        prop_assert!((group - direct).abs() <= 1e-12 * (1.0 + direct));
+        prop_assert!(group + 1e-12 >= acc.rmse(0, 0).unwrap());
+    }
+}
+
+#[test]
+fn rmse_over_time_is_root_mean_of_mse() {
+    let mut acc = SquaredErrors::new(3, 1);
+    for (k, e) in [1.0, 2.0, 3.0].iter().enumerate() {
+        acc.push_slice(k, &[*e]).unwrap();
+    }
+    assert!((acc.rmse_over_time(&[0], 0..3).unwrap() - (14.0f64 / 3.0).sqrt()).abs() < 1e-15);
+    assert!((acc.rmse_over_time(&[0], 1..3).unwrap() - 6.5f64.sqrt()).abs() < 1e-15);
+    assert!(matches!(acc.rmse_over_time(&[0], 2..2), Err(MetricsError::InvalidParameter { .. })));
+    assert!((time_average(&[1.0, 2.0, 6.0]) - 3.0).abs() < 1e-15);
+}
+
+#[test]
+fn typed_errors_for_bad_input() {
+    let mut acc = SquaredErrors::new(2, 2);
+    assert!(matches!(acc.push_slice(2, &[0.0, 0.0]), Err(MetricsError::StepOutOfRange { step: 2, steps: 2 })));
+    assert!(matches!(acc.push_slice(0, &[0.0]), Err(MetricsError::DimensionMismatch { .. })));
+    assert!(matches!(acc.mse(0, 5), Err(MetricsError::DimensionMismatch { .. })));
+    assert!(matches!(StepMean::new(1).push(1, 0.0), Err(MetricsError::StepOutOfRange { .. })));
+    let e = Vector2::new(1.0, 1.0);
+    assert!(matches!(nees(&e, &Matrix2::new(1.0, 2.0, 2.0, 1.0)), Err(MetricsError::Linalg(_))));
+    assert!(matches!(nees(&e, &Matrix2::new(f64::NAN, 0.0, 0.0, 1.0)), Err(MetricsError::Linalg(_))));
+    assert!(matches!(ChiSquareBand::for_mean(0.0, 10, 0.95), Err(MetricsError::InvalidParameter { .. })));
+    assert!(matches!(ChiSquareBand::for_mean(2.0, 0, 0.95), Err(MetricsError::InvalidParameter { .. })));
+    assert!(matches!(ChiSquareBand::for_mean(2.0, 10, 1.0), Err(MetricsError::InvalidParameter { .. })));
+    assert!(StepMean::new(2).mean(0).is_nan());
+}
+
+#[test]
+fn chi_square_band_matches_tabulated_quantiles() {
+    // chi2 quantiles for 100 dof: 2.5% = 74.2219, 97.5% = 129.5612 (standard tables).
+    let b = ChiSquareBand::for_mean(4.0, 25, 0.95).unwrap();
+    assert!((b.lower * 25.0 - 74.2219).abs() < 1e-3, "{b:?}");
+    assert!((b.upper * 25.0 - 129.5612).abs() < 1e-3, "{b:?}");
+    let n = ChiSquareBand::for_normalized_mean(4.0, 25, 0.95).unwrap();
+    assert!((n.lower - b.lower / 4.0).abs() < 1e-15 && n.contains(1.0) && !n.contains(1.5));
+}
