@@ -43,35 +43,45 @@ pub struct FilterOptions {
     pub initial_check: InitialCheck,
 }
 
-/// Mean, covariance and the prior split of a Kalman-type filter, with the last step record.
+/// Where the current estimate lives inside the core's record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    /// The current estimate is `record.posterior`; `record` describes the update that produced
+    /// it if `has_record`, otherwise the posterior is the initial estimate.
+    Posterior,
+    /// The current estimate is `record.prior`, with its split into `record.propagated` and
+    /// `record.process_noise` and the last Jacobian in `record.f`; the other fields are stale.
+    Prior,
+}
+
+/// The state of a Kalman-type filter, kept inside one step record so that a step writes each
+/// result once, where the record needs it, and copies nothing twice (with `Const` sizes the
+/// record is about a kilobyte: copying it around per step cost a third of the run time).
 #[derive(Clone, Debug)]
 pub(crate) struct KalmanCore<N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    x: OVector<f64, N>,
-    p: OMatrix<f64, N, N>,
-    k: usize,
+    record: StepRecord<N, M>,
+    phase: Phase,
+    has_record: bool,
     update: UpdateForm,
-    /// Whether a prediction ran since the last update (or the start).
-    predicted: bool,
-    f: OMatrix<f64, N, N>,
-    propagated: OMatrix<f64, N, N>,
-    process_noise: OMatrix<f64, N, N>,
-    record: Option<StepRecord<N, M>>,
+}
+
+fn all_finite<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R, C>>(m: &nalgebra::Matrix<f64, R, C, S>) -> bool {
+    m.iter().all(|v| v.is_finite())
 }
 
 impl<N: Dim, M: Dim> KalmanCore<N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    pub(crate) fn new(n: N, x0: OVector<f64, N>, mut p0: OMatrix<f64, N, N>, options: FilterOptions) -> Result<Self, FilterError> {
+    pub(crate) fn new(n: N, m: M, x0: OVector<f64, N>, mut p0: OMatrix<f64, N, N>, options: FilterOptions) -> Result<Self, FilterError> {
         let init = |e: LinalgError| FilterError::Initial(e);
         check_dim(n.value(), x0.nrows(), "initial mean").map_err(init)?;
         check_dim(n.value(), p0.nrows(), "initial covariance").map_err(init)?;
         check_dim(n.value(), p0.ncols(), "initial covariance").map_err(init)?;
         check_finite(&x0, "initial mean").map_err(init)?;
-        // `PsdMatrix` checks finiteness and symmetry; for the symmetric-only reading only those.
         match options.initial_check {
             InitialCheck::PositiveSemiDefinite => {
                 p0 = kalibra_linalg::PsdMatrix::named(p0, "initial covariance").map_err(init)?.matrix().clone();
@@ -86,57 +96,73 @@ where
                 symmetrize(&mut p0);
             }
         }
-        let identity = OMatrix::<f64, N, N>::identity_generic(n, n);
-        let zeros = OMatrix::<f64, N, N>::zeros_generic(n, n);
-        Ok(Self {
-            x: x0,
-            propagated: p0.clone(),
-            p: p0,
+        let zeros_nn = || OMatrix::<f64, N, N>::zeros_generic(n, n);
+        let placeholder_s = Covariance::from_symmetric(OMatrix::<f64, M, M>::identity_generic(m, m), "placeholder")
+            .map_err(init)?;
+        let record = StepRecord {
             k: options.first_step,
-            update: options.update,
-            predicted: false,
-            f: identity,
-            process_noise: zeros,
-            record: None,
-        })
+            prior: Estimate { mean: x0.clone(), cov: p0.clone() },
+            posterior: Estimate { mean: x0, cov: p0 },
+            predicted_measurement: OVector::<f64, M>::zeros_generic(m, nalgebra::U1),
+            innovation: OVector::<f64, M>::zeros_generic(m, nalgebra::U1),
+            s: placeholder_s,
+            gain: OMatrix::<f64, N, M>::zeros_generic(n, m),
+            h: OMatrix::<f64, M, N>::zeros_generic(m, n),
+            r: OMatrix::<f64, M, M>::zeros_generic(m, m),
+            f: OMatrix::<f64, N, N>::identity_generic(n, n),
+            propagated: zeros_nn(),
+            process_noise: zeros_nn(),
+        };
+        Ok(Self { record, phase: Phase::Posterior, has_record: false, update: options.update })
+    }
+
+    fn current(&self) -> &Estimate<N> {
+        match self.phase {
+            Phase::Posterior => &self.record.posterior,
+            Phase::Prior => &self.record.prior,
+        }
     }
 
     pub(crate) fn mean(&self) -> &OVector<f64, N> {
-        &self.x
+        &self.current().mean
     }
     pub(crate) fn cov(&self) -> &OMatrix<f64, N, N> {
-        &self.p
+        &self.current().cov
     }
     pub(crate) fn step(&self) -> usize {
-        self.k
+        self.record.k
     }
+    /// The record of the update at the current step; none after a prediction.
     pub(crate) fn record(&self) -> Option<&StepRecord<N, M>> {
-        self.record.as_ref()
+        (self.phase == Phase::Posterior && self.has_record).then_some(&self.record)
     }
 
     /// Predicts from step `k` to `k + 1` given the predicted mean, the transition Jacobian and
     /// the process noise, all evaluated by the caller.
     pub(crate) fn predict(&mut self, x_pred: OVector<f64, N>, f: OMatrix<f64, N, N>, q: OMatrix<f64, N, N>) -> Result<(), FilterError> {
-        let next = self.k + 1;
-        check_finite(&f, "transition Jacobian F").map_err(|e| FilterError::at(self.k, e))?;
-        check_finite(&q, "process noise covariance Q").map_err(|e| FilterError::at(self.k, e))?;
-        check_finite(&x_pred, "predicted mean").map_err(|e| FilterError::at(next, e))?;
-        let (propagated, noise) = if self.predicted {
+        let k = self.record.k;
+        let rec = &mut self.record;
+        let (propagated, noise) = match self.phase {
+            Phase::Posterior => (propagate(&f, &rec.posterior.cov), q),
             // A second prediction without an update: carry both parts.
-            (propagate(&f, &self.propagated), propagate(&f, &self.process_noise) + &q)
-        } else {
-            (propagate(&f, &self.p), q)
+            Phase::Prior => (propagate(&f, &rec.propagated), propagate(&f, &rec.process_noise) + q),
         };
         let mut p = &propagated + &noise;
         symmetrize(&mut p);
-        check_finite(&p, "predicted covariance").map_err(|e| FilterError::at(next, e))?;
-        self.x = x_pred;
-        self.p = p;
-        self.f = f;
-        self.propagated = propagated;
-        self.process_noise = noise;
-        self.predicted = true;
-        self.k = next;
+        // Non-finite inputs always reach the outputs, so check the outputs on the hot path and
+        // look for the culprit only when they fail.
+        if !(all_finite(&p) && all_finite(&x_pred)) {
+            check_finite(&f, "transition Jacobian F").map_err(|e| FilterError::at(k, e))?;
+            check_finite(&x_pred, "predicted mean").map_err(|e| FilterError::at(k + 1, e))?;
+            return Err(FilterError::NonFinite { what: "predicted covariance (process noise Q?)", step: k + 1 });
+        }
+        rec.prior.mean = x_pred;
+        rec.prior.cov = p;
+        rec.f = f;
+        rec.propagated = propagated;
+        rec.process_noise = noise;
+        rec.k = k + 1;
+        self.phase = Phase::Prior;
         Ok(())
     }
 
@@ -149,47 +175,55 @@ where
         h: OMatrix<f64, M, N>,
         r: OMatrix<f64, M, M>,
     ) -> Result<&StepRecord<N, M>, FilterError> {
-        let k = self.k;
+        let k = self.record.k;
         let at = |e| FilterError::at(k, e);
-        check_finite(&h, "measurement Jacobian H").map_err(at)?;
-        check_finite(&r, "measurement noise covariance R").map_err(at)?;
-        check_finite(&innovation, "innovation").map_err(at)?;
-        let pht = &self.p * h.transpose();
+        if self.phase == Phase::Posterior {
+            // An update with no prediction before it: the prior is the current estimate, all of
+            // it counted as "propagated" (B_k = 0).
+            let rec = &mut self.record;
+            rec.prior = rec.posterior.clone();
+            rec.propagated = rec.prior.cov.clone();
+            rec.process_noise.fill(0.0);
+            rec.f.fill_with_identity();
+            self.phase = Phase::Prior;
+        }
+        let prior = &self.record.prior;
+        let pht = &prior.cov * h.transpose();
         let mut s = &h * &pht + &r;
         symmetrize(&mut s);
-        let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(at)?;
+        let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(|e| {
+            // NaN in H or R makes the factorisation fail too: name the real culprit.
+            let culprit = check_finite(&h, "measurement Jacobian H").and_then(|()| check_finite(&r, "measurement noise covariance R"));
+            at(culprit.err().unwrap_or(e))
+        })?;
         // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
         let gain = s.cholesky().solve(&pht.transpose()).transpose();
-        let x_post = &self.x + &gain * &innovation;
+        let x_post = &prior.mean + &gain * &innovation;
         let p_post = match self.update {
-            UpdateForm::Joseph => joseph_update(&self.p, &gain, &h, &r),
-            UpdateForm::Standard => standard_update(&self.p, &gain, &h),
+            UpdateForm::Joseph => joseph_update(&prior.cov, &gain, &h, &r),
+            UpdateForm::Standard => standard_update(&prior.cov, &gain, &h),
         };
-        check_finite(&x_post, "posterior mean").map_err(at)?;
-        check_finite(&p_post, "posterior covariance").map_err(at)?;
-        let n = self.x.shape_generic().0;
-        let prior = Estimate { mean: std::mem::replace(&mut self.x, x_post.clone()), cov: std::mem::replace(&mut self.p, p_post.clone()) };
-        let record = StepRecord {
-            k,
-            prior,
-            posterior: Estimate { mean: x_post, cov: p_post },
-            predicted_measurement: zhat,
-            innovation,
-            s,
-            gain,
-            h,
-            r,
-            f: std::mem::replace(&mut self.f, OMatrix::identity_generic(n, n)),
-            propagated: std::mem::replace(&mut self.propagated, self.p.clone()),
-            process_noise: std::mem::replace(&mut self.process_noise, OMatrix::zeros_generic(n, n)),
-        };
-        self.predicted = false;
-        Ok(self.record.insert(record))
+        if !(all_finite(&x_post) && all_finite(&p_post)) {
+            check_finite(&innovation, "innovation").map_err(at)?;
+            return Err(FilterError::NonFinite { what: "posterior estimate", step: k });
+        }
+        let rec = &mut self.record;
+        rec.posterior.mean = x_post;
+        rec.posterior.cov = p_post;
+        rec.predicted_measurement = zhat;
+        rec.innovation = innovation;
+        rec.s = s;
+        rec.gain = gain;
+        rec.h = h;
+        rec.r = r;
+        self.phase = Phase::Posterior;
+        self.has_record = true;
+        Ok(&self.record)
     }
 
     /// Checks the length and finiteness of a measurement handed in from outside.
     pub(crate) fn check_measurement(&self, m: usize, z: &OVector<f64, M>) -> Result<(), FilterError> {
-        check_dim(m, z.nrows(), "measurement").map_err(|e| FilterError::at(self.k, e))?;
-        check_finite(z, "measurement").map_err(|e| FilterError::at(self.k, e))
+        check_dim(m, z.nrows(), "measurement").map_err(|e| FilterError::at(self.step(), e))?;
+        check_finite(z, "measurement").map_err(|e| FilterError::at(self.step(), e))
     }
 }

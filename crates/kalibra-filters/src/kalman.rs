@@ -78,7 +78,7 @@ macro_rules! constructors {
                 p0: OMatrix<f64, N, N>,
                 options: FilterOptions,
             ) -> Result<Self, FilterError> {
-                let core = KalmanCore::new(dynamics.state_dim(), x0, p0, options)?;
+                let core = KalmanCore::new(dynamics.state_dim(), measurement.meas_dim(), x0, p0, options)?;
                 Ok(Self { dynamics, measurement, core })
             }
 

@@ -167,6 +167,43 @@ where
     }
 }
 
+/// `v^T C^-1 v` for a covariance used once: the checks of [`Covariance::new`] (square,
+/// finite, symmetric to [`SYMMETRY_TOLERANCE`], positive definite) without keeping the matrix
+/// and its factor. The factorisation reads the lower triangle.
+///
+/// ```
+/// use kalibra_linalg::{quad_form_once, Matrix2, Vector2};
+/// let q = quad_form_once(&Matrix2::new(4.0, 0.0, 0.0, 1.0), &Vector2::new(2.0, 1.0), "P")?;
+/// assert!((q - 2.0).abs() < 1e-15);
+/// # Ok::<(), kalibra_linalg::LinalgError>(())
+/// ```
+///
+/// # Errors
+/// As [`Covariance::new`], and [`LinalgError::DimensionMismatch`] or
+/// [`LinalgError::NonFinite`] for the vector.
+pub fn quad_form_once<D: Dim, S: Storage<f64, D>>(
+    cov: &OMatrix<f64, D, D>,
+    v: &Matrix<f64, D, U1, S>,
+    what: &'static str,
+) -> Result<f64, LinalgError>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    check_square(cov, what)?;
+    crate::check_dim(cov.nrows(), v.nrows(), "vector")?;
+    check_finite(v, "vector")?;
+    check_finite(cov, what)?;
+    let asymmetry = relative_asymmetry(cov);
+    if asymmetry > SYMMETRY_TOLERANCE {
+        return Err(LinalgError::NotSymmetric { what, asymmetry });
+    }
+    let chol = Cholesky::new(cov.clone()).ok_or(LinalgError::NotPositiveDefinite { what })?;
+    let mut w = v.clone_owned();
+    chol.l_dirty().solve_lower_triangular_unchecked_mut(&mut w);
+    let q = w.norm_squared();
+    if q.is_finite() { Ok(q) } else { Err(LinalgError::NotPositiveDefinite { what }) }
+}
+
 fn check_square<D: Dim>(m: &OMatrix<f64, D, D>, what: &'static str) -> Result<(), LinalgError>
 where
     DefaultAllocator: Alloc<D>,

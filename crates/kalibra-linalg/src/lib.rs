@@ -58,7 +58,7 @@ mod kernels;
 mod psd;
 
 pub use alloc::Alloc;
-pub use covariance::{Covariance, SYMMETRY_TOLERANCE};
+pub use covariance::{Covariance, SYMMETRY_TOLERANCE, quad_form_once};
 pub use error::LinalgError;
 pub use kernels::{
     check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,

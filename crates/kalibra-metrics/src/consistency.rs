@@ -1,6 +1,7 @@
 //! NEES, NIS and their chi-square acceptance bands.
 
 use kalibra_linalg::{Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector};
+
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 use crate::MetricsError;
@@ -23,8 +24,9 @@ pub fn nees<N: Dim>(error: &OVector<f64, N>, cov: &OMatrix<f64, N, N>) -> Result
 where
     DefaultAllocator: Alloc<N>,
 {
-    let p = Covariance::named(cov.clone(), "state covariance P")?;
-    Ok(p.quad_form(error)?)
+    // Called once per run and step in every Monte Carlo study: factorise without keeping a
+    // `Covariance` (which would copy P twice), but check what `Covariance::new` checks.
+    Ok(kalibra_linalg::quad_form_once(cov, error, "state covariance P")?)
 }
 
 /// The normalised innovation squared `nu^T S^-1 nu` with an already factorised `S` (a step

@@ -1,1 +1,55 @@
-//! placeholder
+//! The studies `cargo xtask reproduce` runs, as tested library code.
+//!
+//! # What this crate is for
+//! One module per study. Each has a `Config` (with `paper()` for the published size and
+//! `quick()` for tests), `run(&Config) -> Result<Report, PaperError>`, and a `Report` that
+//! serialises to JSON (serde) and renders as Markdown. The crate computes and formats; it
+//! writes no files (xtask does).
+//!
+//! Until the paper modules land, one study is here:
+//! * [`w1`]: the consistency study of workload W1 (a 2-D constant-velocity target, positions
+//!   measured), ANEES and average NIS per step with their 95% chi-square bands.
+//!
+//! Every module documents the decisions its paper leaves open, and every report records its
+//! seed, run count and thread-independent results.
+
+pub mod w1;
+
+use kalibra_filters::FilterError;
+use kalibra_metrics::MetricsError;
+use kalibra_models::ModelError;
+
+/// Why a study failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PaperError {
+    /// A model could not be built or simulated.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// A filter step failed.
+    #[error(transparent)]
+    Filter(#[from] FilterError),
+    /// A metric could not be computed.
+    #[error(transparent)]
+    Metrics(#[from] MetricsError),
+    /// A Monte Carlo run failed.
+    #[error("Monte Carlo run {run} failed: {message}")]
+    Run {
+        /// The run index.
+        run: usize,
+        /// The error, rendered.
+        message: String,
+    },
+    /// The Monte Carlo harness failed.
+    #[error("Monte Carlo harness: {0}")]
+    Harness(String),
+}
+
+impl From<kalibra_sim::SimError<PaperError>> for PaperError {
+    fn from(e: kalibra_sim::SimError<PaperError>) -> Self {
+        match e {
+            kalibra_sim::SimError::Run { run, source } => PaperError::Run { run, message: source.to_string() },
+            other => PaperError::Harness(other.to_string()),
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
+
+use std::ffi::OsString;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use kalibra_papers::w1;
+use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+
+struct Args {
+    runs: usize,
+    steps: usize,
+    threads: usize,
+    repeats: usize,
+}
+
+fn parse(args: Vec<OsString>) -> Result<Args> {
+    use lexopt::prelude::*;
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let mut parsed = Args { runs: 1000, steps: 1000, threads: cores, repeats: 3 };
+    let mut parser = lexopt::Parser::from_args(args);
+    while let Some(arg) = parser.next()? {
+        match arg {
+            Long("runs") => parsed.runs = parser.value()?.parse()?,
+            Long("steps") => parsed.steps = parser.value()?.parse()?,
+            Long("threads") => parsed.threads = parser.value()?.parse()?,
+            Long("repeats") => parsed.repeats = parser.value()?.parse()?,
+            _ => return Err(arg.unexpected().into()),
+        }
+    }
+    if parsed.runs == 0 || parsed.steps == 0 || parsed.repeats == 0 {
+        bail!("--runs, --steps and --repeats must be positive");
+    }
+    Ok(parsed)
+}
+
+pub fn main(args: Vec<OsString>) -> Result<()> {
+    let args = parse(args)?;
+    w1_bench(&args)
+}
+
+/// Best wall time of `repeats` calls, and the last result.
+fn best_of<T>(repeats: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+    let mut best = f64::INFINITY;
+    let mut out = None;
+    for _ in 0..repeats {
+        let t = Instant::now();
+        let r = f()?;
+        best = best.min(t.elapsed().as_secs_f64());
+        out = Some(r);
+    }
+    Ok((best, out.expect("repeats > 0")))
+}
+
+fn w1_bench(args: &Args) -> Result<()> {
+    let total = (args.runs * args.steps) as f64;
+    println!(
+        "W1: KF on [x, y, vx, vy], T = 1, R = 100 I2, {} runs x {} steps, per-step NEES and NIS averaged over runs (best of {})",
+        args.runs, args.steps, args.repeats
+    );
+    let config = |threads| w1::Config { runs: args.runs, steps: args.steps, seed: 2012, threads, confidence: 0.95 };
+    // Interleave the two so that machine noise hits both alike.
+    let mut lib_best = f64::INFINITY;
+    let mut hand_best = f64::INFINITY;
+    let mut lib_report = None;
+    let mut hand_out = None;
+    for _ in 0..args.repeats {
+        let (t, r) = best_of(1, || Ok(w1::run(&config(1))?))?;
+        lib_best = lib_best.min(t);
+        lib_report = Some(r);
+        let (t, h) = best_of(1, || Ok(hand_w1(args.runs, args.steps, 2012)))?;
+        hand_best = hand_best.min(t);
+        hand_out = Some(h);
+    }
+    let (lib_report, hand_out) = (lib_report.expect("repeats > 0"), hand_out.expect("repeats > 0"));
+    let (t_par, mut par_report) = best_of(args.repeats, || Ok(w1::run(&config(args.threads))?))?;
+    // The reports differ only in the thread count they record.
+    par_report.config.threads = lib_report.config.threads;
+
+    let lib_rate = total / lib_best;
+    let hand_rate = total / hand_best;
+    let par_rate = total / t_par;
+    println!("  library,      1 thread : {:>12.0} steps/s ({lib_best:.3} s)", lib_rate);
+    println!("  hand-written, 1 thread : {:>12.0} steps/s ({hand_best:.3} s)", hand_rate);
+    println!("  ratio library / hand-written (1 thread): {:.3}", lib_rate / hand_rate);
+    println!(
+        "  library, {} threads   : {:>12.0} steps/s ({t_par:.3} s), speed-up {:.2}x over 1 thread",
+        args.threads,
+        par_rate,
+        par_rate / lib_rate
+    );
+    let max_diff = lib_report
+        .anees
+        .iter()
+        .zip(&hand_out.0)
+        .chain(lib_report.anis.iter().zip(&hand_out.1))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f64, f64::max);
+    println!("  same arithmetic check: max |library - hand-written| over per-step ANEES and NIS = {max_diff:.2e}");
+    println!(
+        "  thread check: {} threads give {} results as 1 thread",
+        args.threads,
+        if par_report == lib_report { "bit-identical" } else { "DIFFERENT" }
+    );
+    if par_report != lib_report {
+        bail!("results depend on the thread count");
+    }
+    Ok(())
+}
+
+fn normals<const D: usize>(rng: &mut ChaCha8Rng) -> SMatrix<f64, D, 1> {
+    SMatrix::<f64, D, 1>::from_fn(|_, _| StandardNormal.sample(rng))
+}
+
+fn sym4(m: &mut Matrix4<f64>) {
+    *m = (*m + m.transpose()) * 0.5;
+}
+
+/// W1 written directly in nalgebra `SMatrix` code, as a user without kalibra would: the same
+/// draws in the same order (initial state, then per step measurement noise and process noise),
+/// the same Joseph update and symmetrisation, NEES and NIS through Cholesky, per-step sums.
+/// Returns per-step ANEES and NIS / 2.
+fn hand_w1(runs: usize, steps: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let f = Matrix4::new(1., 0., 1., 0., 0., 1., 0., 1., 0., 0., 1., 0., 0., 0., 0., 1.);
+    let g = SMatrix::<f64, 4, 2>::new(0.5, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 1.0);
+    let q = g * g.transpose();
+    let h = SMatrix::<f64, 2, 4>::new(1., 0., 0., 0., 0., 1., 0., 0.);
+    let r = Matrix2::identity() * 100.0;
+    let (m0, p0) = w1::prior();
+    // Factors as the library computes them (semi-definite Cholesky of the rank-2 Q).
+    let lq = *kalibra_linalg::PsdMatrix::new(q).expect("valid Q").factor();
+    let lr = *kalibra_linalg::PsdMatrix::new(r).expect("valid R").factor();
+    let lp0 = *kalibra_linalg::PsdMatrix::new(p0).expect("valid P0").factor();
+    let mut nees_sum = vec![0.0; steps];
+    let mut nis_sum = vec![0.0; steps];
+    let mut err_sum = vec![0.0; steps * 4];
+    for run in 0..runs {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(run as u64);
+        let mut x: Vector4<f64> = m0 + lp0 * normals::<4>(&mut rng);
+        let (mut xh, mut p) = (m0, p0);
+        for k in 0..steps {
+            let z: Vector2<f64> = h * x + lr * normals::<2>(&mut rng);
+            let x_k = x;
+            x = f * x + lq * normals::<4>(&mut rng);
+            if k > 0 {
+                xh = f * xh;
+                p = f * p * f.transpose() + q;
+                sym4(&mut p);
+            }
+            let pht = p * h.transpose();
+            let mut s = h * pht + r;
+            s = (s + s.transpose()) * 0.5;
+            let chol = s.cholesky().expect("S positive definite");
+            let gain = chol.solve(&pht.transpose()).transpose();
+            let nu = z - h * xh;
+            xh += gain * nu;
+            let ikh = Matrix4::identity() - gain * h;
+            p = ikh * p * ikh.transpose() + gain * r * gain.transpose();
+            sym4(&mut p);
+            let e = x_k - xh;
+            let lp = p.cholesky().expect("P positive definite");
+            let w = lp.l().solve_lower_triangular(&e).expect("non-singular");
+            nees_sum[k] += w.norm_squared() / 4.0;
+            let v = chol.l().solve_lower_triangular(&nu).expect("non-singular");
+            nis_sum[k] += v.norm_squared() / 2.0;
+            for i in 0..4 {
+                err_sum[k * 4 + i] += e[i] * e[i];
+            }
+        }
+    }
+    std::hint::black_box(&err_sum);
+    let n = runs as f64;
+    (nees_sum.iter().map(|s| s / n).collect(), nis_sum.iter().map(|s| s / n).collect())
+}
