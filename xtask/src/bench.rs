@@ -19,8 +19,15 @@ struct Args {
 
 fn parse(args: Vec<OsString>) -> Result<Args> {
     use lexopt::prelude::*;
-    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
-    let mut parsed = Args { runs: 1000, steps: 1000, threads: cores, repeats: 3 };
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    let mut parsed = Args {
+        runs: 1000,
+        steps: 1000,
+        threads: cores,
+        repeats: 3,
+    };
     let mut parser = lexopt::Parser::from_args(args);
     while let Some(arg) = parser.next()? {
         match arg {
@@ -61,7 +68,13 @@ fn w1_bench(args: &Args) -> Result<()> {
         "W1: KF on [x, y, vx, vy], T = 1, R = 100 I2, {} runs x {} steps, per-step NEES and NIS averaged over runs (best of {})",
         args.runs, args.steps, args.repeats
     );
-    let config = |threads| w1::Config { runs: args.runs, steps: args.steps, seed: 2012, threads, confidence: 0.95 };
+    let config = |threads| w1::Config {
+        runs: args.runs,
+        steps: args.steps,
+        seed: 2012,
+        threads,
+        confidence: 0.95,
+    };
     // Interleave the two so that machine noise hits both alike.
     let mut lib_best = f64::INFINITY;
     let mut hand_best = f64::INFINITY;
@@ -75,7 +88,10 @@ fn w1_bench(args: &Args) -> Result<()> {
         hand_best = hand_best.min(t);
         hand_out = Some(h);
     }
-    let (lib_report, hand_out) = (lib_report.expect("repeats > 0"), hand_out.expect("repeats > 0"));
+    let (lib_report, hand_out) = (
+        lib_report.expect("repeats > 0"),
+        hand_out.expect("repeats > 0"),
+    );
     let (t_par, mut par_report) = best_of(args.repeats, || Ok(w1::run(&config(args.threads))?))?;
     // The reports differ only in the thread count they record.
     par_report.config.threads = lib_report.config.threads;
@@ -83,9 +99,18 @@ fn w1_bench(args: &Args) -> Result<()> {
     let lib_rate = total / lib_best;
     let hand_rate = total / hand_best;
     let par_rate = total / t_par;
-    println!("  library,      1 thread : {:>12.0} steps/s ({lib_best:.3} s)", lib_rate);
-    println!("  hand-written, 1 thread : {:>12.0} steps/s ({hand_best:.3} s)", hand_rate);
-    println!("  ratio library / hand-written (1 thread): {:.3}", lib_rate / hand_rate);
+    println!(
+        "  library,      1 thread : {:>12.0} steps/s ({lib_best:.3} s)",
+        lib_rate
+    );
+    println!(
+        "  hand-written, 1 thread : {:>12.0} steps/s ({hand_best:.3} s)",
+        hand_rate
+    );
+    println!(
+        "  ratio library / hand-written (1 thread): {:.3}",
+        lib_rate / hand_rate
+    );
     println!(
         "  library, {} threads   : {:>12.0} steps/s ({t_par:.3} s), speed-up {:.2}x over 1 thread",
         args.threads,
@@ -99,11 +124,17 @@ fn w1_bench(args: &Args) -> Result<()> {
         .chain(lib_report.anis.iter().zip(&hand_out.1))
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f64, f64::max);
-    println!("  same arithmetic check: max |library - hand-written| over per-step ANEES and NIS = {max_diff:.2e}");
+    println!(
+        "  same arithmetic check: max |library - hand-written| over per-step ANEES and NIS = {max_diff:.2e}"
+    );
     println!(
         "  thread check: {} threads give {} results as 1 thread",
         args.threads,
-        if par_report == lib_report { "bit-identical" } else { "DIFFERENT" }
+        if par_report == lib_report {
+            "bit-identical"
+        } else {
+            "DIFFERENT"
+        }
     );
     if par_report != lib_report {
         bail!("results depend on the thread count");
@@ -124,7 +155,9 @@ fn sym4(m: &mut Matrix4<f64>) {
 /// the same Joseph update and symmetrisation, NEES and NIS through Cholesky, per-step sums.
 /// Returns per-step ANEES and NIS / 2.
 fn hand_w1(runs: usize, steps: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
-    let f = Matrix4::new(1., 0., 1., 0., 0., 1., 0., 1., 0., 0., 1., 0., 0., 0., 0., 1.);
+    let f = Matrix4::new(
+        1., 0., 1., 0., 0., 1., 0., 1., 0., 0., 1., 0., 0., 0., 0., 1.,
+    );
     let g = SMatrix::<f64, 4, 2>::new(0.5, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 1.0);
     let q = g * g.transpose();
     let h = SMatrix::<f64, 2, 4>::new(1., 0., 0., 0., 0., 1., 0., 0.);
@@ -133,7 +166,9 @@ fn hand_w1(runs: usize, steps: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
     // Factors as the library computes them (semi-definite Cholesky of the rank-2 Q).
     let lq = *kalibra_linalg::PsdMatrix::new(q).expect("valid Q").factor();
     let lr = *kalibra_linalg::PsdMatrix::new(r).expect("valid R").factor();
-    let lp0 = *kalibra_linalg::PsdMatrix::new(p0).expect("valid P0").factor();
+    let lp0 = *kalibra_linalg::PsdMatrix::new(p0)
+        .expect("valid P0")
+        .factor();
     let mut nees_sum = vec![0.0; steps];
     let mut nis_sum = vec![0.0; steps];
     let mut err_sum = vec![0.0; steps * 4];
@@ -174,5 +209,8 @@ fn hand_w1(runs: usize, steps: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
     }
     std::hint::black_box(&err_sum);
     let n = runs as f64;
-    (nees_sum.iter().map(|s| s / n).collect(), nis_sum.iter().map(|s| s / n).collect())
+    (
+        nees_sum.iter().map(|s| s / n).collect(),
+        nis_sum.iter().map(|s| s / n).collect(),
+    )
 }

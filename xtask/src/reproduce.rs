@@ -16,7 +16,12 @@ struct Args {
 
 fn parse(args: Vec<OsString>) -> Result<Args> {
     use lexopt::prelude::*;
-    let mut parsed = Args { quick: false, out: crate::workspace_root().join("target/reproduce"), seed: None, threads: 0 };
+    let mut parsed = Args {
+        quick: false,
+        out: crate::workspace_root().join("target/reproduce"),
+        seed: None,
+        threads: 0,
+    };
     let mut parser = lexopt::Parser::from_args(args);
     while let Some(arg) = parser.next()? {
         match arg {
@@ -45,13 +50,20 @@ fn git_revision() -> String {
 pub fn main(args: Vec<OsString>) -> Result<()> {
     let args = parse(args)?;
     let revision = git_revision();
-    let mut config = if args.quick { w1::Config::quick() } else { w1::Config::paper() };
+    let mut config = if args.quick {
+        w1::Config::quick()
+    } else {
+        w1::Config::paper()
+    };
     if let Some(seed) = args.seed {
         config.seed = seed;
     }
     config.threads = args.threads;
 
-    eprintln!("w1: consistency study, {} runs x {} steps ...", config.runs, config.steps);
+    eprintln!(
+        "w1: consistency study, {} runs x {} steps ...",
+        config.runs, config.steps
+    );
     let start = Instant::now();
     let report = w1::run(&config)?;
     let elapsed = start.elapsed().as_secs_f64();
@@ -67,7 +79,10 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         "parameters": config,
         "results": report,
     });
-    std::fs::write(dir.join("results.json"), serde_json::to_string_pretty(&json)?)?;
+    std::fs::write(
+        dir.join("results.json"),
+        serde_json::to_string_pretty(&json)?,
+    )?;
     std::fs::write(dir.join("report.md"), report.to_markdown())?;
 
     let index = format!(

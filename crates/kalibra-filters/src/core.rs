@@ -3,8 +3,8 @@
 //! later reuse the same model calls and the same step record).
 
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, check_dim, check_finite,
-    joseph_update, propagate, standard_update, symmetrize,
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, check_dim,
+    check_finite, joseph_update, propagate, standard_update, symmetrize,
 };
 
 use crate::{Estimate, FilterError, StepRecord};
@@ -68,7 +68,9 @@ where
     update: UpdateForm,
 }
 
-fn all_finite<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R, C>>(m: &nalgebra::Matrix<f64, R, C, S>) -> bool {
+fn all_finite<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R, C>>(
+    m: &nalgebra::Matrix<f64, R, C, S>,
+) -> bool {
     m.iter().all(|v| v.is_finite())
 }
 
@@ -76,7 +78,13 @@ impl<N: Dim, M: Dim> KalmanCore<N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    pub(crate) fn new(n: N, m: M, x0: OVector<f64, N>, mut p0: OMatrix<f64, N, N>, options: FilterOptions) -> Result<Self, FilterError> {
+    pub(crate) fn new(
+        n: N,
+        m: M,
+        x0: OVector<f64, N>,
+        mut p0: OMatrix<f64, N, N>,
+        options: FilterOptions,
+    ) -> Result<Self, FilterError> {
         let init = |e: LinalgError| FilterError::Initial(e);
         check_dim(n.value(), x0.nrows(), "initial mean").map_err(init)?;
         check_dim(n.value(), p0.nrows(), "initial covariance").map_err(init)?;
@@ -84,24 +92,34 @@ where
         check_finite(&x0, "initial mean").map_err(init)?;
         match options.initial_check {
             InitialCheck::PositiveSemiDefinite => {
-                p0 = kalibra_linalg::PsdMatrix::named(p0, "initial covariance").map_err(init)?.matrix().clone();
+                p0 = kalibra_linalg::PsdMatrix::named(p0, "initial covariance")
+                    .map_err(init)?
+                    .matrix()
+                    .clone();
             }
             InitialCheck::SymmetricOnly => {
                 check_finite(&p0, "initial covariance").map_err(init)?;
                 let asym = (&p0 - p0.transpose()).amax();
                 let scale = p0.diagonal().amax().max(f64::MIN_POSITIVE);
                 if asym > kalibra_linalg::SYMMETRY_TOLERANCE * scale {
-                    return Err(init(LinalgError::NotSymmetric { what: "initial covariance", asymmetry: asym / scale }));
+                    return Err(init(LinalgError::NotSymmetric {
+                        what: "initial covariance",
+                        asymmetry: asym / scale,
+                    }));
                 }
                 symmetrize(&mut p0);
             }
         }
         let zeros_nn = || OMatrix::<f64, N, N>::zeros_generic(n, n);
-        let placeholder_s = Covariance::from_symmetric(OMatrix::<f64, M, M>::identity_generic(m, m), "placeholder")
-            .map_err(init)?;
+        let placeholder_s =
+            Covariance::from_symmetric(OMatrix::<f64, M, M>::identity_generic(m, m), "placeholder")
+                .map_err(init)?;
         let record = StepRecord {
             k: options.first_step,
-            prior: Estimate { mean: x0.clone(), cov: p0.clone() },
+            prior: Estimate {
+                mean: x0.clone(),
+                cov: p0.clone(),
+            },
             posterior: Estimate { mean: x0, cov: p0 },
             predicted_measurement: OVector::<f64, M>::zeros_generic(m, nalgebra::U1),
             innovation: OVector::<f64, M>::zeros_generic(m, nalgebra::U1),
@@ -113,7 +131,12 @@ where
             propagated: zeros_nn(),
             process_noise: zeros_nn(),
         };
-        Ok(Self { record, phase: Phase::Posterior, has_record: false, update: options.update })
+        Ok(Self {
+            record,
+            phase: Phase::Posterior,
+            has_record: false,
+            update: options.update,
+        })
     }
 
     fn current(&self) -> &Estimate<N> {
@@ -139,13 +162,21 @@ where
 
     /// Predicts from step `k` to `k + 1` given the predicted mean, the transition Jacobian and
     /// the process noise, all evaluated by the caller.
-    pub(crate) fn predict(&mut self, x_pred: OVector<f64, N>, f: OMatrix<f64, N, N>, q: OMatrix<f64, N, N>) -> Result<(), FilterError> {
+    pub(crate) fn predict(
+        &mut self,
+        x_pred: OVector<f64, N>,
+        f: OMatrix<f64, N, N>,
+        q: OMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
         let k = self.record.k;
         let rec = &mut self.record;
         let (propagated, noise) = match self.phase {
             Phase::Posterior => (propagate(&f, &rec.posterior.cov), q),
             // A second prediction without an update: carry both parts.
-            Phase::Prior => (propagate(&f, &rec.propagated), propagate(&f, &rec.process_noise) + q),
+            Phase::Prior => (
+                propagate(&f, &rec.propagated),
+                propagate(&f, &rec.process_noise) + q,
+            ),
         };
         let mut p = &propagated + &noise;
         symmetrize(&mut p);
@@ -154,7 +185,10 @@ where
         if !(all_finite(&p) && all_finite(&x_pred)) {
             check_finite(&f, "transition Jacobian F").map_err(|e| FilterError::at(k, e))?;
             check_finite(&x_pred, "predicted mean").map_err(|e| FilterError::at(k + 1, e))?;
-            return Err(FilterError::NonFinite { what: "predicted covariance (process noise Q?)", step: k + 1 });
+            return Err(FilterError::NonFinite {
+                what: "predicted covariance (process noise Q?)",
+                step: k + 1,
+            });
         }
         rec.prior.mean = x_pred;
         rec.prior.cov = p;
@@ -193,7 +227,8 @@ where
         symmetrize(&mut s);
         let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(|e| {
             // NaN in H or R makes the factorisation fail too: name the real culprit.
-            let culprit = check_finite(&h, "measurement Jacobian H").and_then(|()| check_finite(&r, "measurement noise covariance R"));
+            let culprit = check_finite(&h, "measurement Jacobian H")
+                .and_then(|()| check_finite(&r, "measurement noise covariance R"));
             at(culprit.err().unwrap_or(e))
         })?;
         // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
@@ -205,7 +240,10 @@ where
         };
         if !(all_finite(&x_post) && all_finite(&p_post)) {
             check_finite(&innovation, "innovation").map_err(at)?;
-            return Err(FilterError::NonFinite { what: "posterior estimate", step: k });
+            return Err(FilterError::NonFinite {
+                what: "posterior estimate",
+                step: k,
+            });
         }
         let rec = &mut self.record;
         rec.posterior.mean = x_post;
@@ -222,7 +260,11 @@ where
     }
 
     /// Checks the length and finiteness of a measurement handed in from outside.
-    pub(crate) fn check_measurement(&self, m: usize, z: &OVector<f64, M>) -> Result<(), FilterError> {
+    pub(crate) fn check_measurement(
+        &self,
+        m: usize,
+        z: &OVector<f64, M>,
+    ) -> Result<(), FilterError> {
         check_dim(m, z.nrows(), "measurement").map_err(|e| FilterError::at(self.step(), e))?;
         check_finite(z, "measurement").map_err(|e| FilterError::at(self.step(), e))
     }

@@ -47,15 +47,26 @@ impl FilterError {
     pub(crate) fn at(step: usize, e: LinalgError) -> Self {
         match e {
             LinalgError::NonFinite { what } => FilterError::NonFinite { what, step },
-            LinalgError::DimensionMismatch { what, expected, found } => {
-                FilterError::DimensionMismatch { what, expected, found }
-            }
+            LinalgError::DimensionMismatch {
+                what,
+                expected,
+                found,
+            } => FilterError::DimensionMismatch {
+                what,
+                expected,
+                found,
+            },
             LinalgError::NotPositiveDefinite { what }
             | LinalgError::NotPositiveSemiDefinite { what, .. }
-            | LinalgError::NotSymmetric { what, .. } => FilterError::NotPositiveDefinite { what, step },
+            | LinalgError::NotSymmetric { what, .. } => {
+                FilterError::NotPositiveDefinite { what, step }
+            }
             // LinalgError is non-exhaustive: report any future variant as a definiteness failure
             // of an unnamed matrix rather than panic.
-            _ => FilterError::NotPositiveDefinite { what: "matrix", step },
+            _ => FilterError::NotPositiveDefinite {
+                what: "matrix",
+                step,
+            },
         }
     }
 }

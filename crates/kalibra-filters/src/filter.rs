@@ -62,7 +62,12 @@ where
     ///
     /// # Errors
     /// The first [`FilterError`] of any step; the filter stays at that step.
-    fn run<'z, I>(&mut self, measurements: I, start: Start, mut visit: impl FnMut(&StepRecord<N, M>)) -> Result<(), FilterError>
+    fn run<'z, I>(
+        &mut self,
+        measurements: I,
+        start: Start,
+        mut visit: impl FnMut(&StepRecord<N, M>),
+    ) -> Result<(), FilterError>
     where
         I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
         OVector<f64, M>: 'z,
@@ -82,7 +87,11 @@ where
     ///
     /// # Errors
     /// As [`Filter::run`].
-    fn run_collect<'z, I>(&mut self, measurements: I, start: Start) -> Result<Vec<StepRecord<N, M>>, FilterError>
+    fn run_collect<'z, I>(
+        &mut self,
+        measurements: I,
+        start: Start,
+    ) -> Result<Vec<StepRecord<N, M>>, FilterError>
     where
         I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
         OVector<f64, M>: 'z,

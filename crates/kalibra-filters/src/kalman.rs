@@ -63,7 +63,12 @@ macro_rules! constructors {
             /// # Errors
             /// [`FilterError::Initial`] if `x0` or `p0` has the wrong size, is not finite, or
             /// `p0` is not symmetric positive semi-definite.
-            pub fn new(dynamics: D, measurement: H, x0: OVector<f64, N>, p0: OMatrix<f64, N, N>) -> Result<Self, FilterError> {
+            pub fn new(
+                dynamics: D,
+                measurement: H,
+                x0: OVector<f64, N>,
+                p0: OMatrix<f64, N, N>,
+            ) -> Result<Self, FilterError> {
                 Self::with_options(dynamics, measurement, x0, p0, FilterOptions::default())
             }
 
@@ -78,8 +83,18 @@ macro_rules! constructors {
                 p0: OMatrix<f64, N, N>,
                 options: FilterOptions,
             ) -> Result<Self, FilterError> {
-                let core = KalmanCore::new(dynamics.state_dim(), measurement.meas_dim(), x0, p0, options)?;
-                Ok(Self { dynamics, measurement, core })
+                let core = KalmanCore::new(
+                    dynamics.state_dim(),
+                    measurement.meas_dim(),
+                    x0,
+                    p0,
+                    options,
+                )?;
+                Ok(Self {
+                    dynamics,
+                    measurement,
+                    core,
+                })
             }
 
             /// The dynamics model.
@@ -98,7 +113,8 @@ macro_rules! constructors {
 constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
 
-impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>> Filter<N, M> for Kf<N, M, D, H>
+impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>> Filter<N, M>
+    for Kf<N, M, D, H>
 where
     DefaultAllocator: Alloc<N, M>,
 {
@@ -114,11 +130,13 @@ where
     fn predict(&mut self) -> Result<(), FilterError> {
         let k = self.core.step();
         let x_pred = self.dynamics.transition(k, self.core.mean());
-        self.core.predict(x_pred, self.dynamics.matrix(k), self.dynamics.noise_cov(k))
+        self.core
+            .predict(x_pred, self.dynamics.matrix(k), self.dynamics.noise_cov(k))
     }
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let k = self.core.step();
-        self.core.check_measurement(self.measurement.meas_dim().value(), z)?;
+        self.core
+            .check_measurement(self.measurement.meas_dim().value(), z)?;
         let x = self.core.mean();
         let zhat = self.measurement.measure(k, x);
         let nu = self.measurement.residual(z, &zhat);
@@ -147,11 +165,16 @@ where
         let k = self.core.step();
         let x = self.core.mean();
         let x_pred = self.dynamics.transition(k, x);
-        self.core.predict(x_pred, self.dynamics.jacobian(k, x), self.dynamics.noise_cov(k))
+        self.core.predict(
+            x_pred,
+            self.dynamics.jacobian(k, x),
+            self.dynamics.noise_cov(k),
+        )
     }
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let k = self.core.step();
-        self.core.check_measurement(self.measurement.meas_dim().value(), z)?;
+        self.core
+            .check_measurement(self.measurement.meas_dim().value(), z)?;
         let x = self.core.mean();
         let zhat = self.measurement.measure(k, x);
         let nu = self.measurement.residual(z, &zhat);

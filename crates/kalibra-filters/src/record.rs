@@ -109,6 +109,8 @@ where
     }
     /// The normalised innovation squared `nu^T S^-1 nu`, from the stored factor of `S`.
     pub fn nis(&self) -> f64 {
-        self.s.quad_form(&self.innovation).expect("innovation and S share the dimension M")
+        self.s
+            .quad_form(&self.innovation)
+            .expect("innovation and S share the dimension M")
     }
 }

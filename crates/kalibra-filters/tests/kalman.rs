@@ -2,20 +2,35 @@
 //! prior split used by J1/J2, and typed errors that leave the filter untouched.
 
 use approx::assert_relative_eq;
-use kalibra_filters::{Ekf, Filter, FilterError, FilterOptions, InitialCheck, Kf, Start, UpdateForm};
-use kalibra_linalg::{DMatrix, DVector, Dyn, Matrix2, Matrix4, SMatrix, U2, U4, Vector2, Vector4, propagate};
+use kalibra_filters::{
+    Ekf, Filter, FilterError, FilterOptions, InitialCheck, Kf, Start, UpdateForm,
+};
+use kalibra_linalg::{
+    DMatrix, DVector, Dyn, Matrix2, Matrix4, SMatrix, U2, U4, Vector2, Vector4, propagate,
+};
 use kalibra_models::{Kinematic, LinearGaussian, LinearObservation, ProcessNoise, Truth, simulate};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 
 fn w1() -> (LinearGaussian<U4>, LinearObservation<U4, U2>) {
     let cv = Kinematic::constant_velocity(2, 1.0).unwrap();
-    (cv.dynamics(U4).unwrap(), cv.position_measurement(U4, U2, Matrix2::identity() * 100.0).unwrap())
+    (
+        cv.dynamics(U4).unwrap(),
+        cv.position_measurement(U4, U2, Matrix2::identity() * 100.0)
+            .unwrap(),
+    )
 }
 
 fn truth(seed: u64, steps: usize) -> Truth<U4, U2> {
     let (f, h) = w1();
-    simulate(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), steps, &mut ChaCha8Rng::seed_from_u64(seed)).unwrap()
+    simulate(
+        &f,
+        &h,
+        Vector4::new(0.0, 0.0, 10.0, -5.0),
+        steps,
+        &mut ChaCha8Rng::seed_from_u64(seed),
+    )
+    .unwrap()
 }
 
 fn p0() -> Matrix4<f64> {
@@ -27,12 +42,28 @@ fn ekf_equals_kf_on_a_linear_model() {
     let (f, h) = w1();
     let t = truth(1, 200);
     let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
-    let kf = Kf::new(&f, &h, x0, p0()).unwrap().run_collect(t.measurements.iter().map(Some), Start::UpdateFirst).unwrap();
-    let ekf = Ekf::new(&f, &h, x0, p0()).unwrap().run_collect(t.measurements.iter().map(Some), Start::UpdateFirst).unwrap();
+    let kf = Kf::new(&f, &h, x0, p0())
+        .unwrap()
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
+    let ekf = Ekf::new(&f, &h, x0, p0())
+        .unwrap()
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
     assert_eq!(kf.len(), 200);
     for (a, b) in kf.iter().zip(&ekf) {
-        assert_relative_eq!(a.posterior().mean, b.posterior().mean, epsilon = 1e-12, max_relative = 1e-12);
-        assert_relative_eq!(a.posterior().cov, b.posterior().cov, epsilon = 1e-12, max_relative = 1e-12);
+        assert_relative_eq!(
+            a.posterior().mean,
+            b.posterior().mean,
+            epsilon = 1e-12,
+            max_relative = 1e-12
+        );
+        assert_relative_eq!(
+            a.posterior().cov,
+            b.posterior().cov,
+            epsilon = 1e-12,
+            max_relative = 1e-12
+        );
         assert_relative_eq!(a.gain(), b.gain(), epsilon = 1e-12);
     }
 }
@@ -66,21 +97,60 @@ fn kf_matches_a_textbook_recursion() {
 #[test]
 fn fixed_and_dynamic_sizes_agree() {
     let (f, h) = w1();
-    let fd = LinearGaussian::new(DMatrix::from_column_slice(4, 4, f.f().as_slice()), DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice())).unwrap();
-    let hd = LinearObservation::new(DMatrix::from_column_slice(2, 4, h.h().as_slice()), DMatrix::from_column_slice(2, 2, h.r().matrix().as_slice())).unwrap();
+    let fd = LinearGaussian::new(
+        DMatrix::from_column_slice(4, 4, f.f().as_slice()),
+        DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
+    )
+    .unwrap();
+    let hd = LinearObservation::new(
+        DMatrix::from_column_slice(2, 4, h.h().as_slice()),
+        DMatrix::from_column_slice(2, 2, h.r().matrix().as_slice()),
+    )
+    .unwrap();
     let t = truth(3, 50);
     let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
-    let fixed = Kf::new(&f, &h, x0, p0()).unwrap().run_collect(t.measurements.iter().map(Some), Start::UpdateFirst).unwrap();
-    let zs: Vec<DVector<f64>> = t.measurements.iter().map(|z| DVector::from_column_slice(z.as_slice())).collect();
-    let mut kd = Kf::new(&fd, &hd, DVector::from_column_slice(x0.as_slice()), DMatrix::from_column_slice(4, 4, p0().as_slice())).unwrap();
-    let dynamic = kd.run_collect(zs.iter().map(Some), Start::UpdateFirst).unwrap();
+    let fixed = Kf::new(&f, &h, x0, p0())
+        .unwrap()
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
+    let zs: Vec<DVector<f64>> = t
+        .measurements
+        .iter()
+        .map(|z| DVector::from_column_slice(z.as_slice()))
+        .collect();
+    let mut kd = Kf::new(
+        &fd,
+        &hd,
+        DVector::from_column_slice(x0.as_slice()),
+        DMatrix::from_column_slice(4, 4, p0().as_slice()),
+    )
+    .unwrap();
+    let dynamic = kd
+        .run_collect(zs.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
     for (a, b) in fixed.iter().zip(&dynamic) {
-        assert_relative_eq!(a.posterior().mean.as_slice(), b.posterior().mean.as_slice(), max_relative = 1e-12);
+        assert_relative_eq!(
+            a.posterior().mean.as_slice(),
+            b.posterior().mean.as_slice(),
+            max_relative = 1e-12
+        );
         assert_relative_eq!(a.nis(), b.nis(), max_relative = 1e-12);
     }
     // A measurement of the wrong length is a typed error at the dynamic boundary.
-    let err = kd.update(&DVector::from_vec(vec![1.0, 2.0, 3.0])).unwrap_err();
-    assert!(matches!(err, FilterError::DimensionMismatch { expected: 2, found: 3, .. }), "{err}");
+    let err = kd
+        .update(&DVector::from_vec(vec![1.0, 2.0, 3.0]))
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            FilterError::DimensionMismatch {
+                expected: 2,
+                found: 3,
+                ..
+            }
+        ),
+        "{err}"
+    );
     let wrong_x0 = Kf::<Dyn, Dyn, _, _>::new(&fd, &hd, DVector::zeros(3), DMatrix::identity(4, 4));
     assert!(matches!(wrong_x0, Err(FilterError::Initial(_))));
 }
@@ -93,14 +163,26 @@ fn prior_splits_into_propagated_and_process_noise() {
     let first = kf.update(&t.measurements[0]).unwrap().clone();
     // An update with no prediction before it: the prior is all "propagated", B = 0.
     assert_eq!(first.b(), Matrix2::zeros());
-    assert_relative_eq!(first.a() + first.r(), first.s().matrix(), max_relative = 1e-12);
+    assert_relative_eq!(
+        first.a() + first.r(),
+        first.s().matrix(),
+        max_relative = 1e-12
+    );
     let mut prev_post = first.posterior().cov;
     for z in &t.measurements[1..10] {
         kf.predict().unwrap();
         let rec = kf.update(z).unwrap();
-        assert_relative_eq!(rec.propagated(), &(f.f() * prev_post * f.f().transpose()), max_relative = 1e-12);
+        assert_relative_eq!(
+            rec.propagated(),
+            &(f.f() * prev_post * f.f().transpose()),
+            max_relative = 1e-12
+        );
         assert_relative_eq!(rec.process_noise(), f.q().matrix(), max_relative = 1e-12);
-        assert_relative_eq!(rec.a() + rec.b() + rec.r(), rec.s().matrix(), max_relative = 1e-12);
+        assert_relative_eq!(
+            rec.a() + rec.b() + rec.r(),
+            rec.s().matrix(),
+            max_relative = 1e-12
+        );
         prev_post = rec.posterior().cov;
     }
     // Two predictions between updates carry both parts.
@@ -108,23 +190,42 @@ fn prior_splits_into_propagated_and_process_noise() {
     kf.predict().unwrap();
     let rec = kf.update(&t.measurements[12]).unwrap();
     let ff = f.f() * f.f();
-    assert_relative_eq!(rec.propagated(), &(ff * prev_post * ff.transpose()), max_relative = 1e-12);
-    assert_relative_eq!(rec.process_noise(), &(propagate(f.f(), f.q().matrix()) + f.q().matrix()), max_relative = 1e-12);
-    assert_relative_eq!(rec.a() + rec.b() + rec.r(), rec.s().matrix(), max_relative = 1e-12);
+    assert_relative_eq!(
+        rec.propagated(),
+        &(ff * prev_post * ff.transpose()),
+        max_relative = 1e-12
+    );
+    assert_relative_eq!(
+        rec.process_noise(),
+        &(propagate(f.f(), f.q().matrix()) + f.q().matrix()),
+        max_relative = 1e-12
+    );
+    assert_relative_eq!(
+        rec.a() + rec.b() + rec.r(),
+        rec.s().matrix(),
+        max_relative = 1e-12
+    );
 }
 
 #[test]
 fn gaps_in_the_sequence_only_predict() {
     let (f, h) = w1();
     let t = truth(5, 20);
-    let zs: Vec<Option<&Vector2<f64>>> = t.measurements.iter().enumerate().map(|(i, z)| (i % 3 != 1).then_some(z)).collect();
+    let zs: Vec<Option<&Vector2<f64>>> = t
+        .measurements
+        .iter()
+        .enumerate()
+        .map(|(i, z)| (i % 3 != 1).then_some(z))
+        .collect();
     let mut kf = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
     let recs = kf.run_collect(zs, Start::UpdateFirst).unwrap();
     let steps: Vec<usize> = recs.iter().map(|r| r.step()).collect();
     assert_eq!(steps, (0..20).filter(|i| i % 3 != 1).collect::<Vec<_>>());
     assert_eq!(kf.step_index(), 19);
     let mut late = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
-    let recs = late.run_collect(t.measurements.iter().map(Some), Start::PredictFirst).unwrap();
+    let recs = late
+        .run_collect(t.measurements.iter().map(Some), Start::PredictFirst)
+        .unwrap();
     assert_eq!(recs[0].step(), 1);
 }
 
@@ -133,9 +234,22 @@ fn bad_data_gives_typed_errors_and_leaves_the_filter_untouched() {
     let (f, h) = w1();
     let mut kf = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
     let (x, p) = (*kf.mean(), *kf.covariance());
-    for bad in [Vector2::new(f64::NAN, 0.0), Vector2::new(0.0, f64::INFINITY), Vector2::new(f64::NEG_INFINITY, 1.0)] {
+    for bad in [
+        Vector2::new(f64::NAN, 0.0),
+        Vector2::new(0.0, f64::INFINITY),
+        Vector2::new(f64::NEG_INFINITY, 1.0),
+    ] {
         let err = kf.update(&bad).unwrap_err();
-        assert!(matches!(err, FilterError::NonFinite { what: "measurement", step: 0 }), "{err}");
+        assert!(
+            matches!(
+                err,
+                FilterError::NonFinite {
+                    what: "measurement",
+                    step: 0
+                }
+            ),
+            "{err}"
+        );
         assert_eq!((*kf.mean(), *kf.covariance()), (x, p));
     }
     // Singular S: no measurement noise and no uncertainty in the measured components.
@@ -143,16 +257,34 @@ fn bad_data_gives_typed_errors_and_leaves_the_filter_untouched() {
     let certain = Matrix4::from_diagonal(&Vector4::new(0.0, 0.0, 1.0, 1.0));
     let mut kf = Kf::new(&f, &exact, Vector4::zeros(), certain).unwrap();
     let err = kf.update(&Vector2::new(1.0, 1.0)).unwrap_err();
-    assert!(matches!(err, FilterError::NotPositiveDefinite { what: "innovation covariance S", step: 0 }), "{err}");
+    assert!(
+        matches!(
+            err,
+            FilterError::NotPositiveDefinite {
+                what: "innovation covariance S",
+                step: 0
+            }
+        ),
+        "{err}"
+    );
     assert_eq!(kf.covariance(), &certain);
     // Indefinite or non-finite initial covariance.
     let indefinite = Matrix4::from_diagonal(&Vector4::new(1.0, -1.0, 1.0, 1.0));
-    assert!(matches!(Kf::new(&f, &h, Vector4::zeros(), indefinite), Err(FilterError::Initial(_))));
+    assert!(matches!(
+        Kf::new(&f, &h, Vector4::zeros(), indefinite),
+        Err(FilterError::Initial(_))
+    ));
     let mut nan = p0();
     nan[(2, 2)] = f64::NAN;
-    assert!(matches!(Kf::new(&f, &h, Vector4::zeros(), nan), Err(FilterError::Initial(_))));
+    assert!(matches!(
+        Kf::new(&f, &h, Vector4::zeros(), nan),
+        Err(FilterError::Initial(_))
+    ));
     // The symmetric-only check accepts the indefinite P0 (for paper 000's printed matrix).
-    let opts = FilterOptions { initial_check: InitialCheck::SymmetricOnly, ..Default::default() };
+    let opts = FilterOptions {
+        initial_check: InitialCheck::SymmetricOnly,
+        ..Default::default()
+    };
     assert!(Kf::with_options(&f, &h, Vector4::zeros(), indefinite, opts).is_ok());
 }
 
@@ -161,22 +293,59 @@ fn standard_form_is_available_and_agrees_at_the_optimal_gain() {
     let (f, h) = w1();
     let t = truth(6, 50);
     let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
-    let opts = FilterOptions { update: UpdateForm::Standard, ..Default::default() };
-    let a = Kf::new(&f, &h, x0, p0()).unwrap().run_collect(t.measurements.iter().map(Some), Start::UpdateFirst).unwrap();
-    let b = Kf::with_options(&f, &h, x0, p0(), opts).unwrap().run_collect(t.measurements.iter().map(Some), Start::UpdateFirst).unwrap();
+    let opts = FilterOptions {
+        update: UpdateForm::Standard,
+        ..Default::default()
+    };
+    let a = Kf::new(&f, &h, x0, p0())
+        .unwrap()
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
+    let b = Kf::with_options(&f, &h, x0, p0(), opts)
+        .unwrap()
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
     for (a, b) in a.iter().zip(&b) {
-        assert_relative_eq!(a.posterior().cov, b.posterior().cov, max_relative = 1e-10, epsilon = 1e-10);
+        assert_relative_eq!(
+            a.posterior().cov,
+            b.posterior().cov,
+            max_relative = 1e-10,
+            epsilon = 1e-10
+        );
     }
 }
 
 #[test]
 fn continuous_noise_model_and_ca_run_without_error() {
-    let ca = Kinematic::constant_acceleration(1, 0.1).unwrap().noise(ProcessNoise::Continuous { q: 0.3 });
+    let ca = Kinematic::constant_acceleration(1, 0.1)
+        .unwrap()
+        .noise(ProcessNoise::Continuous { q: 0.3 });
     let f = ca.dynamics(kalibra_linalg::U3).unwrap();
-    let h = ca.position_measurement(kalibra_linalg::U3, kalibra_linalg::U1, SMatrix::<f64, 1, 1>::new(0.5)).unwrap();
-    let t = simulate(&f, &h, kalibra_linalg::Vector3::new(0.0, 1.0, 0.1), 100, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
-    let mut kf = Kf::new(&f, &h, kalibra_linalg::Vector3::zeros(), kalibra_linalg::Matrix3::identity()).unwrap();
-    let recs = kf.run_collect(t.measurements.iter().map(Some), Start::UpdateFirst).unwrap();
+    let h = ca
+        .position_measurement(
+            kalibra_linalg::U3,
+            kalibra_linalg::U1,
+            SMatrix::<f64, 1, 1>::new(0.5),
+        )
+        .unwrap();
+    let t = simulate(
+        &f,
+        &h,
+        kalibra_linalg::Vector3::new(0.0, 1.0, 0.1),
+        100,
+        &mut ChaCha8Rng::seed_from_u64(9),
+    )
+    .unwrap();
+    let mut kf = Kf::new(
+        &f,
+        &h,
+        kalibra_linalg::Vector3::zeros(),
+        kalibra_linalg::Matrix3::identity(),
+    )
+    .unwrap();
+    let recs = kf
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
     let mean_nis: f64 = recs.iter().map(|r| r.nis()).sum::<f64>() / recs.len() as f64;
     // 100 NIS values of 1 degree of freedom: the mean is within 0.5 of 1 with probability > 0.999.
     assert!((mean_nis - 1.0).abs() < 0.5, "{mean_nis}");

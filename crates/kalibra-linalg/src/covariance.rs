@@ -122,7 +122,10 @@ where
     /// # Errors
     /// [`LinalgError::DimensionMismatch`] if `b` has the wrong number of rows (possible only with
     /// `Dyn` dimensions).
-    pub fn solve<C: Dim, S>(&self, b: &Matrix<f64, D, C, S>) -> Result<OMatrix<f64, D, C>, LinalgError>
+    pub fn solve<C: Dim, S>(
+        &self,
+        b: &Matrix<f64, D, C, S>,
+    ) -> Result<OMatrix<f64, D, C>, LinalgError>
     where
         S: Storage<f64, D, C>,
         DefaultAllocator: nalgebra::allocator::Allocator<D, C>,
@@ -143,7 +146,9 @@ where
         crate::check_dim(self.dim(), v.nrows(), "vector")?;
         let mut w = v.clone_owned();
         // The factor is non-singular by construction, so the solve cannot fail.
-        self.chol.l_dirty().solve_lower_triangular_unchecked_mut(&mut w);
+        self.chol
+            .l_dirty()
+            .solve_lower_triangular_unchecked_mut(&mut w);
         Ok(w.norm_squared())
     }
 
@@ -201,7 +206,11 @@ where
     let mut w = v.clone_owned();
     chol.l_dirty().solve_lower_triangular_unchecked_mut(&mut w);
     let q = w.norm_squared();
-    if q.is_finite() { Ok(q) } else { Err(LinalgError::NotPositiveDefinite { what }) }
+    if q.is_finite() {
+        Ok(q)
+    } else {
+        Err(LinalgError::NotPositiveDefinite { what })
+    }
 }
 
 fn check_square<D: Dim>(m: &OMatrix<f64, D, D>, what: &'static str) -> Result<(), LinalgError>
@@ -225,7 +234,11 @@ where
                 continue;
             }
             let scale = (m[(i, i)] * m[(j, j)]).abs().sqrt();
-            let rel = if scale > 0.0 { diff / scale } else { f64::INFINITY };
+            let rel = if scale > 0.0 {
+                diff / scale
+            } else {
+                f64::INFINITY
+            };
             worst = worst.max(rel);
         }
     }
@@ -247,23 +260,40 @@ mod tests {
         let c = Covariance::new(spd3()).unwrap();
         let v = Vector3::new(0.3, -1.0, 2.0);
         let inv = spd3().try_inverse().unwrap();
-        assert_relative_eq!(c.quad_form(&v).unwrap(), (v.transpose() * inv * v)[0], epsilon = 1e-13);
+        assert_relative_eq!(
+            c.quad_form(&v).unwrap(),
+            (v.transpose() * inv * v)[0],
+            epsilon = 1e-13
+        );
         assert_relative_eq!(c.solve(&v).unwrap(), inv * v, epsilon = 1e-13);
         assert_relative_eq!(c.log_det(), spd3().determinant().ln(), epsilon = 1e-13);
-        assert_relative_eq!(c.trace_solve(&Matrix3::identity()).unwrap(), inv.trace(), epsilon = 1e-13);
+        assert_relative_eq!(
+            c.trace_solve(&Matrix3::identity()).unwrap(),
+            inv.trace(),
+            epsilon = 1e-13
+        );
     }
 
     #[test]
     fn rejects_bad_input_with_typed_errors() {
         let mut nan = spd3();
         nan[(1, 1)] = f64::NAN;
-        assert!(matches!(Covariance::new(nan), Err(LinalgError::NonFinite { .. })));
+        assert!(matches!(
+            Covariance::new(nan),
+            Err(LinalgError::NonFinite { .. })
+        ));
         let mut inf = spd3();
         inf[(0, 2)] = f64::INFINITY;
-        assert!(matches!(Covariance::new(inf), Err(LinalgError::NonFinite { .. })));
+        assert!(matches!(
+            Covariance::new(inf),
+            Err(LinalgError::NonFinite { .. })
+        ));
         let mut asym = spd3();
         asym[(0, 1)] += 0.1;
-        assert!(matches!(Covariance::new(asym), Err(LinalgError::NotSymmetric { .. })));
+        assert!(matches!(
+            Covariance::new(asym),
+            Err(LinalgError::NotSymmetric { .. })
+        ));
         let indefinite = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, 1.0));
         assert!(matches!(
             Covariance::new(indefinite),
@@ -278,10 +308,17 @@ mod tests {
 
     #[test]
     fn dynamic_size_checks_operand_dimensions() {
-        let c = Covariance::new(DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 2.0]))).unwrap();
+        let c =
+            Covariance::new(DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 2.0]))).unwrap();
         let wrong = DVector::from_vec(vec![1.0, 2.0, 3.0]);
-        assert!(matches!(c.quad_form(&wrong), Err(LinalgError::DimensionMismatch { .. })));
-        assert!(matches!(c.solve(&wrong), Err(LinalgError::DimensionMismatch { .. })));
+        assert!(matches!(
+            c.quad_form(&wrong),
+            Err(LinalgError::DimensionMismatch { .. })
+        ));
+        assert!(matches!(
+            c.solve(&wrong),
+            Err(LinalgError::DimensionMismatch { .. })
+        ));
     }
 
     #[test]

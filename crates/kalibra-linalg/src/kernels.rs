@@ -18,7 +18,10 @@ use crate::{Alloc, LinalgError};
 /// let p = Matrix2::identity();
 /// assert_eq!(propagate(&f, &p), Matrix2::new(2.0, 1.0, 1.0, 1.0));
 /// ```
-pub fn propagate<R: Dim, N: Dim>(a: &OMatrix<f64, R, N>, p: &OMatrix<f64, N, N>) -> OMatrix<f64, R, R>
+pub fn propagate<R: Dim, N: Dim>(
+    a: &OMatrix<f64, R, N>,
+    p: &OMatrix<f64, N, N>,
+) -> OMatrix<f64, R, R>
 where
     // Raw allocator bounds rather than `Alloc<N, R>`: callers hold `Alloc<N, M>` and call this
     // with both `R = M` (H P H^T) and `R = N, N = M` (K R K^T); the raw bounds are implied
@@ -110,7 +113,11 @@ pub fn check_dim(expected: usize, found: usize, what: &'static str) -> Result<()
     if expected == found {
         Ok(())
     } else {
-        Err(LinalgError::DimensionMismatch { what, expected, found })
+        Err(LinalgError::DimensionMismatch {
+            what,
+            expected,
+            found,
+        })
     }
 }
 
@@ -129,7 +136,11 @@ mod tests {
         let r = Matrix2::new(0.5, 0.1, 0.1, 0.7);
         let s = propagate(&h, &p) + r;
         let k = p * h.transpose() * s.try_inverse().unwrap();
-        assert_relative_eq!(joseph_update(&p, &k, &h, &r), standard_update(&p, &k, &h), epsilon = 1e-12);
+        assert_relative_eq!(
+            joseph_update(&p, &k, &h, &r),
+            standard_update(&p, &k, &h),
+            epsilon = 1e-12
+        );
     }
 
     #[test]

@@ -60,14 +60,12 @@ mod psd;
 pub use alloc::Alloc;
 pub use covariance::{Covariance, SYMMETRY_TOLERANCE, quad_form_once};
 pub use error::LinalgError;
-pub use kernels::{
-    check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
-};
+pub use kernels::{check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize};
 pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
 
 pub use nalgebra;
 pub use nalgebra::{
     Const, DMatrix, DVector, DefaultAllocator, Dim, DimName, Dyn, Matrix2, Matrix3, Matrix4,
-    OMatrix, OVector, SMatrix, SVector, U1, U2, U3, U4, U5, U6, U7, U8, U9, Vector2, Vector3,
-    Vector1, Vector4, Vector6,
+    OMatrix, OVector, SMatrix, SVector, U1, U2, U3, U4, U5, U6, U7, U8, U9, Vector1, Vector2,
+    Vector3, Vector4, Vector6,
 };

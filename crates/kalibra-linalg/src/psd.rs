@@ -86,11 +86,19 @@ where
                 }
                 let bound = 10.0 * PIVOT_TOLERANCE.sqrt() * (a[(i, i)].abs() * ajj.abs()).sqrt();
                 if s.abs() > bound {
-                    return Err(LinalgError::NotPositiveSemiDefinite { what, index: j, pivot: d });
+                    return Err(LinalgError::NotPositiveSemiDefinite {
+                        what,
+                        index: j,
+                        pivot: d,
+                    });
                 }
             }
         } else {
-            return Err(LinalgError::NotPositiveSemiDefinite { what, index: j, pivot: d });
+            return Err(LinalgError::NotPositiveSemiDefinite {
+                what,
+                index: j,
+                pivot: d,
+            });
         }
     }
     Ok((l, rank))
@@ -165,7 +173,11 @@ where
         }
         crate::symmetrize(&mut matrix);
         let (factor, rank) = semidefinite_factor(&matrix, what)?;
-        Ok(Self { matrix, factor, rank })
+        Ok(Self {
+            matrix,
+            factor,
+            rank,
+        })
     }
 
     /// The matrix.
@@ -226,7 +238,10 @@ mod tests {
             Err(LinalgError::NotPositiveSemiDefinite { .. })
         ));
         let negative = Matrix2::new(1.0, 0.0, 0.0, -1.0);
-        assert!(matches!(PsdMatrix::new(negative), Err(LinalgError::NotPositiveSemiDefinite { .. })));
+        assert!(matches!(
+            PsdMatrix::new(negative),
+            Err(LinalgError::NotPositiveSemiDefinite { .. })
+        ));
         assert_eq!(PsdMatrix::new(Matrix2::zeros()).unwrap().rank(), 0);
     }
 }

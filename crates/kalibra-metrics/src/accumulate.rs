@@ -35,7 +35,11 @@ impl<A: Merge, B: Merge, C: Merge> Merge for (A, B, C) {
 }
 
 fn check_step(step: usize, steps: usize) -> Result<(), MetricsError> {
-    if step < steps { Ok(()) } else { Err(MetricsError::StepOutOfRange { step, steps }) }
+    if step < steps {
+        Ok(())
+    } else {
+        Err(MetricsError::StepOutOfRange { step, steps })
+    }
 }
 
 /// The mean over runs of a scalar at each step (NEES, NIS, any per-step statistic).
@@ -48,7 +52,10 @@ pub struct StepMean {
 impl StepMean {
     /// An empty accumulator over `steps` steps.
     pub fn new(steps: usize) -> Self {
-        Self { sum: vec![0.0; steps], count: vec![0; steps] }
+        Self {
+            sum: vec![0.0; steps],
+            count: vec![0; steps],
+        }
     }
 
     /// The number of steps held.
@@ -88,7 +95,11 @@ impl StepMean {
 
 impl Merge for StepMean {
     fn merge(&mut self, other: &Self) {
-        assert_eq!(self.steps(), other.steps(), "merging accumulators of different horizons");
+        assert_eq!(
+            self.steps(),
+            other.steps(),
+            "merging accumulators of different horizons"
+        );
         for (a, b) in self.sum.iter_mut().zip(&other.sum) {
             *a += b;
         }
@@ -119,7 +130,11 @@ pub struct SquaredErrors {
 impl SquaredErrors {
     /// An empty accumulator over `steps` steps of a `dim`-component state.
     pub fn new(steps: usize, dim: usize) -> Self {
-        Self { dim, sum: vec![0.0; steps * dim], count: vec![0; steps] }
+        Self {
+            dim,
+            sum: vec![0.0; steps * dim],
+            count: vec![0; steps],
+        }
     }
 
     /// Number of steps held.
@@ -140,9 +155,16 @@ impl SquaredErrors {
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         if error.len() != self.dim {
-            return Err(MetricsError::DimensionMismatch { what: "error vector", expected: self.dim, found: error.len() });
+            return Err(MetricsError::DimensionMismatch {
+                what: "error vector",
+                expected: self.dim,
+                found: error.len(),
+            });
         }
-        for (s, e) in self.sum[step * self.dim..(step + 1) * self.dim].iter_mut().zip(error) {
+        for (s, e) in self.sum[step * self.dim..(step + 1) * self.dim]
+            .iter_mut()
+            .zip(error)
+        {
             *s += e * e;
         }
         self.count[step] += 1;
@@ -168,10 +190,18 @@ impl SquaredErrors {
     pub fn mse(&self, step: usize, i: usize) -> Result<f64, MetricsError> {
         check_step(step, self.steps())?;
         if i >= self.dim {
-            return Err(MetricsError::DimensionMismatch { what: "component index", expected: self.dim, found: i });
+            return Err(MetricsError::DimensionMismatch {
+                what: "component index",
+                expected: self.dim,
+                found: i,
+            });
         }
         let c = self.count[step];
-        Ok(if c == 0 { f64::NAN } else { self.sum[step * self.dim + i] / c as f64 })
+        Ok(if c == 0 {
+            f64::NAN
+        } else {
+            self.sum[step * self.dim + i] / c as f64
+        })
     }
 
     /// RMSE of component `i` at `step`.
@@ -200,16 +230,25 @@ impl SquaredErrors {
     /// # Errors
     /// As [`SquaredErrors::mse`].
     pub fn rmse_series(&self, group: &[usize]) -> Result<Vec<f64>, MetricsError> {
-        (0..self.steps()).map(|k| self.rmse_group(k, group)).collect()
+        (0..self.steps())
+            .map(|k| self.rmse_group(k, group))
+            .collect()
     }
 
     /// RMSE over runs and over the steps `range`: `sqrt(mean over steps of MSE_k)`.
     ///
     /// # Errors
     /// As [`SquaredErrors::mse`]; [`MetricsError::InvalidParameter`] for an empty range.
-    pub fn rmse_over_time(&self, group: &[usize], range: std::ops::Range<usize>) -> Result<f64, MetricsError> {
+    pub fn rmse_over_time(
+        &self,
+        group: &[usize],
+        range: std::ops::Range<usize>,
+    ) -> Result<f64, MetricsError> {
         if range.is_empty() {
-            return Err(MetricsError::InvalidParameter { name: "step range length", value: 0.0 });
+            return Err(MetricsError::InvalidParameter {
+                name: "step range length",
+                value: 0.0,
+            });
         }
         let len = range.len() as f64;
         let mut total = 0.0;
@@ -223,7 +262,11 @@ impl SquaredErrors {
 
 impl Merge for SquaredErrors {
     fn merge(&mut self, other: &Self) {
-        assert_eq!((self.steps(), self.dim), (other.steps(), other.dim), "merging accumulators of different shapes");
+        assert_eq!(
+            (self.steps(), self.dim),
+            (other.steps(), other.dim),
+            "merging accumulators of different shapes"
+        );
         for (a, b) in self.sum.iter_mut().zip(&other.sum) {
             *a += b;
         }

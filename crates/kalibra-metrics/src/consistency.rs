@@ -26,7 +26,11 @@ where
 {
     // Called once per run and step in every Monte Carlo study: factorise without keeping a
     // `Covariance` (which would copy P twice), but check what `Covariance::new` checks.
-    Ok(kalibra_linalg::quad_form_once(cov, error, "state covariance P")?)
+    Ok(kalibra_linalg::quad_form_once(
+        cov,
+        error,
+        "state covariance P",
+    )?)
 }
 
 /// The normalised innovation squared `nu^T S^-1 nu` with an already factorised `S` (a step
@@ -72,16 +76,28 @@ impl ChiSquareBand {
     /// (0, 1).
     pub fn for_mean(dof: f64, samples: usize, confidence: f64) -> Result<Self, MetricsError> {
         if !(dof.is_finite() && dof > 0.0) {
-            return Err(MetricsError::InvalidParameter { name: "degrees of freedom", value: dof });
+            return Err(MetricsError::InvalidParameter {
+                name: "degrees of freedom",
+                value: dof,
+            });
         }
         if samples == 0 {
-            return Err(MetricsError::InvalidParameter { name: "samples", value: 0.0 });
+            return Err(MetricsError::InvalidParameter {
+                name: "samples",
+                value: 0.0,
+            });
         }
         if !(confidence > 0.0 && confidence < 1.0) {
-            return Err(MetricsError::InvalidParameter { name: "confidence", value: confidence });
+            return Err(MetricsError::InvalidParameter {
+                name: "confidence",
+                value: confidence,
+            });
         }
         let total = dof * samples as f64;
-        let chi2 = ChiSquared::new(total).map_err(|_| MetricsError::InvalidParameter { name: "degrees of freedom", value: total })?;
+        let chi2 = ChiSquared::new(total).map_err(|_| MetricsError::InvalidParameter {
+            name: "degrees of freedom",
+            value: total,
+        })?;
         let tail = (1.0 - confidence) / 2.0;
         Ok(Self {
             lower: chi2.inverse_cdf(tail) / samples as f64,
@@ -95,9 +111,17 @@ impl ChiSquareBand {
     ///
     /// # Errors
     /// As [`ChiSquareBand::for_mean`].
-    pub fn for_normalized_mean(dof: f64, samples: usize, confidence: f64) -> Result<Self, MetricsError> {
+    pub fn for_normalized_mean(
+        dof: f64,
+        samples: usize,
+        confidence: f64,
+    ) -> Result<Self, MetricsError> {
         let b = Self::for_mean(dof, samples, confidence)?;
-        Ok(Self { lower: b.lower / dof, upper: b.upper / dof, confidence })
+        Ok(Self {
+            lower: b.lower / dof,
+            upper: b.upper / dof,
+            confidence,
+        })
     }
 
     /// Whether `value` lies inside (bounds included).

@@ -1,7 +1,9 @@
 //! Accumulators and consistency statistics against direct computations.
 
 use kalibra_linalg::{Matrix2, Vector2};
-use kalibra_metrics::{ChiSquareBand, Merge, MetricsError, SquaredErrors, StepMean, nees, time_average};
+use kalibra_metrics::{
+    ChiSquareBand, Merge, MetricsError, SquaredErrors, StepMean, nees, time_average,
+};
 use proptest::prelude::*;
 
 proptest! {
@@ -57,23 +59,53 @@ fn rmse_over_time_is_root_mean_of_mse() {
     }
     assert!((acc.rmse_over_time(&[0], 0..3).unwrap() - (14.0f64 / 3.0).sqrt()).abs() < 1e-15);
     assert!((acc.rmse_over_time(&[0], 1..3).unwrap() - 6.5f64.sqrt()).abs() < 1e-15);
-    assert!(matches!(acc.rmse_over_time(&[0], 2..2), Err(MetricsError::InvalidParameter { .. })));
+    assert!(matches!(
+        acc.rmse_over_time(&[0], 2..2),
+        Err(MetricsError::InvalidParameter { .. })
+    ));
     assert!((time_average(&[1.0, 2.0, 6.0]) - 3.0).abs() < 1e-15);
 }
 
 #[test]
 fn typed_errors_for_bad_input() {
     let mut acc = SquaredErrors::new(2, 2);
-    assert!(matches!(acc.push_slice(2, &[0.0, 0.0]), Err(MetricsError::StepOutOfRange { step: 2, steps: 2 })));
-    assert!(matches!(acc.push_slice(0, &[0.0]), Err(MetricsError::DimensionMismatch { .. })));
-    assert!(matches!(acc.mse(0, 5), Err(MetricsError::DimensionMismatch { .. })));
-    assert!(matches!(StepMean::new(1).push(1, 0.0), Err(MetricsError::StepOutOfRange { .. })));
+    assert!(matches!(
+        acc.push_slice(2, &[0.0, 0.0]),
+        Err(MetricsError::StepOutOfRange { step: 2, steps: 2 })
+    ));
+    assert!(matches!(
+        acc.push_slice(0, &[0.0]),
+        Err(MetricsError::DimensionMismatch { .. })
+    ));
+    assert!(matches!(
+        acc.mse(0, 5),
+        Err(MetricsError::DimensionMismatch { .. })
+    ));
+    assert!(matches!(
+        StepMean::new(1).push(1, 0.0),
+        Err(MetricsError::StepOutOfRange { .. })
+    ));
     let e = Vector2::new(1.0, 1.0);
-    assert!(matches!(nees(&e, &Matrix2::new(1.0, 2.0, 2.0, 1.0)), Err(MetricsError::Linalg(_))));
-    assert!(matches!(nees(&e, &Matrix2::new(f64::NAN, 0.0, 0.0, 1.0)), Err(MetricsError::Linalg(_))));
-    assert!(matches!(ChiSquareBand::for_mean(0.0, 10, 0.95), Err(MetricsError::InvalidParameter { .. })));
-    assert!(matches!(ChiSquareBand::for_mean(2.0, 0, 0.95), Err(MetricsError::InvalidParameter { .. })));
-    assert!(matches!(ChiSquareBand::for_mean(2.0, 10, 1.0), Err(MetricsError::InvalidParameter { .. })));
+    assert!(matches!(
+        nees(&e, &Matrix2::new(1.0, 2.0, 2.0, 1.0)),
+        Err(MetricsError::Linalg(_))
+    ));
+    assert!(matches!(
+        nees(&e, &Matrix2::new(f64::NAN, 0.0, 0.0, 1.0)),
+        Err(MetricsError::Linalg(_))
+    ));
+    assert!(matches!(
+        ChiSquareBand::for_mean(0.0, 10, 0.95),
+        Err(MetricsError::InvalidParameter { .. })
+    ));
+    assert!(matches!(
+        ChiSquareBand::for_mean(2.0, 0, 0.95),
+        Err(MetricsError::InvalidParameter { .. })
+    ));
+    assert!(matches!(
+        ChiSquareBand::for_mean(2.0, 10, 1.0),
+        Err(MetricsError::InvalidParameter { .. })
+    ));
     assert!(StepMean::new(2).mean(0).is_nan());
 }
 

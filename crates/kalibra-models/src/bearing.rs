@@ -51,10 +51,19 @@ impl<const D: usize> Tabulated<D> {
     /// non-finite position.
     pub fn new(positions: Vec<SVector<f64, D>>) -> Result<Self, ModelError> {
         if positions.is_empty() {
-            return Err(ModelError::InvalidParameter { name: "platform table length", value: 0.0 });
+            return Err(ModelError::InvalidParameter {
+                name: "platform table length",
+                value: 0.0,
+            });
         }
-        if let Some(step) = positions.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-            return Err(ModelError::NonFinite { what: "platform position", step });
+        if let Some(step) = positions
+            .iter()
+            .position(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return Err(ModelError::NonFinite {
+                what: "platform position",
+                step,
+            });
         }
         Ok(Self { positions })
     }
@@ -105,16 +114,35 @@ impl<N: Dim, P: Platform<2>> Bearing<N, P> {
     /// # Errors
     /// [`ModelError::DimensionMismatch`] for an index beyond the state,
     /// [`ModelError::InvalidParameter`] for a negative or non-finite variance.
-    pub fn new(n: N, position: [usize; 2], reference: BearingReference, variance: f64, platform: P) -> Result<Self, ModelError> {
+    pub fn new(
+        n: N,
+        position: [usize; 2],
+        reference: BearingReference,
+        variance: f64,
+        platform: P,
+    ) -> Result<Self, ModelError> {
         for &i in &position {
             if i >= n.value() {
-                return Err(ModelError::DimensionMismatch { what: "bearing position index", expected: n.value(), found: i });
+                return Err(ModelError::DimensionMismatch {
+                    what: "bearing position index",
+                    expected: n.value(),
+                    found: i,
+                });
             }
         }
         if !(variance.is_finite() && variance >= 0.0) {
-            return Err(ModelError::InvalidParameter { name: "bearing variance", value: variance });
+            return Err(ModelError::InvalidParameter {
+                name: "bearing variance",
+                value: variance,
+            });
         }
-        Ok(Self { n, position, reference, variance, platform })
+        Ok(Self {
+            n,
+            position,
+            reference,
+            variance,
+            platform,
+        })
     }
 
     /// The platform.
@@ -188,7 +216,11 @@ mod tests {
         let platform = Moving(|k: usize| Vector2::new((k as f64).cos(), (k as f64).sin()));
         for reference in [BearingReference::XAxis, BearingReference::North] {
             let m = Bearing::new(U4, [0, 1], reference, 1e-3, platform).unwrap();
-            for x in [Vector4::new(20.0, 5.0, 1.0, 0.0), Vector4::new(-3.0, -0.1, 0.0, 2.0), Vector4::new(-7.0, 1e-3, 0.0, 0.0)] {
+            for x in [
+                Vector4::new(20.0, 5.0, 1.0, 0.0),
+                Vector4::new(-3.0, -0.1, 0.0, 2.0),
+                Vector4::new(-7.0, 1e-3, 0.0, 0.0),
+            ] {
                 let check = check_measurement_jacobian(&m, 3, &x);
                 assert!(check.scaled_error < 1e-7, "{reference:?} at {x}: {check:?}");
             }
@@ -197,11 +229,25 @@ mod tests {
 
     #[test]
     fn residual_does_not_jump_across_pi() {
-        let m = Bearing::new(U4, [0, 1], BearingReference::XAxis, 1e-3, Stationary(Vector2::zeros())).unwrap();
+        let m = Bearing::new(
+            U4,
+            [0, 1],
+            BearingReference::XAxis,
+            1e-3,
+            Stationary(Vector2::zeros()),
+        )
+        .unwrap();
         let z = OVector::<f64, U1>::new(PI - 0.01);
         let zhat = OVector::<f64, U1>::new(-PI + 0.01);
         assert!((m.residual(&z, &zhat)[0] + 0.02).abs() < 1e-12);
-        let north = Bearing::new(U4, [0, 1], BearingReference::North, 1e-3, Stationary(Vector2::zeros())).unwrap();
+        let north = Bearing::new(
+            U4,
+            [0, 1],
+            BearingReference::North,
+            1e-3,
+            Stationary(Vector2::zeros()),
+        )
+        .unwrap();
         // Due east of the platform is 90 degrees nautical, 0 mathematical.
         let east = Vector4::new(1.0, 0.0, 0.0, 0.0);
         assert!((north.measure(0, &east)[0] - PI / 2.0).abs() < 1e-15);
@@ -211,8 +257,17 @@ mod tests {
     #[test]
     fn rejects_bad_construction() {
         let p = Stationary(Vector2::zeros());
-        assert!(matches!(Bearing::new(U4, [0, 4], BearingReference::XAxis, 1.0, p), Err(ModelError::DimensionMismatch { .. })));
-        assert!(matches!(Bearing::new(U4, [0, 1], BearingReference::XAxis, f64::NAN, p), Err(ModelError::InvalidParameter { .. })));
-        assert!(matches!(Tabulated::<2>::new(vec![]), Err(ModelError::InvalidParameter { .. })));
+        assert!(matches!(
+            Bearing::new(U4, [0, 4], BearingReference::XAxis, 1.0, p),
+            Err(ModelError::DimensionMismatch { .. })
+        ));
+        assert!(matches!(
+            Bearing::new(U4, [0, 1], BearingReference::XAxis, f64::NAN, p),
+            Err(ModelError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            Tabulated::<2>::new(vec![]),
+            Err(ModelError::InvalidParameter { .. })
+        ));
     }
 }

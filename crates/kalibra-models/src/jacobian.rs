@@ -27,7 +27,10 @@ where
     pub scaled_error: f64,
 }
 
-fn compare<R: Dim, C: Dim>(analytic: OMatrix<f64, R, C>, numeric: OMatrix<f64, R, C>) -> JacobianCheck<R, C>
+fn compare<R: Dim, C: Dim>(
+    analytic: OMatrix<f64, R, C>,
+    numeric: OMatrix<f64, R, C>,
+) -> JacobianCheck<R, C>
 where
     DefaultAllocator: Allocator<R, C>,
 {
@@ -35,22 +38,37 @@ where
     let mut scaled_error = 0.0f64;
     for (a, n) in analytic.iter().zip(numeric.iter()) {
         // NaN must not hide: treat it as an infinite error.
-        let e = if (a - n).is_nan() { f64::INFINITY } else { (a - n).abs() };
+        let e = if (a - n).is_nan() {
+            f64::INFINITY
+        } else {
+            (a - n).abs()
+        };
         max_abs_error = max_abs_error.max(e);
         scaled_error = scaled_error.max(e / (1.0 + a.abs()));
     }
-    JacobianCheck { analytic, numeric, max_abs_error, scaled_error }
+    JacobianCheck {
+        analytic,
+        numeric,
+        max_abs_error,
+        scaled_error,
+    }
 }
 
 fn steps<N: Dim>(x: &OVector<f64, N>) -> impl Iterator<Item = (usize, f64)> + '_
 where
     DefaultAllocator: Alloc<N>,
 {
-    x.iter().enumerate().map(|(j, v)| (j, FD_RELATIVE_STEP * v.abs().max(1.0)))
+    x.iter()
+        .enumerate()
+        .map(|(j, v)| (j, FD_RELATIVE_STEP * v.abs().max(1.0)))
 }
 
 /// Checks `Dynamics::jacobian` at `(k, x)` against central differences of `transition`.
-pub fn check_dynamics_jacobian<N: Dim, D: Dynamics<N>>(model: &D, k: usize, x: &OVector<f64, N>) -> JacobianCheck<N, N>
+pub fn check_dynamics_jacobian<N: Dim, D: Dynamics<N>>(
+    model: &D,
+    k: usize,
+    x: &OVector<f64, N>,
+) -> JacobianCheck<N, N>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -69,7 +87,11 @@ where
 /// Checks `Measurement::jacobian` at `(k, x)` against central differences of `measure`, taking
 /// differences through the model's `residual` so that angles wrapping at +-pi do not spoil
 /// the estimate.
-pub fn check_measurement_jacobian<N: Dim, M: Dim, H: Measurement<N, M>>(model: &H, k: usize, x: &OVector<f64, N>) -> JacobianCheck<M, N>
+pub fn check_measurement_jacobian<N: Dim, M: Dim, H: Measurement<N, M>>(
+    model: &H,
+    k: usize,
+    x: &OVector<f64, N>,
+) -> JacobianCheck<M, N>
 where
     DefaultAllocator: Alloc<N, M>,
 {

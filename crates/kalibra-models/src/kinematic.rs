@@ -89,12 +89,24 @@ impl Kinematic {
     /// [`ModelError::InvalidParameter`] for `axes == 0` or a non-positive or non-finite `dt`.
     pub fn new(order: Order, axes: usize, dt: f64) -> Result<Self, ModelError> {
         if axes == 0 {
-            return Err(ModelError::InvalidParameter { name: "axes", value: 0.0 });
+            return Err(ModelError::InvalidParameter {
+                name: "axes",
+                value: 0.0,
+            });
         }
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(ModelError::InvalidParameter { name: "dt", value: dt });
+            return Err(ModelError::InvalidParameter {
+                name: "dt",
+                value: dt,
+            });
         }
-        Ok(Self { order, axes, dt, layout: Layout::Blocked, noise: ProcessNoise::Discrete { q: 1.0 } })
+        Ok(Self {
+            order,
+            axes,
+            dt,
+            layout: Layout::Blocked,
+            noise: ProcessNoise::Discrete { q: 1.0 },
+        })
     }
 
     /// A constant-velocity model.
@@ -137,7 +149,10 @@ impl Kinematic {
     /// If `axis` or `deriv` is out of range (a programming error).
     pub fn index(&self, axis: usize, deriv: usize) -> usize {
         let per = self.order.per_axis();
-        assert!(axis < self.axes && deriv < per, "axis {axis} or derivative {deriv} out of range");
+        assert!(
+            axis < self.axes && deriv < per,
+            "axis {axis} or derivative {deriv} out of range"
+        );
         match self.layout {
             Layout::Blocked => deriv * self.axes + axis,
             Layout::Interleaved => axis * per + deriv,
@@ -158,7 +173,11 @@ impl Kinematic {
         if n.value() == self.state_len() {
             Ok(())
         } else {
-            Err(ModelError::DimensionMismatch { what: "kinematic state", expected: self.state_len(), found: n.value() })
+            Err(ModelError::DimensionMismatch {
+                what: "kinematic state",
+                expected: self.state_len(),
+                found: n.value(),
+            })
         }
     }
 
@@ -176,7 +195,11 @@ impl Kinematic {
         match self.noise {
             ProcessNoise::Discrete { q } => {
                 check_q(q)?;
-                let g: [f64; 3] = if per == 2 { [t * t / 2.0, t, 0.0] } else { [t * t / 2.0, t, 1.0] };
+                let g: [f64; 3] = if per == 2 {
+                    [t * t / 2.0, t, 0.0]
+                } else {
+                    [t * t / 2.0, t, 1.0]
+                };
                 for (i, row) in out.iter_mut().enumerate().take(per) {
                     for (j, v) in row.iter_mut().enumerate().take(per) {
                         *v = q * g[i] * g[j];
@@ -193,7 +216,11 @@ impl Kinematic {
                     out[1][1] = q * t;
                 } else {
                     let (t4, t5) = (t3 * t, t3 * t2);
-                    let block = [[t5 / 20.0, t4 / 8.0, t3 / 6.0], [t4 / 8.0, t3 / 3.0, t2 / 2.0], [t3 / 6.0, t2 / 2.0, t]];
+                    let block = [
+                        [t5 / 20.0, t4 / 8.0, t3 / 6.0],
+                        [t4 / 8.0, t3 / 3.0, t2 / 2.0],
+                        [t3 / 6.0, t2 / 2.0, t],
+                    ];
                     for i in 0..3 {
                         for j in 0..3 {
                             out[i][j] = q * block[i][j];
@@ -273,7 +300,11 @@ impl Kinematic {
     {
         self.check_state_dim(n)?;
         if m.value() != self.axes {
-            return Err(ModelError::DimensionMismatch { what: "position measurement", expected: self.axes, found: m.value() });
+            return Err(ModelError::DimensionMismatch {
+                what: "position measurement",
+                expected: self.axes,
+                found: m.value(),
+            });
         }
         let mut h = OMatrix::<f64, M, N>::zeros_generic(m, n);
         for a in 0..self.axes {
@@ -287,7 +318,10 @@ fn check_q(q: f64) -> Result<(), ModelError> {
     if q.is_finite() && q >= 0.0 {
         Ok(())
     } else {
-        Err(ModelError::InvalidParameter { name: "q", value: q })
+        Err(ModelError::InvalidParameter {
+            name: "q",
+            value: q,
+        })
     }
 }
 
@@ -302,15 +336,24 @@ mod tests {
         let t = 1.0;
         let m = Kinematic::constant_velocity(2, t).unwrap();
         let f = m.transition_matrix(U4).unwrap();
-        assert_eq!(f, Matrix4::new(1., 0., t, 0., 0., 1., 0., t, 0., 0., 1., 0., 0., 0., 0., 1.));
+        assert_eq!(
+            f,
+            Matrix4::new(1., 0., t, 0., 0., 1., 0., t, 0., 0., 1., 0., 0., 0., 0., 1.)
+        );
         let g = SMatrix::<f64, 4, 2>::new(t * t / 2.0, 0.0, 0.0, t * t / 2.0, t, 0.0, 0.0, t);
-        assert_relative_eq!(m.noise_matrix(U4).unwrap(), g * g.transpose(), epsilon = 1e-15);
+        assert_relative_eq!(
+            m.noise_matrix(U4).unwrap(),
+            g * g.transpose(),
+            epsilon = 1e-15
+        );
     }
 
     #[test]
     fn interleaved_ca_matches_paper_004_blocks() {
         let dt = 0.05;
-        let m = Kinematic::constant_acceleration(3, dt).unwrap().layout(Layout::Interleaved);
+        let m = Kinematic::constant_acceleration(3, dt)
+            .unwrap()
+            .layout(Layout::Interleaved);
         let f = m.transition_matrix(U9).unwrap();
         assert_eq!(f[(3, 4)], dt);
         assert_eq!(f[(4, 4)], 1.0);
@@ -324,22 +367,42 @@ mod tests {
 
     #[test]
     fn continuous_noise_is_positive_definite_and_dyn_matches_const() {
-        let m = Kinematic::constant_velocity(3, 2.0).unwrap().noise(ProcessNoise::Continuous { q: 0.5 });
+        let m = Kinematic::constant_velocity(3, 2.0)
+            .unwrap()
+            .noise(ProcessNoise::Continuous { q: 0.5 });
         let fixed = m.dynamics(U6).unwrap();
         let dynamic = m.dynamics(Dyn(6)).unwrap();
         assert_eq!(fixed.q().rank(), 6);
         assert_eq!(fixed.f().as_slice(), dynamic.f().as_slice());
-        assert_eq!(fixed.q().matrix().as_slice(), dynamic.q().matrix().as_slice());
+        assert_eq!(
+            fixed.q().matrix().as_slice(),
+            dynamic.q().matrix().as_slice()
+        );
     }
 
     #[test]
     fn rejects_bad_parameters_and_dimensions() {
-        assert!(matches!(Kinematic::constant_velocity(0, 1.0), Err(ModelError::InvalidParameter { .. })));
-        assert!(matches!(Kinematic::constant_velocity(1, -1.0), Err(ModelError::InvalidParameter { .. })));
-        assert!(matches!(Kinematic::constant_velocity(1, f64::NAN), Err(ModelError::InvalidParameter { .. })));
+        assert!(matches!(
+            Kinematic::constant_velocity(0, 1.0),
+            Err(ModelError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            Kinematic::constant_velocity(1, -1.0),
+            Err(ModelError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            Kinematic::constant_velocity(1, f64::NAN),
+            Err(ModelError::InvalidParameter { .. })
+        ));
         let m = Kinematic::constant_velocity(2, 1.0).unwrap();
-        assert!(matches!(m.dynamics(U6), Err(ModelError::DimensionMismatch { .. })));
+        assert!(matches!(
+            m.dynamics(U6),
+            Err(ModelError::DimensionMismatch { .. })
+        ));
         let bad_q = m.noise(ProcessNoise::Discrete { q: -1.0 });
-        assert!(matches!(bad_q.dynamics(U4), Err(ModelError::InvalidParameter { .. })));
+        assert!(matches!(
+            bad_q.dynamics(U4),
+            Err(ModelError::InvalidParameter { .. })
+        ));
     }
 }

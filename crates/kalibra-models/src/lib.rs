@@ -49,9 +49,11 @@ mod traits;
 
 pub use bearing::{Bearing, BearingReference, Moving, Platform, Stationary, Tabulated, wrap_angle};
 pub use error::ModelError;
-pub use jacobian::{FD_RELATIVE_STEP, JacobianCheck, check_dynamics_jacobian, check_measurement_jacobian};
+pub use jacobian::{
+    FD_RELATIVE_STEP, JacobianCheck, check_dynamics_jacobian, check_measurement_jacobian,
+};
 pub use kinematic::{Kinematic, Layout, Order, ProcessNoise};
 pub use linear::{LinearGaussian, LinearObservation, WithInput};
 pub use noise::{sample_with_factor, standard_normal};
-pub use simulate::{Simulator, Truth, simulate, simulate_until};
+pub use simulate::{Simulator, Truth, TruthStep, simulate, simulate_until};
 pub use traits::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};

@@ -1,6 +1,8 @@
 //! Linear-Gaussian models and the known-input combinator.
 
-use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, PsdMatrix, check_dim, check_finite};
+use kalibra_linalg::{
+    Alloc, DefaultAllocator, Dim, OMatrix, OVector, PsdMatrix, check_dim, check_finite,
+};
 use rand::Rng;
 
 use crate::noise::sample_with_factor;
@@ -62,7 +64,10 @@ where
     /// [`ModelError::InvalidParameter`] unless `factor` is finite and non-negative.
     pub fn with_noise_scaled(&self, factor: f64) -> Result<Self, ModelError> {
         if !(factor.is_finite() && factor >= 0.0) {
-            return Err(ModelError::InvalidParameter { name: "noise scale", value: factor });
+            return Err(ModelError::InvalidParameter {
+                name: "noise scale",
+                value: factor,
+            });
         }
         Self::new(self.f.clone(), self.q.matrix() * factor)
     }
@@ -84,7 +89,11 @@ where
     fn noise_cov(&self, _k: usize) -> OMatrix<f64, N, N> {
         self.q.matrix().clone()
     }
-    fn sample_noise<R: Rng + ?Sized>(&self, _k: usize, rng: &mut R) -> Result<OVector<f64, N>, ModelError> {
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        _k: usize,
+        rng: &mut R,
+    ) -> Result<OVector<f64, N>, ModelError> {
         Ok(sample_with_factor(self.q.factor(), rng))
     }
 }
@@ -220,12 +229,17 @@ where
     fn noise_cov(&self, k: usize) -> OMatrix<f64, N, N> {
         self.inner.noise_cov(k)
     }
-    fn sample_noise<R: Rng + ?Sized>(&self, k: usize, rng: &mut R) -> Result<OVector<f64, N>, ModelError> {
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        k: usize,
+        rng: &mut R,
+    ) -> Result<OVector<f64, N>, ModelError> {
         self.inner.sample_noise(k, rng)
     }
 }
 
-impl<N: Dim, D: LinearDynamics<N>, U: Fn(usize) -> OVector<f64, N>> LinearDynamics<N> for WithInput<D, U>
+impl<N: Dim, D: LinearDynamics<N>, U: Fn(usize) -> OVector<f64, N>> LinearDynamics<N>
+    for WithInput<D, U>
 where
     DefaultAllocator: Alloc<N>,
 {

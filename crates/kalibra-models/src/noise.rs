@@ -14,7 +14,10 @@ where
 
 /// A draw of `N(0, L L^T)` as `L n`, `n` standard normal. `L` may be rank-deficient (a
 /// semi-definite factor), which samples exactly from a singular covariance.
-pub fn sample_with_factor<D: Dim, R: Rng + ?Sized>(l: &OMatrix<f64, D, D>, rng: &mut R) -> OVector<f64, D>
+pub fn sample_with_factor<D: Dim, R: Rng + ?Sized>(
+    l: &OMatrix<f64, D, D>,
+    rng: &mut R,
+) -> OVector<f64, D>
 where
     DefaultAllocator: Alloc<D>,
 {

@@ -5,6 +5,9 @@ use rand::Rng;
 
 use crate::{Dynamics, Measurement, ModelError};
 
+/// One simulated step: the true state `x_k` and its measurement `z_k`.
+pub type TruthStep<N, M> = (OVector<f64, N>, OVector<f64, M>);
+
 /// Steps a true state and measures it, one step at a time, without storing the history: the
 /// building block of Monte Carlo runs that stream into accumulators.
 ///
@@ -33,10 +36,20 @@ where
     /// # Errors
     /// [`ModelError::DimensionMismatch`] if `x0` does not fit the dynamics,
     /// [`ModelError::Linalg`] if it is not finite.
-    pub fn new(dynamics: D, measurement: H, x0: OVector<f64, N>, k0: usize) -> Result<Self, ModelError> {
+    pub fn new(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        k0: usize,
+    ) -> Result<Self, ModelError> {
         check_dim(dynamics.state_dim().value(), x0.nrows(), "initial state")?;
         check_finite(&x0, "initial state")?;
-        Ok(Self { dynamics, measurement, x: x0, k: k0 })
+        Ok(Self {
+            dynamics,
+            measurement,
+            x: x0,
+            k: k0,
+        })
     }
 
     /// The current true state `x_k`.
@@ -54,20 +67,30 @@ where
     /// # Errors
     /// [`ModelError::NonFinite`] if the measurement or the next state is not finite (a
     /// diverging truth), or a model's sampling error.
-    pub fn step<M: Dim, R: Rng + ?Sized>(&mut self, rng: &mut R) -> Result<(OVector<f64, N>, OVector<f64, M>), ModelError>
+    pub fn step<M: Dim, R: Rng + ?Sized>(
+        &mut self,
+        rng: &mut R,
+    ) -> Result<TruthStep<N, M>, ModelError>
     where
         H: Measurement<N, M>,
         DefaultAllocator: Alloc<N, M>,
     {
         let k = self.k;
-        let mut z = self.measurement.measure(k, &self.x) + self.measurement.sample_noise(k, &self.x, rng)?;
+        let mut z = self.measurement.measure(k, &self.x)
+            + self.measurement.sample_noise(k, &self.x, rng)?;
         self.measurement.normalize(&mut z);
         if !z.iter().all(|v| v.is_finite()) {
-            return Err(ModelError::NonFinite { what: "simulated measurement", step: k });
+            return Err(ModelError::NonFinite {
+                what: "simulated measurement",
+                step: k,
+            });
         }
         let next = self.dynamics.transition(k, &self.x) + self.dynamics.sample_noise(k, rng)?;
         if !next.iter().all(|v| v.is_finite()) {
-            return Err(ModelError::NonFinite { what: "simulated state", step: k + 1 });
+            return Err(ModelError::NonFinite {
+                what: "simulated state",
+                step: k + 1,
+            });
         }
         let x = std::mem::replace(&mut self.x, next);
         self.k = k + 1;
@@ -153,7 +176,11 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let mut sim = Simulator::new(dynamics, measurement, x0, 0)?;
-    let mut truth = Truth { first_step: 0, states: Vec::new(), measurements: Vec::new() };
+    let mut truth = Truth {
+        first_step: 0,
+        states: Vec::new(),
+        measurements: Vec::new(),
+    };
     while truth.len() < max_steps && !stop(sim.step_index(), sim.state()) {
         let (x, z) = sim.step(rng)?;
         truth.states.push(x);
@@ -172,7 +199,11 @@ mod tests {
 
     fn w1() -> (LinearGaussian<U4>, crate::LinearObservation<U4, U2>) {
         let cv = Kinematic::constant_velocity(2, 1.0).unwrap();
-        (cv.dynamics(U4).unwrap(), cv.position_measurement(U4, U2, Matrix2::identity() * 100.0).unwrap())
+        (
+            cv.dynamics(U4).unwrap(),
+            cv.position_measurement(U4, U2, Matrix2::identity() * 100.0)
+                .unwrap(),
+        )
     }
 
     #[test]
@@ -210,12 +241,27 @@ mod tests {
     #[test]
     fn stops_when_told_and_reports_divergence() {
         let (f, h) = w1();
-        let truth = simulate_until(&f, &h, Vector4::new(0.0, 0.0, 1.0, 0.0), 100, &mut ChaCha8Rng::seed_from_u64(1), |_, x| x[0] > 5.5).unwrap();
+        let truth = simulate_until(
+            &f,
+            &h,
+            Vector4::new(0.0, 0.0, 1.0, 0.0),
+            100,
+            &mut ChaCha8Rng::seed_from_u64(1),
+            |_, x| x[0] > 5.5,
+        )
+        .unwrap();
         assert!(truth.states.iter().all(|x| x[0] <= 5.5));
         assert!(truth.len() < 100);
         let exploding = LinearGaussian::new(Matrix2::identity() * 1e200, Matrix2::zeros()).unwrap();
-        let sensor = crate::LinearObservation::new(Matrix2::identity(), Matrix2::identity()).unwrap();
-        let err = simulate(&exploding, &sensor, Vector2::new(1e200, 0.0), 3, &mut ChaCha8Rng::seed_from_u64(1));
+        let sensor =
+            crate::LinearObservation::new(Matrix2::identity(), Matrix2::identity()).unwrap();
+        let err = simulate(
+            &exploding,
+            &sensor,
+            Vector2::new(1e200, 0.0),
+            3,
+            &mut ChaCha8Rng::seed_from_u64(1),
+        );
         assert!(matches!(err, Err(ModelError::NonFinite { .. })));
     }
 

@@ -40,7 +40,11 @@ where
     ///
     /// # Errors
     /// [`ModelError::Linalg`] if `Q_k` is not positive semi-definite.
-    fn sample_noise<R: Rng + ?Sized>(&self, k: usize, rng: &mut R) -> Result<OVector<f64, N>, ModelError> {
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        k: usize,
+        rng: &mut R,
+    ) -> Result<OVector<f64, N>, ModelError> {
         let q = self.noise_cov(k);
         let (l, _) = kalibra_linalg::semidefinite_factor(&q, "process noise covariance")?;
         Ok(sample_with_factor(&l, rng))
@@ -134,7 +138,11 @@ where
     fn noise_cov(&self, k: usize) -> OMatrix<f64, N, N> {
         (**self).noise_cov(k)
     }
-    fn sample_noise<R: Rng + ?Sized>(&self, k: usize, rng: &mut R) -> Result<OVector<f64, N>, ModelError> {
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        k: usize,
+        rng: &mut R,
+    ) -> Result<OVector<f64, N>, ModelError> {
         (**self).sample_noise(k, rng)
     }
 }

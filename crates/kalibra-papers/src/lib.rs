@@ -48,7 +48,10 @@ pub enum PaperError {
 impl From<kalibra_sim::SimError<PaperError>> for PaperError {
     fn from(e: kalibra_sim::SimError<PaperError>) -> Self {
         match e {
-            kalibra_sim::SimError::Run { run, source } => PaperError::Run { run, message: source.to_string() },
+            kalibra_sim::SimError::Run { run, source } => PaperError::Run {
+                run,
+                message: source.to_string(),
+            },
             other => PaperError::Harness(other.to_string()),
         }
     }

@@ -17,7 +17,9 @@
 use kalibra_filters::{Filter, Kf};
 use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector4};
 use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, nees, time_average};
-use kalibra_models::{Kinematic, LinearGaussian, LinearObservation, ProcessNoise, Simulator, sample_with_factor};
+use kalibra_models::{
+    Kinematic, LinearGaussian, LinearObservation, ProcessNoise, Simulator, sample_with_factor,
+};
 use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
@@ -29,12 +31,18 @@ use crate::PaperError;
 /// Never for these constants; the `Result` carries the models' construction checks.
 pub fn models() -> Result<(LinearGaussian<U4>, LinearObservation<U4, U2>), PaperError> {
     let cv = Kinematic::constant_velocity(2, 1.0)?.noise(ProcessNoise::Discrete { q: 1.0 });
-    Ok((cv.dynamics(U4)?, cv.position_measurement(U4, U2, Matrix2::identity() * 100.0)?))
+    Ok((
+        cv.dynamics(U4)?,
+        cv.position_measurement(U4, U2, Matrix2::identity() * 100.0)?,
+    ))
 }
 
 /// The prior of the initial state, `(m0, P0)`.
 pub fn prior() -> (Vector4<f64>, Matrix4<f64>) {
-    (Vector4::new(0.0, 0.0, 10.0, -5.0), Matrix4::from_diagonal(&Vector4::new(100.0, 100.0, 25.0, 25.0)))
+    (
+        Vector4::new(0.0, 0.0, 10.0, -5.0),
+        Matrix4::from_diagonal(&Vector4::new(100.0, 100.0, 25.0, 25.0)),
+    )
 }
 
 /// Size and seed of a W1 study.
@@ -55,12 +63,22 @@ pub struct Config {
 impl Config {
     /// The full size: 1000 runs of 1000 steps.
     pub fn paper() -> Self {
-        Self { runs: 1000, steps: 1000, seed: 2012, threads: 0, confidence: 0.95 }
+        Self {
+            runs: 1000,
+            steps: 1000,
+            seed: 2012,
+            threads: 0,
+            confidence: 0.95,
+        }
     }
 
     /// A reduced size for tests: 200 runs of 200 steps.
     pub fn quick() -> Self {
-        Self { runs: 200, steps: 200, ..Self::paper() }
+        Self {
+            runs: 200,
+            steps: 200,
+            ..Self::paper()
+        }
     }
 }
 
@@ -77,7 +95,11 @@ pub struct Band {
 
 impl From<ChiSquareBand> for Band {
     fn from(b: ChiSquareBand) -> Self {
-        Self { lower: b.lower, upper: b.upper, confidence: b.confidence }
+        Self {
+            lower: b.lower,
+            upper: b.upper,
+            confidence: b.confidence,
+        }
     }
 }
 
@@ -115,18 +137,29 @@ pub struct Report {
 /// consistent) or `config` asks for zero runs or steps.
 pub fn run(config: &Config) -> Result<Report, PaperError> {
     if config.runs == 0 || config.steps == 0 {
-        return Err(PaperError::Metrics(kalibra_metrics::MetricsError::InvalidParameter {
-            name: "runs or steps",
-            value: 0.0,
-        }));
+        return Err(PaperError::Metrics(
+            kalibra_metrics::MetricsError::InvalidParameter {
+                name: "runs or steps",
+                value: 0.0,
+            },
+        ));
     }
     let (f, h) = models()?;
     let (m0, p0) = prior();
-    let p0_factor = kalibra_linalg::PsdMatrix::new(p0).map_err(kalibra_models::ModelError::from)?.factor().clone_owned();
+    let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
+        .map_err(kalibra_models::ModelError::from)?
+        .factor()
+        .clone_owned();
     let steps = config.steps;
     let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
     let (nees_acc, nis_acc, err_acc) = mc.accumulate(
-        || (StepMean::new(steps), StepMean::new(steps), SquaredErrors::new(steps, 4)),
+        || {
+            (
+                StepMean::new(steps),
+                StepMean::new(steps),
+                SquaredErrors::new(steps, 4),
+            )
+        },
         |_run, rng, (nees_acc, nis_acc, err_acc)| {
             let x0 = m0 + sample_with_factor(&p0_factor, rng);
             let mut truth = Simulator::new(&f, &h, x0, 0)?;
@@ -149,7 +182,9 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
     let anis_band = ChiSquareBand::for_normalized_mean(2.0, config.runs, config.confidence)?;
     let anees = nees_acc.means();
     let anis = nis_acc.means();
-    let inside = |v: &[f64], b: &ChiSquareBand| v.iter().filter(|x| b.contains(**x)).count() as f64 / v.len() as f64;
+    let inside = |v: &[f64], b: &ChiSquareBand| {
+        v.iter().filter(|x| b.contains(**x)).count() as f64 / v.len() as f64
+    };
     Ok(Report {
         config: *config,
         anees_inside: inside(&anees, &anees_band),
@@ -178,7 +213,11 @@ impl Report {
              Kalman filter with Joseph update, initialised from the truth's prior. {} runs x {} steps, seed {}.\n",
             c.runs, c.steps, c.seed
         );
-        let _ = writeln!(s, "| statistic | time average | {:.0}% band (per step) | steps inside band |", c.confidence * 100.0);
+        let _ = writeln!(
+            s,
+            "| statistic | time average | {:.0}% band (per step) | steps inside band |",
+            c.confidence * 100.0
+        );
         let _ = writeln!(s, "|---|---|---|---|");
         let _ = writeln!(
             s,
@@ -202,7 +241,10 @@ impl Report {
              the steps are correlated in time, so the fraction varies more than a binomial would.\n",
             c.confidence * 100.0
         );
-        let _ = writeln!(s, "| step | ANEES | NIS / 2 | RMSE position | RMSE velocity |");
+        let _ = writeln!(
+            s,
+            "| step | ANEES | NIS / 2 | RMSE position | RMSE velocity |"
+        );
         let _ = writeln!(s, "|---|---|---|---|---|");
         let n = self.anees.len();
         let mut shown: Vec<usize> = vec![0, 1, 2, 5, 10, 20, 50, 100, 200, 500, n - 1];
@@ -215,7 +257,10 @@ impl Report {
                 self.anees[k], self.anis[k], self.rmse_position[k], self.rmse_velocity[k]
             );
         }
-        let _ = writeln!(s, "\nPer-step arrays are in `results.json` (`anees`, `anis`, `rmse_position`, `rmse_velocity`).");
+        let _ = writeln!(
+            s,
+            "\nPer-step arrays are in `results.json` (`anees`, `anis`, `rmse_position`, `rmse_velocity`)."
+        );
         s
     }
 }

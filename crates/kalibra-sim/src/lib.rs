@@ -74,7 +74,11 @@ pub struct MonteCarlo {
 impl MonteCarlo {
     /// A study of `runs` runs from `seed`, on rayon's global pool.
     pub fn new(runs: usize, seed: u64) -> Self {
-        Self { runs, seed, threads: None }
+        Self {
+            runs,
+            seed,
+            threads: None,
+        }
     }
 
     /// The same study on a dedicated pool of `threads` threads (`0` means rayon's global
@@ -116,7 +120,10 @@ impl MonteCarlo {
             Some(threads) => rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
-                .map_err(|e| SimError::ThreadPool { threads, message: e.to_string() })?
+                .map_err(|e| SimError::ThreadPool {
+                    threads,
+                    message: e.to_string(),
+                })?
                 .install(work),
         }
     }
@@ -142,7 +149,8 @@ impl MonteCarlo {
                     let mut acc = make();
                     for run in self.block(b, blocks) {
                         let mut rng = self.rng(run);
-                        one(run, &mut rng, &mut acc).map_err(|source| SimError::Run { run, source })?;
+                        one(run, &mut rng, &mut acc)
+                            .map_err(|source| SimError::Run { run, source })?;
                     }
                     Ok(acc)
                 })
@@ -169,7 +177,9 @@ impl MonteCarlo {
         self.in_pool(|| {
             (0..self.runs)
                 .into_par_iter()
-                .map(|run| one(run, &mut self.rng(run)).map_err(|source| SimError::Run { run, source }))
+                .map(|run| {
+                    one(run, &mut self.rng(run)).map_err(|source| SimError::Run { run, source })
+                })
                 .collect()
         })
     }
@@ -204,14 +214,35 @@ mod tests {
     fn reports_the_lowest_failing_run() {
         let mc = MonteCarlo::new(200, 1).threads(4);
         let err = mc
-            .accumulate(|| StepMean::new(1), |run, _, acc| if run % 50 == 37 { acc.push(5, 0.0) } else { acc.push(0, 1.0) })
+            .accumulate(
+                || StepMean::new(1),
+                |run, _, acc| {
+                    if run % 50 == 37 {
+                        acc.push(5, 0.0)
+                    } else {
+                        acc.push(0, 1.0)
+                    }
+                },
+            )
             .unwrap_err();
-        assert!(matches!(err, SimError::Run { run: 37, source: MetricsError::StepOutOfRange { .. } }), "{err}");
+        assert!(
+            matches!(
+                err,
+                SimError::Run {
+                    run: 37,
+                    source: MetricsError::StepOutOfRange { .. }
+                }
+            ),
+            "{err}"
+        );
     }
 
     #[test]
     fn map_keeps_run_order() {
-        let out = MonteCarlo::new(100, 3).threads(3).map(|run, _| Ok::<_, MetricsError>(run * 2)).unwrap();
+        let out = MonteCarlo::new(100, 3)
+            .threads(3)
+            .map(|run, _| Ok::<_, MetricsError>(run * 2))
+            .unwrap();
         assert_eq!(out, (0..100).map(|r| r * 2).collect::<Vec<_>>());
     }
 }
