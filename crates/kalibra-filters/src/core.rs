@@ -3,7 +3,7 @@
 //! later reuse the same model calls and the same step record).
 
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, check_dim,
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite, check_dim,
     check_finite, joseph_update, propagate, standard_update, symmetrize,
 };
 
@@ -66,12 +66,6 @@ where
     phase: Phase,
     has_record: bool,
     update: UpdateForm,
-}
-
-fn all_finite<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R, C>>(
-    m: &nalgebra::Matrix<f64, R, C, S>,
-) -> bool {
-    m.iter().all(|v| v.is_finite())
 }
 
 impl<N: Dim, M: Dim> KalmanCore<N, M>

@@ -35,8 +35,9 @@
 //! * A matrix passed as a covariance must be symmetric to a relative tolerance of
 //!   [`SYMMETRY_TOLERANCE`]; it is then made exactly symmetric (mean of the two triangles) before
 //!   factorisation, so rounding from earlier products does not reject good input.
-//! * Semi-definite factors use a pivot tolerance relative to each diagonal entry
-//!   ([`PIVOT_TOLERANCE`]), so widely different scales in one matrix are not confused.
+//! * Semi-definite factors pivot on the largest remaining diagonal entry and stop below a
+//!   tolerance relative to the largest variance ([`PIVOT_TOLERANCE`]), so rank-deficient
+//!   matrices factor reliably; a variance below about `1e-13 n` times the largest counts as zero.
 //!
 //! # Example
 //! ```
@@ -60,7 +61,9 @@ mod psd;
 pub use alloc::Alloc;
 pub use covariance::{Covariance, SYMMETRY_TOLERANCE, quad_form_once};
 pub use error::LinalgError;
-pub use kernels::{check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize};
+pub use kernels::{
+    all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
+};
 pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
 
 pub use nalgebra;

@@ -6,31 +6,25 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix};
 use crate::covariance::relative_asymmetry;
 use crate::{Alloc, LinalgError, SYMMETRY_TOLERANCE, check_finite};
 
-/// Relative pivot tolerance of [`semidefinite_factor`]: a pivot `d_j` of the elimination with
-/// `|d_j| <= PIVOT_TOLERANCE * a_jj` is treated as an exact zero (a rank deficiency, such as
-/// the `Q = G G^T` of a discrete white-noise-acceleration model, whose pivots come out as a few
-/// ulps of either sign). Measured against each column's own diagonal, so a matrix holding both
-/// `1e6` and `1e-6` variances is not mistaken for a singular one.
-pub const PIVOT_TOLERANCE: f64 = 1e-10;
+/// Pivot tolerance of [`semidefinite_factor`], relative to the largest diagonal entry and the
+/// dimension: elimination stops when every remaining pivot is at most
+/// `PIVOT_TOLERANCE * n * max_i a_ii` (LAPACK's `pstrf` uses `n eps max a_ii`; this is a few
+/// hundred times looser so that rounding left by products such as `G G^T` is always absorbed).
+/// Variances that small beside the largest one are treated as zero.
+pub const PIVOT_TOLERANCE: f64 = 1e-13;
 
-/// How [`sigma_sqrt`] obtained its factor.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
-pub enum SqrtMethod {
-    /// The standard Cholesky factorisation succeeded: the matrix is positive definite.
-    Cholesky,
-    /// Cholesky failed and the semi-definite factorisation ([`semidefinite_factor`]) was used:
-    /// the matrix is singular to working precision; the factor has zero columns where the
-    /// matrix has no variance.
-    SemiDefinite,
-}
-
-/// A lower-triangular `L` with `L L^T = A` for a symmetric positive semi-definite `A`.
+/// A square root `L` with `L L^T = A` for a symmetric positive semi-definite `A`, and the
+/// numerical rank of `A`.
 ///
-/// This is the Cholesky elimination with one change: a pivot within [`PIVOT_TOLERANCE`] of zero
-/// (relative to its diagonal entry) zeroes its column instead of failing, after checking that
-/// the rest of the column is zero too (otherwise `A` is indefinite). The returned rank counts the
-/// non-zero columns.
+/// Cholesky elimination with diagonal pivoting (the largest remaining pivot first, as LAPACK's
+/// `pstrf`), stopped when every remaining pivot is below the tolerance
+/// ([`PIVOT_TOLERANCE`]): the rank-deficient directions get zero columns. Pivoting bounds the
+/// growth of rounding, so rank-deficient matrices such as `Q = G G^T` factor reliably; without
+/// it, a nearly collinear `G` leaves pivots of the wrong sign. The rows of `L` are returned in the
+/// original order, so `L` is lower triangular only up to that permutation (for a positive
+/// definite `A` with no pivoting needed, it is the Cholesky factor). What remains after the
+/// stop must be negligible: a clearly negative pivot, or a remaining off-diagonal entry beyond
+/// the tolerance, means `A` is indefinite.
 ///
 /// ```
 /// use kalibra_linalg::{semidefinite_factor, Matrix2};
@@ -42,9 +36,8 @@ pub enum SqrtMethod {
 /// ```
 ///
 /// # Errors
-/// [`LinalgError::NotPositiveSemiDefinite`] for a clearly negative pivot or a zero pivot with a
-/// non-zero column, [`LinalgError::NonFinite`] for NaN or infinite entries,
-/// [`LinalgError::DimensionMismatch`] if `a` is not square.
+/// [`LinalgError::NotPositiveSemiDefinite`] for an indefinite `a`, [`LinalgError::NonFinite`]
+/// for NaN or infinite entries, [`LinalgError::DimensionMismatch`] if `a` is not square.
 pub fn semidefinite_factor<D: Dim>(
     a: &OMatrix<f64, D, D>,
     what: &'static str,
@@ -56,52 +49,78 @@ where
     crate::check_dim(n, a.ncols(), what)?;
     check_finite(a, what)?;
     let (nr, nc) = a.shape_generic();
+    // Work in permuted coordinates: row i of `l` and `w` belongs to original index perm[i].
+    let mut w = a.clone();
     let mut l = OMatrix::<f64, D, D>::zeros_generic(nr, nc);
-    let mut rank = 0;
+    let mut perm: Vec<usize> = (0..n).collect();
+    let max_diag = (0..n).map(|i| a[(i, i)]).fold(0.0f64, f64::max);
+    let tol = PIVOT_TOLERANCE * n as f64 * max_diag;
+    // d[i]: diagonal of the current Schur complement.
+    let mut d: Vec<f64> = (0..n).map(|i| a[(i, i)]).collect();
+    let mut rank = n;
     for j in 0..n {
-        let ajj = a[(j, j)];
-        let mut d = ajj;
-        for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
+        let (p, &dp) =
+            d.iter().enumerate().skip(j).fold(
+                (j, &d[j]),
+                |best, (i, v)| if *v > *best.1 { (i, v) } else { best },
+            );
+        if dp <= tol {
+            rank = j;
+            break;
         }
-        let tol = PIVOT_TOLERANCE * ajj.abs();
-        if d > tol {
-            let ljj = d.sqrt();
-            l[(j, j)] = ljj;
-            for i in (j + 1)..n {
-                let mut s = a[(i, j)];
-                for k in 0..j {
-                    s -= l[(i, k)] * l[(j, k)];
-                }
-                l[(i, j)] = s / ljj;
+        if p != j {
+            d.swap(p, j);
+            perm.swap(p, j);
+            w.swap_rows(p, j);
+            w.swap_columns(p, j);
+            l.swap_rows(p, j);
+        }
+        let ljj = dp.sqrt();
+        l[(j, j)] = ljj;
+        for i in (j + 1)..n {
+            let mut s = w[(i, j)];
+            for k in 0..j {
+                s -= l[(i, k)] * l[(j, k)];
             }
-            rank += 1;
-        } else if d >= -tol {
-            // A zero pivot of a PSD matrix forces a zero column of the Schur complement: for
-            // PSD S, |S_ij| <= sqrt(S_ii S_jj). Anything larger means A is indefinite.
-            for i in (j + 1)..n {
-                let mut s = a[(i, j)];
-                for k in 0..j {
-                    s -= l[(i, k)] * l[(j, k)];
-                }
-                let bound = 10.0 * PIVOT_TOLERANCE.sqrt() * (a[(i, i)].abs() * ajj.abs()).sqrt();
-                if s.abs() > bound {
-                    return Err(LinalgError::NotPositiveSemiDefinite {
-                        what,
-                        index: j,
-                        pivot: d,
-                    });
-                }
-            }
-        } else {
-            return Err(LinalgError::NotPositiveSemiDefinite {
-                what,
-                index: j,
-                pivot: d,
-            });
+            let lij = s / ljj;
+            l[(i, j)] = lij;
+            d[i] -= lij * lij;
         }
     }
-    Ok((l, rank))
+    // What the elimination left must be negligible: for PSD remainders |S_ij| <= sqrt(S_ii S_jj).
+    for j in rank..n {
+        for i in j..n {
+            let mut s = w[(i, j)];
+            for k in 0..rank {
+                s -= l[(i, k)] * l[(j, k)];
+            }
+            if s.abs() > 100.0 * tol.max(f64::MIN_POSITIVE) {
+                return Err(LinalgError::NotPositiveSemiDefinite {
+                    what,
+                    index: perm[j],
+                    pivot: s,
+                });
+            }
+        }
+    }
+    // Back to the original row order.
+    let mut out = OMatrix::<f64, D, D>::zeros_generic(nr, nc);
+    for (i, &orig) in perm.iter().enumerate() {
+        out.set_row(orig, &l.row(i));
+    }
+    Ok((out, rank))
+}
+
+/// How [`sigma_sqrt`] obtained its factor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SqrtMethod {
+    /// The standard Cholesky factorisation succeeded: the matrix is positive definite.
+    Cholesky,
+    /// Cholesky failed and the semi-definite factorisation ([`semidefinite_factor`]) was used:
+    /// the matrix is singular to working precision; the factor has zero columns where the
+    /// matrix has no variance.
+    SemiDefinite,
 }
 
 /// A matrix square root `L` (lower triangular, `L L^T = P`) for generating sigma points.
@@ -222,6 +241,7 @@ mod tests {
         let p = Matrix4::from_diagonal(&Vector4::new(4.0, 3.0, 2.0, 1.0)) + Matrix4::repeat(0.1);
         let (l, rank) = semidefinite_factor(&p, "P").unwrap();
         assert_eq!(rank, 4);
+        // Diagonal already in decreasing order: no pivoting, so it is the Cholesky factor.
         assert_relative_eq!(l, Cholesky::new(p).unwrap().l(), epsilon = 1e-14);
         assert_eq!(sigma_sqrt(&p, "P").unwrap().1, SqrtMethod::Cholesky);
     }

@@ -5,15 +5,22 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 /// A vector of independent standard normal draws of dimension `d`.
+#[inline]
 pub fn standard_normal<D: Dim, R: Rng + ?Sized>(d: D, rng: &mut R) -> OVector<f64, D>
 where
     DefaultAllocator: Alloc<D>,
 {
-    OVector::<f64, D>::from_fn_generic(d, U1, |_, _| StandardNormal.sample(rng))
+    // A plain loop rather than `from_fn_generic`, whose closure LLVM did not inline.
+    let mut v = OVector::<f64, D>::zeros_generic(d, U1);
+    for x in v.iter_mut() {
+        *x = StandardNormal.sample(rng);
+    }
+    v
 }
 
 /// A draw of `N(0, L L^T)` as `L n`, `n` standard normal. `L` may be rank-deficient (a
 /// semi-definite factor), which samples exactly from a singular covariance.
+#[inline]
 pub fn sample_with_factor<D: Dim, R: Rng + ?Sized>(
     l: &OMatrix<f64, D, D>,
     rng: &mut R,

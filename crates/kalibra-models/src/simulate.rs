@@ -79,14 +79,14 @@ where
         let mut z = self.measurement.measure(k, &self.x)
             + self.measurement.sample_noise(k, &self.x, rng)?;
         self.measurement.normalize(&mut z);
-        if !z.iter().all(|v| v.is_finite()) {
+        if !kalibra_linalg::all_finite(&z) {
             return Err(ModelError::NonFinite {
                 what: "simulated measurement",
                 step: k,
             });
         }
         let next = self.dynamics.transition(k, &self.x) + self.dynamics.sample_noise(k, rng)?;
-        if !next.iter().all(|v| v.is_finite()) {
+        if !kalibra_linalg::all_finite(&next) {
             return Err(ModelError::NonFinite {
                 what: "simulated state",
                 step: k + 1,

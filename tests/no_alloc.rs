@@ -1,0 +1,88 @@
+//! Per-step work on the fixed-size path allocates nothing: a counting global allocator watches
+//! a simulation step, a KF predict and update, and the NEES and NIS of the step.
+
+// A global allocator can only be written with `unsafe`; it forwards to the system allocator.
+#![allow(unsafe_code)]
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use kalibra::filters::{Ekf, Filter, Kf};
+use kalibra::linalg::{Matrix2, Matrix4, U2, U4, Vector4};
+use kalibra::metrics::nees;
+use kalibra::models::{Kinematic, Simulator};
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::SeedableRng;
+
+struct Counting;
+
+// Counted per thread, since the test harness runs tests in parallel. A `const` thread-local
+// without a destructor needs no allocation itself.
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: `ptr` came from `System.alloc` with this layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn fixed_size_steps_do_not_allocate() {
+    let cv = Kinematic::constant_velocity(2, 1.0).unwrap();
+    let f = cv.dynamics(U4).unwrap();
+    let h = cv
+        .position_measurement(U4, U2, Matrix2::identity() * 100.0)
+        .unwrap();
+    let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut truth = Simulator::new(&f, &h, x0, 0).unwrap();
+    let mut kf = Kf::new(&f, &h, x0, Matrix4::identity() * 100.0).unwrap();
+    let mut ekf = Ekf::new(&f, &h, x0, Matrix4::identity() * 100.0).unwrap();
+    let mut total = 0.0;
+    let before = allocations();
+    for k in 0..1000 {
+        let (x, z) = truth.step(&mut rng).unwrap();
+        if k > 0 {
+            kf.predict().unwrap();
+            ekf.predict().unwrap();
+        }
+        let rec = kf.update(&z).unwrap();
+        total += rec.nis() + nees(&(x - rec.posterior().mean), &rec.posterior().cov).unwrap();
+        total += rec.a()[(0, 0)] + rec.b()[(1, 1)];
+        total += ekf.update(&z).unwrap().nis();
+    }
+    let allocations = allocations() - before;
+    assert!(total.is_finite());
+    assert_eq!(allocations, 0, "{allocations} allocations in 1000 steps");
+}
+
+/// The counter sees allocations when there are some: the same step on `Dyn` sizes allocates.
+#[test]
+fn the_counter_detects_dynamic_allocations() {
+    use kalibra::linalg::{DMatrix, DVector};
+    use kalibra::models::{LinearGaussian, LinearObservation};
+    let f = LinearGaussian::new(DMatrix::<f64>::identity(2, 2), DMatrix::identity(2, 2)).unwrap();
+    let h =
+        LinearObservation::new(DMatrix::<f64>::identity(1, 2), DMatrix::identity(1, 1)).unwrap();
+    let mut kf = Kf::new(&f, &h, DVector::zeros(2), DMatrix::identity(2, 2)).unwrap();
+    let z = DVector::zeros(1);
+    let before = allocations();
+    kf.predict().unwrap();
+    kf.update(&z).unwrap();
+    assert!(allocations() > before);
+}
