@@ -35,3 +35,8 @@ pub use kalibra_metrics as metrics;
 pub use kalibra_models as models;
 pub use kalibra_papers as papers;
 pub use kalibra_sim as sim;
+
+/// The README's example, compiled and run as a doctest so that it stays true.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
