@@ -113,38 +113,61 @@ macro_rules! constructors {
 constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
 
+/// The update shared by the KF and the EKF; they differ only in where `H_k` comes from.
+fn measurement_update<'a, N: Dim, M: Dim, H: Measurement<N, M>>(
+    core: &'a mut KalmanCore<N, M>,
+    measurement: &H,
+    z: &OVector<f64, M>,
+    h_matrix: impl FnOnce(usize, &OVector<f64, N>) -> OMatrix<f64, M, N>,
+) -> Result<&'a StepRecord<N, M>, FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let k = core.step();
+    core.check_measurement(measurement.meas_dim().value(), z)?;
+    let x = core.mean();
+    let zhat = measurement.measure(k, x);
+    let nu = measurement.residual(z, &zhat);
+    let h = h_matrix(k, x);
+    let r = measurement.noise_cov(k, x);
+    core.update(zhat, nu, h, r)
+}
+
+/// The accessors both filters forward to their core.
+macro_rules! core_accessors {
+    () => {
+        fn step_index(&self) -> usize {
+            self.core.step()
+        }
+        fn mean(&self) -> &OVector<f64, N> {
+            self.core.mean()
+        }
+        fn covariance(&self) -> &OMatrix<f64, N, N> {
+            self.core.cov()
+        }
+        fn last_record(&self) -> Option<&StepRecord<N, M>> {
+            self.core.record()
+        }
+    };
+}
+
 impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>> Filter<N, M>
     for Kf<N, M, D, H>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    fn step_index(&self) -> usize {
-        self.core.step()
-    }
-    fn mean(&self) -> &OVector<f64, N> {
-        self.core.mean()
-    }
-    fn covariance(&self) -> &OMatrix<f64, N, N> {
-        self.core.cov()
-    }
+    core_accessors!();
+
     fn predict(&mut self) -> Result<(), FilterError> {
         let k = self.core.step();
         let x_pred = self.dynamics.transition(k, self.core.mean());
         self.core
             .predict(x_pred, self.dynamics.matrix(k), self.dynamics.noise_cov(k))
     }
+
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
-        let k = self.core.step();
-        self.core
-            .check_measurement(self.measurement.meas_dim().value(), z)?;
-        let x = self.core.mean();
-        let zhat = self.measurement.measure(k, x);
-        let nu = self.measurement.residual(z, &zhat);
-        let r = self.measurement.noise_cov(k, x);
-        self.core.update(zhat, nu, self.measurement.matrix(k), r)
-    }
-    fn last_record(&self) -> Option<&StepRecord<N, M>> {
-        self.core.record()
+        let measurement = &self.measurement;
+        measurement_update(&mut self.core, measurement, z, |k, _| measurement.matrix(k))
     }
 }
 
@@ -152,15 +175,8 @@ impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M> for Ekf<
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    fn step_index(&self) -> usize {
-        self.core.step()
-    }
-    fn mean(&self) -> &OVector<f64, N> {
-        self.core.mean()
-    }
-    fn covariance(&self) -> &OMatrix<f64, N, N> {
-        self.core.cov()
-    }
+    core_accessors!();
+
     fn predict(&mut self) -> Result<(), FilterError> {
         let k = self.core.step();
         let x = self.core.mean();
@@ -171,18 +187,11 @@ where
             self.dynamics.noise_cov(k),
         )
     }
+
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
-        let k = self.core.step();
-        self.core
-            .check_measurement(self.measurement.meas_dim().value(), z)?;
-        let x = self.core.mean();
-        let zhat = self.measurement.measure(k, x);
-        let nu = self.measurement.residual(z, &zhat);
-        let h = self.measurement.jacobian(k, x);
-        let r = self.measurement.noise_cov(k, x);
-        self.core.update(zhat, nu, h, r)
-    }
-    fn last_record(&self) -> Option<&StepRecord<N, M>> {
-        self.core.record()
+        let measurement = &self.measurement;
+        measurement_update(&mut self.core, measurement, z, |k, x| {
+            measurement.jacobian(k, x)
+        })
     }
 }
