@@ -53,12 +53,7 @@ where
     /// # Errors
     /// As [`Covariance::new`].
     pub fn named(mut matrix: OMatrix<f64, D, D>, what: &'static str) -> Result<Self, LinalgError> {
-        check_square(&matrix, what)?;
-        check_finite(&matrix, what)?;
-        let asymmetry = relative_asymmetry(&matrix);
-        if asymmetry > SYMMETRY_TOLERANCE {
-            return Err(LinalgError::NotSymmetric { what, asymmetry });
-        }
+        check_symmetric(&matrix, what)?;
         crate::symmetrize(&mut matrix);
         Self::from_symmetric(matrix, what)
     }
@@ -194,14 +189,9 @@ pub fn quad_form_once<D: Dim, S: Storage<f64, D>>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    check_square(cov, what)?;
+    check_symmetric(cov, what)?;
     crate::check_dim(cov.nrows(), v.nrows(), "vector")?;
     check_finite(v, "vector")?;
-    check_finite(cov, what)?;
-    let asymmetry = relative_asymmetry(cov);
-    if asymmetry > SYMMETRY_TOLERANCE {
-        return Err(LinalgError::NotSymmetric { what, asymmetry });
-    }
     let chol = Cholesky::new(cov.clone()).ok_or(LinalgError::NotPositiveDefinite { what })?;
     let mut w = v.clone_owned();
     chol.l_dirty().solve_lower_triangular_unchecked_mut(&mut w);
@@ -213,15 +203,31 @@ where
     }
 }
 
-fn check_square<D: Dim>(m: &OMatrix<f64, D, D>, what: &'static str) -> Result<(), LinalgError>
+/// Checks that `m` is square, finite and symmetric to [`SYMMETRY_TOLERANCE`] (relative
+/// asymmetry `|a_ij - a_ji| / sqrt(|a_ii a_jj|)`): the one check every matrix meant as a
+/// covariance passes, before any factorisation.
+///
+/// # Errors
+/// [`LinalgError::DimensionMismatch`], [`LinalgError::NonFinite`] or
+/// [`LinalgError::NotSymmetric`], naming `what`.
+pub fn check_symmetric<D: Dim>(
+    m: &OMatrix<f64, D, D>,
+    what: &'static str,
+) -> Result<(), LinalgError>
 where
     DefaultAllocator: Alloc<D>,
 {
-    crate::check_dim(m.nrows(), m.ncols(), what)
+    crate::check_dim(m.nrows(), m.ncols(), what)?;
+    check_finite(m, what)?;
+    let asymmetry = relative_asymmetry(m);
+    if asymmetry > SYMMETRY_TOLERANCE {
+        return Err(LinalgError::NotSymmetric { what, asymmetry });
+    }
+    Ok(())
 }
 
 /// Largest `|a_ij - a_ji| / sqrt(|a_ii a_jj|)`, with an absolute fallback when a diagonal is 0.
-pub(crate) fn relative_asymmetry<D: Dim>(m: &OMatrix<f64, D, D>) -> f64
+fn relative_asymmetry<D: Dim>(m: &OMatrix<f64, D, D>) -> f64
 where
     DefaultAllocator: Alloc<D>,
 {

@@ -59,7 +59,7 @@ mod kernels;
 mod psd;
 
 pub use alloc::Alloc;
-pub use covariance::{Covariance, SYMMETRY_TOLERANCE, quad_form_once};
+pub use covariance::{Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once};
 pub use error::LinalgError;
 pub use kernels::{
     all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,

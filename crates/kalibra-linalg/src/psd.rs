@@ -3,8 +3,7 @@
 use nalgebra::linalg::Cholesky;
 use nalgebra::{DefaultAllocator, Dim, OMatrix};
 
-use crate::covariance::relative_asymmetry;
-use crate::{Alloc, LinalgError, SYMMETRY_TOLERANCE, check_finite};
+use crate::{Alloc, LinalgError, check_finite};
 
 /// Pivot tolerance of [`semidefinite_factor`], relative to the largest diagonal entry and the
 /// dimension: elimination stops when every remaining pivot is at most
@@ -184,12 +183,7 @@ where
     /// # Errors
     /// As [`PsdMatrix::new`].
     pub fn named(mut matrix: OMatrix<f64, D, D>, what: &'static str) -> Result<Self, LinalgError> {
-        crate::check_dim(matrix.nrows(), matrix.ncols(), what)?;
-        check_finite(&matrix, what)?;
-        let asymmetry = relative_asymmetry(&matrix);
-        if asymmetry > SYMMETRY_TOLERANCE {
-            return Err(LinalgError::NotSymmetric { what, asymmetry });
-        }
+        crate::check_symmetric(&matrix, what)?;
         crate::symmetrize(&mut matrix);
         let (factor, rank) = semidefinite_factor(&matrix, what)?;
         Ok(Self {
