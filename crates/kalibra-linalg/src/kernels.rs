@@ -5,6 +5,7 @@
 //! bench`).
 
 use nalgebra::allocator::Allocator;
+use nalgebra::storage::IsContiguous;
 use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, RawStorage};
 
 use crate::{Alloc, LinalgError};
@@ -99,7 +100,7 @@ where
 /// # Errors
 /// [`LinalgError::NonFinite`] naming `what`.
 #[inline]
-pub fn check_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C>>(
+pub fn check_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C> + IsContiguous>(
     m: &Matrix<f64, R, C, S>,
     what: &'static str,
 ) -> Result<(), LinalgError> {
@@ -110,11 +111,15 @@ pub fn check_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C>>(
     }
 }
 
-/// Whether every entry of `m` is finite. A non-short-circuiting `&` reduction: it has no
-/// data-dependent branches and vectorises, and filters run it on every matrix of every step.
+/// Whether every entry of `m` is finite. A non-short-circuiting `&` reduction over the
+/// contiguous storage: it has no data-dependent branches and vectorises, and filters run it
+/// on every matrix of every step (over nalgebra's strided iterator it cost about seven
+/// instructions per entry under callgrind, over the slice about one).
 #[inline]
-pub fn all_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C>>(m: &Matrix<f64, R, C, S>) -> bool {
-    m.iter().fold(true, |ok, v| ok & v.is_finite())
+pub fn all_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C> + IsContiguous>(
+    m: &Matrix<f64, R, C, S>,
+) -> bool {
+    m.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
 }
 
 /// Checks a run-time dimension (the boundary where `Dyn` sizes meet).
