@@ -68,7 +68,7 @@ pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma
 
 pub use nalgebra;
 pub use nalgebra::{
-    Const, DMatrix, DVector, DefaultAllocator, Dim, DimName, Dyn, Matrix2, Matrix3, Matrix4,
-    OMatrix, OVector, SMatrix, SVector, U1, U2, U3, U4, U5, U6, U7, U8, U9, Vector1, Vector2,
-    Vector3, Vector4, Vector6,
+    Const, DMatrix, DVector, DefaultAllocator, Dim, DimName, Dyn, Matrix1, Matrix2, Matrix3,
+    Matrix4, OMatrix, OVector, SMatrix, SVector, U1, U2, U3, U4, U5, U6, U7, U8, U9, Vector1,
+    Vector2, Vector3, Vector4, Vector6,
 };

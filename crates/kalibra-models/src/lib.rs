@@ -38,6 +38,7 @@
 //! # Ok::<(), kalibra_models::ModelError>(())
 //! ```
 
+mod ballistic;
 mod bearing;
 mod error;
 mod jacobian;
@@ -47,6 +48,10 @@ mod noise;
 mod simulate;
 mod traits;
 
+pub use ballistic::{
+    AirDensity, Ballistic, BallisticDragFree, ConvertedPosition, RadarRates, ballistic_f1,
+    ballistic_g,
+};
 pub use bearing::{Bearing, BearingReference, Moving, Platform, Stationary, Tabulated, wrap_angle};
 pub use error::ModelError;
 pub use jacobian::{

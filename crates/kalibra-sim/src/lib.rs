@@ -31,6 +31,10 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod tuning;
+
+pub use tuning::{TuningError, grid, p_ad, q_ad, sweep, two_point_init};
+
 use kalibra_metrics::Merge;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;

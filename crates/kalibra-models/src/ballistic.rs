@@ -1,0 +1,578 @@
+//! Two-dimensional ballistic re-entry with air drag (Farina, Ristic and Benvenuti 2002), as
+//! papers 000 and 003 use it, and the radar measurements of those papers.
+//!
+//! # Notation
+//! State `x = [x1, x1dot, x2, x2dot]`: down-range, its rate, altitude, its rate (m, m/s); the
+//! radar sits at the origin. With sampling period `T`,
+//!
+//! `x_{k+1} = F1 x_k + G fkk(x_k) + G u + w_k`, `w_k ~ N(0, Q)`,
+//!
+//! `F1 = blockdiag([[1, T], [0, 1]] x 2)`, `G = [[T^2/2, 0], [T, 0], [0, T^2/2], [0, T]]`,
+//! `u = [0, -g]` (gravity as a known input), and the drag acceleration
+//! `fkk(x) = -rho(x2) g v [x1dot, x2dot] / (2 beta)`, `v = |[x1dot, x2dot]|`, with the
+//! piecewise exponential air density `rho(h) = C1 exp(-C2 h)`. The map is discrete: one Euler
+//! step of the continuous model per sample, exactly as the papers write it.
+//!
+//! Paper 003 prints `G` as `[[T^2/2, 0], [0, T^2/2], [0, 0], [0, 0]]`, a layout typo (it would
+//! leave the velocities without gravity); `G` here is the one of the source paper (Farina et
+//! al.) that both papers cite.
+//!
+//! # Numerical choices
+//! The density switches at 9144 m (30 000 ft): below it `(C1, C2) = (1.227, 1.093e-4)`, at or
+//! above it `(1.754, 1.490e-4)` (003's reading of the boundary; 000 leaves `x2 = 9144` open).
+//! The analytic Jacobian is the one-sided derivative on the current piece; it is undefined at
+//! the switch and at zero speed (`v = 0`), where this module returns the limit without the
+//! `x dot x dot^T / v` term.
+
+use kalibra_linalg::{
+    Matrix2, Matrix3, Matrix4, PsdMatrix, SMatrix, U2, U3, U4, Vector2, Vector3, Vector4,
+};
+use rand::Rng;
+
+use crate::{
+    Dynamics, LinearDynamics, LinearMeasurement, Measurement, ModelError, sample_with_factor,
+    wrap_angle,
+};
+
+/// Piecewise exponential air density `rho(h) = C1 exp(-C2 h)` (kg/m^3), switching at
+/// `threshold` metres of altitude.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AirDensity {
+    /// Altitude (m) at which the coefficients switch; `h >= threshold` uses `above`.
+    pub threshold: f64,
+    /// `(C1, C2)` below the threshold.
+    pub below: (f64, f64),
+    /// `(C1, C2)` at or above the threshold.
+    pub above: (f64, f64),
+}
+
+impl AirDensity {
+    /// The density of Farina, Ristic and Benvenuti (2002): `(1.227, 1.093e-4)` below 9144 m,
+    /// `(1.754, 1.490e-4)` at or above.
+    pub fn farina() -> Self {
+        Self {
+            threshold: 9144.0,
+            below: (1.227, 1.093e-4),
+            above: (1.754, 1.490e-4),
+        }
+    }
+
+    fn coefficients(&self, h: f64) -> (f64, f64) {
+        if h >= self.threshold {
+            self.above
+        } else {
+            self.below
+        }
+    }
+
+    /// `rho(h)`.
+    pub fn at(&self, h: f64) -> f64 {
+        let (c1, c2) = self.coefficients(h);
+        c1 * (-c2 * h).exp()
+    }
+
+    /// `d rho / d h` on the piece containing `h`.
+    pub fn derivative(&self, h: f64) -> f64 {
+        let (c1, c2) = self.coefficients(h);
+        -c2 * c1 * (-c2 * h).exp()
+    }
+}
+
+/// `F1`, the constant-velocity part of the transition.
+pub fn ballistic_f1(t: f64) -> Matrix4<f64> {
+    Matrix4::new(
+        1.0, t, 0.0, 0.0, //
+        0.0, 1.0, 0.0, 0.0, //
+        0.0, 0.0, 1.0, t, //
+        0.0, 0.0, 0.0, 1.0,
+    )
+}
+
+/// `G`, which maps an acceleration `[a1, a2]` into the state over one period.
+pub fn ballistic_g(t: f64) -> SMatrix<f64, 4, 2> {
+    SMatrix::<f64, 4, 2>::new(0.5 * t * t, 0.0, t, 0.0, 0.0, 0.5 * t * t, 0.0, t)
+}
+
+/// Shared parameters of the drag and drag-free models.
+#[derive(Clone, Debug)]
+struct Params {
+    t: f64,
+    g: f64,
+    q: PsdMatrix<U4>,
+    f1: Matrix4<f64>,
+    gm: SMatrix<f64, 4, 2>,
+    /// `G u`, the gravity input in state coordinates.
+    input: Vector4<f64>,
+}
+
+impl Params {
+    fn new(t: f64, g: f64, q: Matrix4<f64>) -> Result<Self, ModelError> {
+        positive("sampling period T", t)?;
+        if !g.is_finite() {
+            return Err(ModelError::InvalidParameter {
+                name: "gravity g",
+                value: g,
+            });
+        }
+        let q = PsdMatrix::named(q, "process noise covariance Q")?;
+        let gm = ballistic_g(t);
+        Ok(Self {
+            t,
+            g,
+            q,
+            f1: ballistic_f1(t),
+            gm,
+            input: gm * Vector2::new(0.0, -g),
+        })
+    }
+}
+
+fn positive(name: &'static str, value: f64) -> Result<(), ModelError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(ModelError::InvalidParameter { name, value })
+    }
+}
+
+/// The ballistic re-entry dynamics with drag and gravity.
+///
+/// ```
+/// use kalibra_models::{Ballistic, Dynamics, check_dynamics_jacobian};
+/// use kalibra_linalg::{Matrix4, Vector4};
+/// let model = Ballistic::new(2.0, 40_000.0, 9.81, Matrix4::identity())?;
+/// let x0 = Vector4::new(232e3, -2255.2, 88e3, -397.7);
+/// let x1 = model.transition(0, &x0);
+/// assert!(x1[2] < x0[2]); // falling
+/// assert!(check_dynamics_jacobian(&model, 0, &x0).scaled_error < 1e-6);
+/// # Ok::<(), kalibra_models::ModelError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Ballistic {
+    params: Params,
+    beta: f64,
+    density: AirDensity,
+}
+
+impl Ballistic {
+    /// Period `t` (s), ballistic coefficient `beta` (kg m^-1 s^-2), gravity `g` (m/s^2), and the
+    /// process-noise covariance `q` (the truth's `Qt`, or a filter's tuning `Q`); the density
+    /// of [`AirDensity::farina`].
+    ///
+    /// # Errors
+    /// [`ModelError::InvalidParameter`] for a non-positive `t` or `beta` or a non-finite `g`;
+    /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
+    pub fn new(t: f64, beta: f64, g: f64, q: Matrix4<f64>) -> Result<Self, ModelError> {
+        positive("ballistic coefficient beta", beta)?;
+        Ok(Self {
+            params: Params::new(t, g, q)?,
+            beta,
+            density: AirDensity::farina(),
+        })
+    }
+
+    /// The same model with another air density.
+    pub fn with_density(mut self, density: AirDensity) -> Self {
+        self.density = density;
+        self
+    }
+
+    /// The same model with another process-noise covariance (a tuning sweep scales `Q`).
+    ///
+    /// # Errors
+    /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
+    pub fn with_noise(&self, q: Matrix4<f64>) -> Result<Self, ModelError> {
+        let mut out = self.clone();
+        out.params.q = PsdMatrix::named(q, "process noise covariance Q")?;
+        Ok(out)
+    }
+
+    /// The drag-free (linear) model with the same period, gravity and noise: `F1 x + G u`.
+    pub fn drag_free(&self) -> BallisticDragFree {
+        BallisticDragFree {
+            params: self.params.clone(),
+        }
+    }
+
+    /// The sampling period `T`.
+    pub fn period(&self) -> f64 {
+        self.params.t
+    }
+
+    /// The air density model.
+    pub fn density(&self) -> &AirDensity {
+        &self.density
+    }
+
+    /// The drag acceleration `fkk(x)` (m/s^2).
+    pub fn drag(&self, x: &Vector4<f64>) -> Vector2<f64> {
+        let vel = Vector2::new(x[1], x[3]);
+        let v = vel.norm();
+        vel * (-self.density.at(x[2]) * self.params.g * v / (2.0 * self.beta))
+    }
+
+    /// `d fkk / d x` (2 x 4).
+    pub fn drag_jacobian(&self, x: &Vector4<f64>) -> SMatrix<f64, 2, 4> {
+        let (v1, v2) = (x[1], x[3]);
+        let v = (v1 * v1 + v2 * v2).sqrt();
+        let c = -self.params.g / (2.0 * self.beta);
+        let rho = self.density.at(x[2]);
+        let drho = self.density.derivative(x[2]);
+        // d(v vel_i)/d vel_j = v delta_ij + vel_i vel_j / v; at v = 0 the second term's limit
+        // is direction-dependent, and dropping it gives the derivative along the axes.
+        let outer = if v > 0.0 { 1.0 / v } else { 0.0 };
+        let dv = Matrix2::new(
+            v + v1 * v1 * outer,
+            v1 * v2 * outer,
+            v1 * v2 * outer,
+            v + v2 * v2 * outer,
+        ) * (c * rho);
+        let dh = Vector2::new(v1, v2) * (c * v * drho);
+        SMatrix::<f64, 2, 4>::new(
+            0.0,
+            dv[(0, 0)],
+            dh[0],
+            dv[(0, 1)], //
+            0.0,
+            dv[(1, 0)],
+            dh[1],
+            dv[(1, 1)],
+        )
+    }
+}
+
+impl Dynamics<U4> for Ballistic {
+    fn state_dim(&self) -> U4 {
+        U4
+    }
+    fn transition(&self, _k: usize, x: &Vector4<f64>) -> Vector4<f64> {
+        self.params.f1 * x + self.params.gm * self.drag(x) + self.params.input
+    }
+    fn jacobian(&self, _k: usize, x: &Vector4<f64>) -> Matrix4<f64> {
+        self.params.f1 + self.params.gm * self.drag_jacobian(x)
+    }
+    fn noise_cov(&self, _k: usize) -> Matrix4<f64> {
+        *self.params.q.matrix()
+    }
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        _k: usize,
+        rng: &mut R,
+    ) -> Result<Vector4<f64>, ModelError> {
+        Ok(sample_with_factor(self.params.q.factor(), rng))
+    }
+}
+
+/// The ballistic model without drag: `x_{k+1} = F1 x_k + G u + w_k` (paper 000's "KF").
+#[derive(Clone, Debug)]
+pub struct BallisticDragFree {
+    params: Params,
+}
+
+impl BallisticDragFree {
+    /// The same model with another process-noise covariance.
+    ///
+    /// # Errors
+    /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
+    pub fn with_noise(&self, q: Matrix4<f64>) -> Result<Self, ModelError> {
+        let mut out = self.clone();
+        out.params.q = PsdMatrix::named(q, "process noise covariance Q")?;
+        Ok(out)
+    }
+}
+
+impl Dynamics<U4> for BallisticDragFree {
+    fn state_dim(&self) -> U4 {
+        U4
+    }
+    fn transition(&self, _k: usize, x: &Vector4<f64>) -> Vector4<f64> {
+        self.params.f1 * x + self.params.input
+    }
+    fn jacobian(&self, _k: usize, _x: &Vector4<f64>) -> Matrix4<f64> {
+        self.params.f1
+    }
+    fn noise_cov(&self, _k: usize) -> Matrix4<f64> {
+        *self.params.q.matrix()
+    }
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        _k: usize,
+        rng: &mut R,
+    ) -> Result<Vector4<f64>, ModelError> {
+        Ok(sample_with_factor(self.params.q.factor(), rng))
+    }
+}
+
+impl LinearDynamics<U4> for BallisticDragFree {
+    fn matrix(&self, _k: usize) -> Matrix4<f64> {
+        self.params.f1
+    }
+}
+
+/// Radar range and elevation converted to Cartesian position (paper 000, eq 18):
+/// `z = [x1, x2] + v`, `v ~ N(0, RA(r, eps))` with
+/// `RA = [[sr^2 c^2 + r^2 se^2 s^2, (sr^2 - r^2 se^2) s c], [., sr^2 s^2 + r^2 se^2 c^2]]`,
+/// `c = cos eps`, `s = sin eps`, at the true range `r` and elevation `eps`. `sr` and `se` are
+/// standard deviations (the paper calls them variances; its values, 100 m and
+/// 0.017/57.3 rad, are standard deviations).
+///
+/// A filter that evaluates [`Measurement::noise_cov`] passes its prior estimate, so this type
+/// also serves a filter that models the converted noise; paper 000's filters use a constant
+/// `R` instead ([`crate::LinearObservation`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConvertedPosition {
+    sigma_range: f64,
+    sigma_elevation: f64,
+}
+
+impl ConvertedPosition {
+    /// Range and elevation standard deviations (m, rad).
+    ///
+    /// # Errors
+    /// [`ModelError::InvalidParameter`] unless both are positive and finite.
+    pub fn new(sigma_range: f64, sigma_elevation: f64) -> Result<Self, ModelError> {
+        positive("range standard deviation", sigma_range)?;
+        positive("elevation standard deviation", sigma_elevation)?;
+        Ok(Self {
+            sigma_range,
+            sigma_elevation,
+        })
+    }
+
+    /// `H = [[1, 0, 0, 0], [0, 0, 1, 0]]`.
+    pub fn h() -> SMatrix<f64, 2, 4> {
+        SMatrix::<f64, 2, 4>::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    }
+
+    /// `RA` at range `r` and elevation `eps`.
+    pub fn covariance(&self, r: f64, eps: f64) -> Matrix2<f64> {
+        let (s, c) = eps.sin_cos();
+        let sr2 = self.sigma_range * self.sigma_range;
+        let re2 = r * r * self.sigma_elevation * self.sigma_elevation;
+        Matrix2::new(
+            sr2 * c * c + re2 * s * s,
+            (sr2 - re2) * s * c,
+            (sr2 - re2) * s * c,
+            sr2 * s * s + re2 * c * c,
+        )
+    }
+}
+
+impl Measurement<U4, U2> for ConvertedPosition {
+    fn meas_dim(&self) -> U2 {
+        U2
+    }
+    fn measure(&self, _k: usize, x: &Vector4<f64>) -> Vector2<f64> {
+        Vector2::new(x[0], x[2])
+    }
+    fn jacobian(&self, _k: usize, _x: &Vector4<f64>) -> SMatrix<f64, 2, 4> {
+        Self::h()
+    }
+    fn noise_cov(&self, _k: usize, x: &Vector4<f64>) -> Matrix2<f64> {
+        let r = x[0].hypot(x[2]);
+        self.covariance(r, x[2].atan2(x[0]))
+    }
+}
+
+impl LinearMeasurement<U4, U2> for ConvertedPosition {
+    fn matrix(&self, _k: usize) -> SMatrix<f64, 2, 4> {
+        Self::h()
+    }
+}
+
+/// Radar range rate, elevation and sightline rate (paper 003, eq 3), with the radar at the
+/// origin: `h(x) = [(x1 x1dot + x2 x2dot) / r, atan2(x2, x1), (x1 x2dot - x2 x1dot) / r^2]`,
+/// `r = |[x1, x2]|`. The elevation residual is wrapped into (-pi, pi].
+///
+/// 003 writes the elevation as `tan^-1(x2 / x1)`; `atan2` agrees with it for a target
+/// down-range (`x1 > 0`) and stays continuous when `x1` changes sign.
+///
+/// ```
+/// use kalibra_models::{RadarRates, check_measurement_jacobian};
+/// use kalibra_linalg::{Matrix3, Vector4};
+/// let radar = RadarRates::new(Matrix3::from_diagonal(&[225.0, 3e-6, 3e-8].into()))?;
+/// let x = Vector4::new(232e3, -2255.2, 88e3, -397.7);
+/// assert!(check_measurement_jacobian(&radar, 0, &x).scaled_error < 1e-6);
+/// # Ok::<(), kalibra_models::ModelError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct RadarRates {
+    r: PsdMatrix<U3>,
+}
+
+impl RadarRates {
+    /// The index of the elevation in the measurement vector.
+    pub const ELEVATION: usize = 1;
+
+    /// A radar with measurement-noise covariance `r` (3 x 3).
+    ///
+    /// # Errors
+    /// [`ModelError::Linalg`] if `r` is not symmetric positive semi-definite.
+    pub fn new(r: Matrix3<f64>) -> Result<Self, ModelError> {
+        Ok(Self {
+            r: PsdMatrix::named(r, "measurement noise covariance R")?,
+        })
+    }
+}
+
+impl Measurement<U4, U3> for RadarRates {
+    fn meas_dim(&self) -> U3 {
+        U3
+    }
+    fn measure(&self, _k: usize, x: &Vector4<f64>) -> Vector3<f64> {
+        let (x1, v1, x2, v2) = (x[0], x[1], x[2], x[3]);
+        let r2 = x1 * x1 + x2 * x2;
+        Vector3::new(
+            (x1 * v1 + x2 * v2) / r2.sqrt(),
+            x2.atan2(x1),
+            (x1 * v2 - x2 * v1) / r2,
+        )
+    }
+    /// Non-finite at the radar (`r = 0`); filters report that as an error.
+    fn jacobian(&self, _k: usize, x: &Vector4<f64>) -> SMatrix<f64, 3, 4> {
+        let (x1, v1, x2, v2) = (x[0], x[1], x[2], x[3]);
+        let r2 = x1 * x1 + x2 * x2;
+        let r = r2.sqrt();
+        let r3 = r2 * r;
+        let dot = x1 * v1 + x2 * v2;
+        let cross = x1 * v2 - x2 * v1;
+        let r4 = r2 * r2;
+        SMatrix::<f64, 3, 4>::new(
+            v1 / r - dot * x1 / r3,
+            x1 / r,
+            v2 / r - dot * x2 / r3,
+            x2 / r,
+            //
+            -x2 / r2,
+            0.0,
+            x1 / r2,
+            0.0,
+            //
+            v2 / r2 - 2.0 * x1 * cross / r4,
+            -x2 / r2,
+            -v1 / r2 - 2.0 * x2 * cross / r4,
+            x1 / r2,
+        )
+    }
+    fn noise_cov(&self, _k: usize, _x: &Vector4<f64>) -> Matrix3<f64> {
+        *self.r.matrix()
+    }
+    fn residual(&self, z: &Vector3<f64>, zhat: &Vector3<f64>) -> Vector3<f64> {
+        let mut d = z - zhat;
+        d[Self::ELEVATION] = wrap_angle(d[Self::ELEVATION]);
+        d
+    }
+    fn normalize(&self, z: &mut Vector3<f64>) {
+        z[Self::ELEVATION] = wrap_angle(z[Self::ELEVATION]);
+    }
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        _k: usize,
+        _x: &Vector4<f64>,
+        rng: &mut R,
+    ) -> Result<Vector3<f64>, ModelError> {
+        Ok(sample_with_factor(self.r.factor(), rng))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{check_dynamics_jacobian, check_measurement_jacobian};
+
+    fn x0() -> Vector4<f64> {
+        let a = 190f64.to_radians();
+        Vector4::new(232e3, 2290.0 * a.cos(), 88e3, 2290.0 * a.sin())
+    }
+
+    fn model() -> Ballistic {
+        Ballistic::new(2.0, 40_000.0, 9.81, Matrix4::identity()).unwrap()
+    }
+
+    #[test]
+    fn drag_jacobian_matches_finite_differences_on_both_density_pieces() {
+        let m = model();
+        for x in [
+            x0(),
+            Vector4::new(20e3, -900.0, 5e3, -1500.0),
+            Vector4::new(1e3, 10.0, 12e3, -3.0),
+        ] {
+            let c = check_dynamics_jacobian(&m, 0, &x);
+            assert!(c.scaled_error < 1e-6, "{x:?}: {c:?}");
+        }
+    }
+
+    #[test]
+    fn drag_free_is_linear_with_gravity() {
+        let m = model().drag_free();
+        let x = x0();
+        let next = m.transition(0, &x);
+        assert_eq!(
+            next,
+            ballistic_f1(2.0) * x + ballistic_g(2.0) * Vector2::new(0.0, -9.81)
+        );
+        assert_eq!(m.matrix(0), ballistic_f1(2.0));
+        assert!(check_dynamics_jacobian(&m, 0, &x).scaled_error < 1e-9);
+    }
+
+    #[test]
+    fn drag_opposes_velocity_and_grows_with_density() {
+        let m = model();
+        let x_high = x0();
+        let mut x_low = x_high;
+        x_low[2] = 5e3;
+        let d_high = m.drag(&x_high);
+        let d_low = m.drag(&x_low);
+        assert!(d_high.dot(&Vector2::new(x_high[1], x_high[3])) < 0.0);
+        assert!(d_low.norm() > 10.0 * d_high.norm());
+        // Density switches at 9144 m to the other coefficient pair.
+        let rho = AirDensity::farina();
+        assert_eq!(rho.at(9144.0), 1.754 * (-1.490e-4f64 * 9144.0).exp());
+        assert_eq!(rho.at(9143.9), 1.227 * (-1.093e-4f64 * 9143.9).exp());
+    }
+
+    #[test]
+    fn radar_jacobian_matches_finite_differences_and_wraps_elevation() {
+        let radar =
+            RadarRates::new(Matrix3::from_diagonal(&Vector3::new(225.0, 3e-6, 3e-8))).unwrap();
+        for x in [
+            x0(),
+            Vector4::new(-3e3, 100.0, 2e3, -50.0),
+            Vector4::new(5e3, 0.0, -1e3, 7.0),
+        ] {
+            let c = check_measurement_jacobian(&radar, 0, &x);
+            assert!(c.scaled_error < 1e-6, "{x:?}: {c:?}");
+        }
+        let z = Vector3::new(0.0, 3.1, 0.0);
+        let zhat = Vector3::new(0.0, -3.1, 0.0);
+        let d = radar.residual(&z, &zhat);
+        assert!((d[1] - (6.2 - 2.0 * std::f64::consts::PI)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn converted_noise_is_range_noise_along_the_line_of_sight() {
+        let m = ConvertedPosition::new(100.0, 0.017 / 57.3).unwrap();
+        let eps = 0.3f64;
+        let ra = m.covariance(50e3, eps);
+        // Along the line of sight the variance is sr^2, across it (r se)^2.
+        let along = Vector2::new(eps.cos(), eps.sin());
+        let across = Vector2::new(-eps.sin(), eps.cos());
+        assert!(((along.transpose() * ra * along)[0] - 1e4).abs() < 1e-8);
+        let cross = (50e3f64 * 0.017 / 57.3).powi(2);
+        assert!(((across.transpose() * ra * across)[0] - cross).abs() < 1e-8);
+        assert!((along.transpose() * ra * across)[0].abs() < 1e-8);
+        assert!(check_measurement_jacobian(&m, 0, &x0()).scaled_error < 1e-9);
+    }
+
+    #[test]
+    fn invalid_parameters_are_typed_errors() {
+        assert!(Ballistic::new(0.0, 1.0, 9.81, Matrix4::identity()).is_err());
+        assert!(Ballistic::new(2.0, -1.0, 9.81, Matrix4::identity()).is_err());
+        assert!(Ballistic::new(2.0, 1.0, f64::NAN, Matrix4::identity()).is_err());
+        assert!(Ballistic::new(2.0, 1.0, 9.81, -Matrix4::identity()).is_err());
+        assert!(ConvertedPosition::new(0.0, 1.0).is_err());
+        assert!(
+            RadarRates::new(Matrix3::new(1.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_err()
+        );
+    }
+}

@@ -1,0 +1,369 @@
+//! Tuning: sweeps `Q = 10^p Q_nom` over a grid of `p`, and the initial tuning of paper 003
+//! (two-point differencing, `P_ad` of eq 22, `Q_ad` of eq 23).
+//!
+//! # Notation
+//! `N` states, `M` measurements; `F_{k-1}` the transition Jacobian at step `k - 1`, `H_k` the
+//! measurement Jacobian at step `k`, `R` the measurement-noise covariance. Paper 003 evaluates
+//! eq 22 "in an offline EKF with `Q = 0`"; [`p_ad`] takes the trajectory to evaluate it along,
+//! so the caller chooses (the reproduction uses the noise-free truth, which reproduces Table II).
+
+use kalibra_linalg::{
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, PsdMatrix, SMatrix,
+    SVector, check_finite,
+};
+use kalibra_models::{Dynamics, Measurement, ModelError};
+use rayon::prelude::*;
+
+use crate::SimError;
+
+/// Errors of the tuning helpers.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TuningError {
+    /// A parameter outside its domain.
+    #[error("invalid parameter {name} = {value}")]
+    InvalidParameter {
+        /// Which parameter.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// Too few steps to average over.
+    #[error("{what} needs at least {needed} steps, got {got}")]
+    TooShort {
+        /// What was computed.
+        what: &'static str,
+        /// Steps needed.
+        needed: usize,
+        /// Steps given.
+        got: usize,
+    },
+    /// A matrix failed its check (for `P_ad`: the averaged information matrix is singular, so
+    /// the state is not observable along the trajectory).
+    #[error(transparent)]
+    Linalg(#[from] LinalgError),
+    /// A model failed.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+}
+
+/// The grid `from, from + step, ...` up to and including `to` (within `step / 1000`), each
+/// point computed as `from + i step` so that rounding does not accumulate.
+///
+/// ```
+/// let g = kalibra_sim::grid(-2.0, 1.0, 0.5).unwrap();
+/// assert_eq!(g, vec![-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0]);
+/// ```
+///
+/// # Errors
+/// [`TuningError::InvalidParameter`] unless `step > 0`, `to >= from` and all are finite.
+pub fn grid(from: f64, to: f64, step: f64) -> Result<Vec<f64>, TuningError> {
+    if !(step.is_finite() && step > 0.0) {
+        return Err(TuningError::InvalidParameter {
+            name: "grid step",
+            value: step,
+        });
+    }
+    if !(from.is_finite() && to.is_finite() && to >= from) {
+        return Err(TuningError::InvalidParameter {
+            name: "grid end",
+            value: to,
+        });
+    }
+    let n = ((to - from) / step + 1e-3).floor() as usize;
+    Ok((0..=n).map(|i| from + i as f64 * step).collect())
+}
+
+/// Evaluates `point(p)` at every `p` of `grid`, in parallel over grid points, and returns the
+/// results in grid order. Each point is independent (a deterministic filter run per `Q`), so
+/// the results do not depend on `threads` (0: rayon's global pool). The error of the first
+/// failing point in grid order is returned, as `SimError::Run { run: index, .. }`.
+///
+/// ```
+/// let squares = kalibra_sim::sweep(&[1.0, 2.0, 3.0], 2, |p| Ok::<_, std::fmt::Error>(p * p))?;
+/// assert_eq!(squares, vec![1.0, 4.0, 9.0]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// # Errors
+/// [`SimError::Run`] for a failing point; [`SimError::ThreadPool`] if the pool cannot be built.
+pub fn sweep<T, E, F>(grid: &[f64], threads: usize, point: F) -> Result<Vec<T>, SimError<E>>
+where
+    T: Send,
+    E: std::error::Error + Send + 'static,
+    F: Fn(f64) -> Result<T, E> + Sync + Send,
+{
+    let work = || {
+        grid.par_iter()
+            .enumerate()
+            .map(|(run, &p)| point(p).map_err(|source| SimError::Run { run, source }))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .collect()
+    };
+    if threads == 0 {
+        work()
+    } else {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| SimError::ThreadPool {
+                threads,
+                message: e.to_string(),
+            })?
+            .install(work)
+    }
+}
+
+/// Two-point differencing (Bar-Shalom, Li, Kirubarajan 2001, p. 247): from two position
+/// measurements `z1`, `z2` (`D` axes) taken `t` apart with noise covariances `r1`, `r2`, the
+/// state `[position = z2, velocity = (z2 - z1) / t]` and its exact covariance
+/// `J blockdiag(r1, r2) J^T`. `position[i]` and `velocity[i]` are the state indices of axis
+/// `i`; other states (if `N > 2 D`) get zero mean and zero covariance.
+///
+/// ```
+/// use kalibra_linalg::{Matrix1, Vector1};
+/// let (x, p) = kalibra_sim::two_point_init::<2, 1>(
+///     &Vector1::new(10.0), &Vector1::new(14.0), &Matrix1::new(1.0), &Matrix1::new(1.0), 2.0, [0], [1])?;
+/// assert_eq!(x, kalibra_linalg::Vector2::new(14.0, 2.0));
+/// // var(v) = (r1 + r2) / t^2, cov(x, v) = r2 / t.
+/// assert_eq!(p, kalibra_linalg::Matrix2::new(1.0, 0.5, 0.5, 0.5));
+/// # Ok::<(), kalibra_sim::TuningError>(())
+/// ```
+///
+/// # Errors
+/// [`TuningError::InvalidParameter`] for `t <= 0`, an index out of range or used twice;
+/// [`TuningError::Linalg`] for non-finite measurements or a noise covariance that is not
+/// symmetric positive semi-definite.
+pub fn two_point_init<const N: usize, const D: usize>(
+    z1: &SVector<f64, D>,
+    z2: &SVector<f64, D>,
+    r1: &SMatrix<f64, D, D>,
+    r2: &SMatrix<f64, D, D>,
+    t: f64,
+    position: [usize; D],
+    velocity: [usize; D],
+) -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), TuningError> {
+    if !(t.is_finite() && t > 0.0) {
+        return Err(TuningError::InvalidParameter {
+            name: "differencing interval t",
+            value: t,
+        });
+    }
+    let mut used = [false; N];
+    for &i in position.iter().chain(&velocity) {
+        if i >= N || used[i] {
+            return Err(TuningError::InvalidParameter {
+                name: "state index",
+                value: i as f64,
+            });
+        }
+        used[i] = true;
+    }
+    check_finite(z1, "first measurement")?;
+    check_finite(z2, "second measurement")?;
+    PsdMatrix::named(*r1, "first measurement noise")?;
+    PsdMatrix::named(*r2, "second measurement noise")?;
+    let mut x = SVector::<f64, N>::zeros();
+    // J maps [z1; z2] (2 D) to the state (N).
+    let mut j = OMatrix::<f64, kalibra_linalg::Dyn, kalibra_linalg::Dyn>::zeros(N, 2 * D);
+    for a in 0..D {
+        x[position[a]] = z2[a];
+        x[velocity[a]] = (z2[a] - z1[a]) / t;
+        j[(position[a], D + a)] = 1.0;
+        j[(velocity[a], a)] = -1.0 / t;
+        j[(velocity[a], D + a)] = 1.0 / t;
+    }
+    let mut r = OMatrix::<f64, kalibra_linalg::Dyn, kalibra_linalg::Dyn>::zeros(2 * D, 2 * D);
+    r.view_mut((0, 0), (D, D)).copy_from(r1);
+    r.view_mut((D, D), (D, D)).copy_from(r2);
+    let p = &j * r * j.transpose();
+    let mut out = SMatrix::<f64, N, N>::zeros();
+    out.copy_from(&p);
+    kalibra_linalg::symmetrize(&mut out);
+    Ok((x, out))
+}
+
+/// `P_ad` of paper 003, eq 22: `[(1/n) sum_{k=1..n} F_{k-1}^T H_k^T R_k^-1 H_k F_{k-1}]^-1`,
+/// with `F_{k-1}` the dynamics Jacobian at `states[k-1]` (step `first_step + k - 1`) and
+/// `H_k`, `R_k` the measurement Jacobian and noise at `states[k]`; `n = states.len() - 1`.
+///
+/// # Errors
+/// [`TuningError::TooShort`] for fewer than two states; [`TuningError::Linalg`] if an `R_k` is
+/// not positive definite or the averaged information matrix is singular (the state is not
+/// observable in one step along the trajectory), or an input is not finite.
+pub fn p_ad<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
+    dynamics: &D,
+    measurement: &H,
+    states: &[OVector<f64, N>],
+    first_step: usize,
+) -> Result<OMatrix<f64, N, N>, TuningError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    if states.len() < 2 {
+        return Err(TuningError::TooShort {
+            what: "P_ad",
+            needed: 2,
+            got: states.len(),
+        });
+    }
+    let n = dynamics.state_dim();
+    let mut info = OMatrix::<f64, N, N>::zeros_generic(n, n);
+    for (i, pair) in states.windows(2).enumerate() {
+        let k = first_step + i + 1;
+        let f = dynamics.jacobian(k - 1, &pair[0]);
+        let h = measurement.jacobian(k, &pair[1]);
+        let r = Covariance::named(
+            measurement.noise_cov(k, &pair[1]),
+            "measurement noise covariance R",
+        )?;
+        let hf = h * f;
+        // (H F)^T R^-1 (H F) through one solve with the factor of R.
+        info += hf.transpose() * r.solve(&hf)?;
+    }
+    info /= (states.len() - 1) as f64;
+    kalibra_linalg::symmetrize(&mut info);
+    let info = Covariance::named(info, "averaged information matrix of P_ad")?;
+    Ok(info.inverse())
+}
+
+/// `Q_ad` of paper 003, eq 23: `(1/n) sum_{k=1..n} [Q_guess - (P+_k - P-_k)]` over the
+/// `(P-_k, P+_k)` pairs of a filter run with `Q = Q_guess` (paper 003 starts it from
+/// `P_ad`). The result is symmetrised; it need not be positive semi-definite, and is not
+/// checked (a paper's value is reported as computed).
+///
+/// # Errors
+/// [`TuningError::TooShort`] for no pairs; [`TuningError::Linalg`] for sizes that differ from
+/// `q_guess` or non-finite entries.
+pub fn q_ad<'a, N: Dim>(
+    q_guess: &OMatrix<f64, N, N>,
+    steps: impl IntoIterator<Item = (&'a OMatrix<f64, N, N>, &'a OMatrix<f64, N, N>)>,
+) -> Result<OMatrix<f64, N, N>, TuningError>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let mut sum = q_guess.clone() * 0.0;
+    let mut count = 0usize;
+    for (prior, posterior) in steps {
+        kalibra_linalg::check_dim(q_guess.nrows(), prior.nrows(), "prior covariance")?;
+        kalibra_linalg::check_dim(q_guess.nrows(), posterior.nrows(), "posterior covariance")?;
+        sum += prior - posterior;
+        count += 1;
+    }
+    if count == 0 {
+        return Err(TuningError::TooShort {
+            what: "Q_ad",
+            needed: 1,
+            got: 0,
+        });
+    }
+    let mut q = q_guess + sum / count as f64;
+    kalibra_linalg::symmetrize(&mut q);
+    check_finite(&q, "Q_ad")?;
+    Ok(q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector2, Vector4};
+    use kalibra_models::{Kinematic, LinearObservation, ProcessNoise};
+
+    #[test]
+    fn grid_hits_both_ends_without_drift() {
+        let g = grid(-13.0, 6.0, 0.01).unwrap();
+        assert_eq!(g.len(), 1901);
+        assert_eq!(g[0], -13.0);
+        assert!((g[1900] - 6.0).abs() < 1e-12);
+        assert!(grid(0.0, 1.0, 0.0).is_err());
+        assert!(grid(1.0, 0.0, 0.1).is_err());
+    }
+
+    #[test]
+    fn sweep_is_ordered_and_reports_the_first_failure() {
+        let g: Vec<f64> = (0..100).map(f64::from).collect();
+        let out = sweep(&g, 2, Ok::<_, std::fmt::Error>).unwrap();
+        assert_eq!(out, g);
+        let err = sweep(&g, 2, |p| {
+            if p >= 40.0 {
+                Err(std::fmt::Error)
+            } else {
+                Ok(p)
+            }
+        })
+        .unwrap_err();
+        assert!(matches!(err, SimError::Run { run: 40, .. }));
+    }
+
+    #[test]
+    fn two_point_covariance_matches_the_textbook_blocks() {
+        // Interleaved [x, vx, y, vy], full 2x2 R: the x-y cross terms follow R's off-diagonal.
+        let r = Matrix2::new(4.0, 1.0, 1.0, 9.0);
+        let (x, p) = two_point_init::<4, 2>(
+            &Vector2::new(0.0, 10.0),
+            &Vector2::new(2.0, 16.0),
+            &r,
+            &r,
+            2.0,
+            [0, 2],
+            [1, 3],
+        )
+        .unwrap();
+        assert_eq!(x, Vector4::new(2.0, 1.0, 16.0, 3.0));
+        let t = 2.0;
+        let expect = |a: usize, b: usize| {
+            Matrix2::new(
+                r[(a, b)],
+                r[(a, b)] / t,
+                r[(a, b)] / t,
+                2.0 * r[(a, b)] / (t * t),
+            )
+        };
+        for (a, b) in [(0, 0), (0, 1), (1, 1)] {
+            let block = p.fixed_view::<2, 2>(2 * a, 2 * b).into_owned();
+            assert!(
+                (block - expect(a, b)).abs().max() < 1e-12,
+                "{a}{b}: {block}"
+            );
+        }
+        assert!(two_point_init::<4, 2>(&x.xy(), &x.xy(), &r, &r, 2.0, [0, 0], [1, 3]).is_err());
+        assert!(two_point_init::<4, 2>(&x.xy(), &x.xy(), &r, &r, 0.0, [0, 2], [1, 3]).is_err());
+    }
+
+    #[test]
+    fn p_ad_is_the_inverse_averaged_information_and_rejects_unobservable_steps() {
+        let cv = Kinematic::constant_velocity(2, 1.0)
+            .unwrap()
+            .noise(ProcessNoise::Discrete { q: 1.0 });
+        let f = cv.dynamics(U4).unwrap();
+        let states = vec![Vector4::zeros(); 4];
+        // Positions only: one step's information (H F)^T R^-1 (H F) has rank 2 of 4.
+        let h = cv
+            .position_measurement(U4, U2, Matrix2::identity() * 4.0)
+            .unwrap();
+        assert!(matches!(
+            p_ad(&f, &h, &states, 0),
+            Err(TuningError::Linalg(LinalgError::NotPositiveDefinite { .. }))
+        ));
+        // Full state with R = 2 I: P_ad = 2 (F^T F)^-1.
+        let full = LinearObservation::new(Matrix4::identity(), Matrix4::identity() * 2.0).unwrap();
+        let p = p_ad(&f, &full, &states, 0).unwrap();
+        let fm = cv.transition_matrix(U4).unwrap();
+        let expect = (fm.transpose() * fm).try_inverse().unwrap() * 2.0;
+        assert!((p - expect).abs().max() < 1e-12, "{p} vs {expect}");
+        assert!(p_ad(&f, &full, &states[..1], 0).is_err());
+    }
+
+    #[test]
+    fn q_ad_averages_the_covariance_drop() {
+        let q = Matrix2::identity();
+        let pairs = [
+            (Matrix2::identity() * 3.0, Matrix2::identity()),
+            (Matrix2::identity() * 5.0, Matrix2::identity()),
+        ];
+        let out = q_ad(&q, pairs.iter().map(|(a, b)| (a, b))).unwrap();
+        assert_eq!(out, Matrix2::identity() * 4.0);
+        assert!(q_ad(&q, std::iter::empty()).is_err());
+    }
+}
