@@ -7,10 +7,11 @@
 //! | module | crate | job |
 //! |---|---|---|
 //! | [`linalg`] | `kalibra-linalg` | dimension-generic matrices, checked covariances, filter kernels |
-//! | [`models`] | `kalibra-models` | dynamics and measurement traits, CV/CA and bearing models, truth simulation |
+//! | [`models`] | `kalibra-models` | dynamics and measurement traits, CV/CA, ballistic and bearing models, truth simulation |
 //! | [`filters`] | `kalibra-filters` | the `Filter` trait, KF and EKF, step records |
-//! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, RMSE accumulators |
-//! | [`sim`] | `kalibra-sim` | seeded parallel Monte Carlo, identical for any thread count |
+//! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, RMSE accumulators, J1/J2/nq, ITSE |
+//! | [`bounds`] | `kalibra-bounds` | posterior Cramér-Rao bound, observability along a trajectory |
+//! | [`sim`] | `kalibra-sim` | seeded parallel Monte Carlo, identical for any thread count; Q sweeps, initial tuning |
 //! | [`papers`] | `kalibra-papers` | the reproduced studies, `run(config) -> Report` |
 //!
 //! # Example
@@ -29,6 +30,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub use kalibra_bounds as bounds;
 pub use kalibra_filters as filters;
 pub use kalibra_linalg as linalg;
 pub use kalibra_metrics as metrics;

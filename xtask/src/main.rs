@@ -12,6 +12,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
+mod plot;
 mod reproduce;
 
 use anyhow::{Result, bail};

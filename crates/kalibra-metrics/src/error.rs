@@ -33,6 +33,35 @@ pub enum MetricsError {
         /// The size given.
         found: usize,
     },
+    /// A matrix to be solved with is singular to working precision (for example `A_k + B_k`
+    /// of an update whose prior covariance is indefinite and happens to be singular).
+    #[error("{what} is singular to working precision")]
+    Singular {
+        /// Which matrix.
+        what: &'static str,
+    },
+    /// A summary was asked of an accumulator that holds nothing.
+    #[error("no {what} to summarise")]
+    Empty {
+        /// What is missing (for example `"filter updates"`).
+        what: &'static str,
+    },
+    /// A horizon average was asked with a divisor below the number of updates pushed.
+    #[error("divisor {divisor} is below the {updates} updates pushed")]
+    DivisorBelowUpdates {
+        /// The divisor given.
+        divisor: usize,
+        /// The number of updates pushed.
+        updates: usize,
+    },
+    /// A point of a parameter sweep cannot be used (non-finite, or out of sweep order).
+    #[error("sweep point {index} {reason}")]
+    InvalidSweep {
+        /// Index of the offending point.
+        index: usize,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
     /// A covariance failed its check (not positive definite, not finite).
     #[error(transparent)]
     Linalg(#[from] LinalgError),

@@ -10,6 +10,11 @@
 //!   per-step scalar) and [`SquaredErrors`] (RMSE per step, per component, for groups such as
 //!   position and velocity, and over time). They implement [`Merge`], so partial results from
 //!   parallel runs combine in a fixed order.
+//! * Innovation-covariance tuning metrics (papers 000 and 003): [`j_step`] computes `J1k`,
+//!   `J2k` and `tr(N_k)` of one update, [`JHorizon`] averages them over a horizon with the
+//!   process-noise level `nq`, and [`crossover`] finds where `J1` and `J2` cross along a sweep
+//!   of the process-noise scale.
+//! * [`itse`]: the integral of time-weighted squared error.
 //!
 //! # Notation
 //! `e_k = x_k - x+_k` the estimation error of one run at step `k`, `P+_k` the filter's
@@ -39,7 +44,11 @@
 mod accumulate;
 mod consistency;
 mod error;
+mod innovation;
+mod itse;
 
 pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
 pub use consistency::{ChiSquareBand, nees, nis};
 pub use error::MetricsError;
+pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
+pub use itse::itse;

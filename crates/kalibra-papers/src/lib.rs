@@ -13,6 +13,8 @@
 //! Every module documents the decisions its paper leaves open, and every report records its
 //! seed, run count and thread-independent results.
 
+pub mod reentry;
+pub mod saha2012;
 pub mod w1;
 
 use kalibra_filters::FilterError;
