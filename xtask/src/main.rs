@@ -12,6 +12,8 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
+mod figures;
+mod figures2014;
 mod plot;
 mod reproduce;
 

@@ -5,13 +5,17 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use kalibra_papers::w1;
+use kalibra_papers::{saha2012, saha2014, w1};
+
+/// The studies `reproduce` knows, in the order it runs them.
+const STUDIES: [&str; 3] = ["w1", "000", "003"];
 
 struct Args {
     quick: bool,
     out: PathBuf,
     seed: Option<u64>,
     threads: usize,
+    studies: Vec<String>,
 }
 
 fn parse(args: Vec<OsString>) -> Result<Args> {
@@ -21,6 +25,7 @@ fn parse(args: Vec<OsString>) -> Result<Args> {
         out: crate::workspace_root().join("target/reproduce"),
         seed: None,
         threads: 0,
+        studies: Vec::new(),
     };
     let mut parser = lexopt::Parser::from_args(args);
     while let Some(arg) = parser.next()? {
@@ -29,7 +34,13 @@ fn parse(args: Vec<OsString>) -> Result<Args> {
             Long("out") => parsed.out = parser.value()?.into(),
             Long("seed") => parsed.seed = Some(parser.value()?.parse()?),
             Long("threads") => parsed.threads = parser.value()?.parse()?,
-            Value(v) => bail!("unknown study {v:?}; available: w1"),
+            Value(v) => {
+                let v = v.string()?;
+                if !STUDIES.contains(&v.as_str()) {
+                    bail!("unknown study {v:?}; available: {}", STUDIES.join(", "));
+                }
+                parsed.studies.push(v);
+            }
             _ => return Err(arg.unexpected().into()),
         }
     }
@@ -47,58 +58,174 @@ fn git_revision() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
-pub fn main(args: Vec<OsString>) -> Result<()> {
-    let args = parse(args)?;
-    let revision = git_revision();
-    let mut config = if args.quick {
-        w1::Config::quick()
-    } else {
-        w1::Config::paper()
-    };
-    if let Some(seed) = args.seed {
-        config.seed = seed;
-    }
-    config.threads = args.threads;
-
-    eprintln!(
-        "w1: consistency study, {} runs x {} steps ...",
-        config.runs, config.steps
-    );
-    let start = Instant::now();
-    let report = w1::run(&config)?;
-    let elapsed = start.elapsed().as_secs_f64();
-    eprintln!("w1: done in {elapsed:.2} s");
-
-    let dir = args.out.join("w1");
+/// Writes one study's `results.json` (with the provenance every study records) and
+/// `report.md`, and its figures, under `out/<name>`.
+fn write_study(
+    out: &std::path::Path,
+    name: &str,
+    provenance: serde_json::Value,
+    results: serde_json::Value,
+    markdown: &str,
+    figures: &[(String, String)],
+) -> Result<()> {
+    let dir = out.join(name);
     std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
-    let json = serde_json::json!({
-        "study": "w1",
-        "git_revision": revision,
-        "seed": config.seed,
-        "threads": config.threads,
-        "parameters": config,
-        "results": report,
-    });
+    let mut json = provenance;
+    json["results"] = results;
     std::fs::write(
         dir.join("results.json"),
         serde_json::to_string_pretty(&json)?,
     )?;
-    std::fs::write(dir.join("report.md"), report.to_markdown())?;
+    std::fs::write(dir.join("report.md"), markdown)?;
+    for (file, svg) in figures {
+        std::fs::write(dir.join(file), svg)?;
+    }
+    Ok(())
+}
+
+pub fn main(args: Vec<OsString>) -> Result<()> {
+    let args = parse(args)?;
+    let revision = git_revision();
+    let wanted = |name: &str| args.studies.is_empty() || args.studies.iter().any(|s| s == name);
+    let size = if args.quick { "quick" } else { "full" };
+    let provenance = |study: &str, seed: Option<u64>, parameters: serde_json::Value| {
+        serde_json::json!({
+            "study": study,
+            "git_revision": revision,
+            "size": size,
+            "seed": seed,
+            "threads": args.threads,
+            "parameters": parameters,
+        })
+    };
+    let mut rows = Vec::new();
+    let total = Instant::now();
+
+    if wanted("w1") {
+        let mut config = if args.quick {
+            w1::Config::quick()
+        } else {
+            w1::Config::paper()
+        };
+        if let Some(seed) = args.seed {
+            config.seed = seed;
+        }
+        config.threads = args.threads;
+        eprintln!(
+            "w1: consistency study, {} runs x {} steps ...",
+            config.runs, config.steps
+        );
+        let start = Instant::now();
+        let report = w1::run(&config)?;
+        eprintln!("w1: done in {:.2} s", start.elapsed().as_secs_f64());
+        write_study(
+            &args.out,
+            "w1",
+            provenance("w1", Some(config.seed), serde_json::to_value(config)?),
+            serde_json::to_value(&report)?,
+            &report.to_markdown(),
+            &[],
+        )?;
+        rows.push(format!(
+            "| W1 consistency | ANEES {:.3} ({:.1}% of steps in 95% band), NIS/2 {:.3} ({:.1}% in band) | [w1/report.md](w1/report.md) |",
+            report.anees_time_average,
+            100.0 * report.anees_inside,
+            report.anis_time_average,
+            100.0 * report.anis_inside,
+        ));
+    }
+
+    if wanted("000") {
+        let mut config = if args.quick {
+            saha2012::Config::quick()
+        } else {
+            saha2012::Config::paper()
+        };
+        config.threads = args.threads;
+        eprintln!("000: J1/J2 sweeps of the KF and EKF (4 readings) ...");
+        let start = Instant::now();
+        let report = saha2012::run(&config)?;
+        eprintln!("000: done in {:.2} s", start.elapsed().as_secs_f64());
+        write_study(
+            &args.out,
+            "000",
+            provenance("000", None, serde_json::to_value(config)?),
+            serde_json::to_value(&report)?,
+            &report.to_markdown(),
+            &crate::figures::saha2012(&report),
+        )?;
+        let paper = report
+            .reading("paper")
+            .context("paper 000 has a 'paper' reading")?;
+        let cross = |c: Option<kalibra_papers::reentry::CrossoverRow>| {
+            c.map_or("none".to_string(), |c| format!("{:.2}", c.nq))
+        };
+        rows.push(format!(
+            "| 000 Table I (J1/J2, KF and EKF) | largest gap {:.3} over 76 entries (paper reading); crossover nq KF {}, EKF {} (claimed 0.21..1.21) | [000/report.md](000/report.md) |",
+            paper.max_abs_gap,
+            cross(paper.crossover.kf),
+            cross(paper.crossover.ekf),
+        ));
+    }
+
+    if wanted("003") {
+        let mut config = if args.quick {
+            saha2014::Config::quick()
+        } else {
+            saha2014::Config::paper()
+        };
+        if let Some(seed) = args.seed {
+            config.seed = seed;
+        }
+        config.threads = args.threads;
+        eprintln!(
+            "003: J1/J2 sweep, P_ad, Q_ad, Monte Carlo {} runs x 5 settings, CRLB ...",
+            config.runs
+        );
+        let start = Instant::now();
+        let report = saha2014::run(&config)?;
+        eprintln!("003: done in {:.2} s", start.elapsed().as_secs_f64());
+        write_study(
+            &args.out,
+            "003",
+            provenance("003", Some(config.seed), serde_json::to_value(config)?),
+            serde_json::to_value(&report)?,
+            &report.to_markdown(),
+            &crate::figures2014::saha2014(&report),
+        )?;
+        let paper = &report.readings[0];
+        let fmt = |e: Option<kalibra_papers::saha2012::Entry>| {
+            e.map_or("none".to_string(), |e| {
+                format!("{:.3} ({:.2})", e.ours, e.paper)
+            })
+        };
+        rows.push(format!(
+            "| 003 J1/J2 of the EKF | J1max {:.3} ({:.2}), J2max {:.3} ({:.2}), crossover nq {}, J {} (ours (paper)) | [003/report.md](003/report.md) |",
+            paper.j1max.ours,
+            paper.j1max.paper,
+            paper.j2max.ours,
+            paper.j2max.paper,
+            fmt(paper.crossover_nq),
+            fmt(paper.crossover_j),
+        ));
+    }
 
     let index = format!(
-        "# kalibra reproduction report\n\nRevision `{revision}`, seed {}, {} size.\n\n\
-         | study | summary | report |\n|---|---|---|\n\
-         | W1 consistency | ANEES {:.3} ({:.1}% of steps in 95% band), NIS/2 {:.3} ({:.1}% in band) | [w1/report.md](w1/report.md) |\n\n\
-         The paper studies (000-004) join this table as their issues land.\n",
-        config.seed,
-        if args.quick { "quick" } else { "full" },
-        report.anees_time_average,
-        100.0 * report.anees_inside,
-        report.anis_time_average,
-        100.0 * report.anis_inside,
+        "# kalibra reproduction report\n\nRevision `{revision}`, {size} size, seed {}, threads {}.\n\n\
+         | study | summary | report |\n|---|---|---|\n{}\n\n\
+         Papers 001, 002 and 004 join this table as their issues land.\n",
+        args.seed
+            .map_or("default per study".to_string(), |s| s.to_string()),
+        args.threads,
+        rows.join("\n"),
     );
+    std::fs::create_dir_all(&args.out)?;
     std::fs::write(args.out.join("index.md"), &index)?;
-    println!("{}", report.to_markdown());
-    println!("wrote {}", args.out.join("index.md").display());
+    println!("{index}");
+    println!(
+        "wrote {} in {:.2} s",
+        args.out.join("index.md").display(),
+        total.elapsed().as_secs_f64()
+    );
     Ok(())
 }

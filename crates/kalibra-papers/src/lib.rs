@@ -15,6 +15,7 @@
 
 pub mod reentry;
 pub mod saha2012;
+pub mod saha2014;
 pub mod w1;
 
 use kalibra_filters::FilterError;

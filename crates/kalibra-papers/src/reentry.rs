@@ -12,7 +12,7 @@
 //! point).
 
 use kalibra_filters::StepRecord;
-use kalibra_linalg::{Alloc, DefaultAllocator, Dim, Matrix4, Vector4, propagate};
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, Matrix4, Vector4, propagate, symmetrize};
 use kalibra_metrics::{JStep, MetricsError, j_step};
 use kalibra_models::{Ballistic, Dynamics, ModelError};
 use serde::Serialize;
@@ -75,8 +75,14 @@ pub fn j_of<N: Dim, M: Dim>(rec: &StepRecord<N, M>) -> Result<JStep, MetricsErro
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    let c = propagate(rec.h(), &rec.posterior().cov);
-    j_step(&rec.a(), &rec.b(), rec.r(), &c)
+    // The projections are symmetric in exact arithmetic; with 003's radar rows (scales from
+    // 1 to 1e-9) rounding leaves relative asymmetries near 1e-8, which j_step would reject.
+    let (mut a, mut b) = (rec.a(), rec.b());
+    let mut c = propagate(rec.h(), &rec.posterior().cov);
+    symmetrize(&mut a);
+    symmetrize(&mut b);
+    symmetrize(&mut c);
+    j_step(&a, &b, rec.r(), &c)
 }
 
 /// One point of a `Q = 10^p Q_nom` sweep, serialised in `results.json`.

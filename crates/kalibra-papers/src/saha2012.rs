@@ -353,7 +353,7 @@ pub struct Entry {
 }
 
 impl Entry {
-    fn new(paper: f64, ours: f64) -> Self {
+    pub(crate) fn new(paper: f64, ours: f64) -> Self {
         Self {
             paper,
             ours,
@@ -497,6 +497,421 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
     })
 }
 
+/// Largest `|gap|` between our J values and Table I's that counts as a reproduction (the
+/// table prints two decimals).
+pub const TABLE_TOLERANCE: f64 = 0.02;
+
+/// The measurement dimension `m`: every `J1k` and `J2k` lies in `[0, m]` for valid covariances.
+const M: f64 = 2.0;
+
+/// The four J entries of a Table I row with their column names.
+fn j_entries(row: &TableRow) -> [(&'static str, Entry); 4] {
+    [
+        ("KF J1", row.j1_kf),
+        ("KF J2", row.j2_kf),
+        ("EKF J1", row.j1_ekf),
+        ("EKF J2", row.j2_ekf),
+    ]
+}
+
+/// The row and column of the largest `|gap|` of a table.
+fn largest_gap(table: &[TableRow]) -> Option<(&TableRow, &'static str, Entry)> {
+    table
+        .iter()
+        .flat_map(|row| j_entries(row).map(|(name, e)| (row, name, e)))
+        .max_by(|a, b| a.2.gap.abs().total_cmp(&b.2.gap.abs()))
+}
+
+/// The index of Table I's J2 spike: the row with the largest printed KF J2.
+fn spike_row() -> usize {
+    TABLE_I
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.3.total_cmp(&b.1.3))
+        .map_or(0, |(i, _)| i)
+}
+
+/// Text safe inside a Markdown table cell.
+fn cell(text: &str) -> String {
+    text.replace('|', "\\|")
+}
+
+/// Minimum, mean and maximum of `values` (`None` when empty).
+fn min_mean_max(values: impl Iterator<Item = f64>) -> Option<(f64, f64, f64)> {
+    let (mut lo, mut hi, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
+    for v in values {
+        lo = lo.min(v);
+        hi = hi.max(v);
+        sum += v;
+        n += 1;
+    }
+    (n > 0).then(|| (lo, sum / n as f64, hi))
+}
+
+impl Report {
+    /// The report as Markdown: set-up and readings, Table I of the `paper` reading beside the
+    /// printed one, the largest gap of every reading, the crossover against the paper's claim,
+    /// the J2 spike, the `nq` offset, the `results.json` keys and links to the figures
+    /// (`j1j2_kf.svg`, `j1j2_ekf.svg`, `j1j2_readings.svg`, to be written beside the report).
+    ///
+    /// Every number shown comes from the report or from the published constants of this
+    /// module ([`TABLE_I`], [`CROSSOVER_NQ_RANGE`], the printed matrices).
+    pub fn to_markdown(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let reproduces = |r: &ReadingReport| r.max_abs_gap <= TABLE_TOLERANCE;
+        let paper = self.reading(READINGS[0].name);
+
+        // Title and set-up.
+        let _ = writeln!(
+            s,
+            "# Paper 000: J1/J2 for a KF and an EKF (Saha, Goswami, Ghosh 2012)\n"
+        );
+        let _ = writeln!(
+            s,
+            "**Truth**: the ballistic re-entry of Farina, Ristic and Benvenuti (2002), T = {} s, \
+             beta = {} kg m^-1 s^-2, g = {} m/s^2, noise-free until ground impact: {} position \
+             measurements y_1 .. y_{} (H = [[1,0,0,0],[0,0,1,0]]), also noise-free. \
+             **Filters**: a linear KF on the drag-free model and an EKF on the drag model, both \
+             from the printed x0, P0, R and Q_nom with a Joseph update, in the paper's arithmetic \
+             (which carries on through the indefinite printed P0). \
+             **Sweep**: Q = 10^p Q_nom at the 19 values of p of Table I, and on a fine grid \
+             p = -13 .. 6 step {} for the crossover and the figures. J1 and J2 are horizon \
+             averages of J1k = tr(S_k^-1 R) and J2k = tr((A_k + B_k)^-1 B_k); \
+             nq = mean of log10 tr(B_k) over the updates.\n",
+            reentry::T,
+            reentry::BETA,
+            reentry::G,
+            self.horizon,
+            self.horizon,
+            self.config.fine_step
+        );
+
+        // Readings.
+        let _ = writeln!(s, "## Readings\n");
+        let _ = writeln!(
+            s,
+            "The paper leaves open, or prints inconsistently, where the filter starts, the \
+             horizon divisor, R and P0. Each reading fixes them; a reading reproduces Table I \
+             when every J entry is within {TABLE_TOLERANCE} of the printed value.\n"
+        );
+        let _ = writeln!(s, "| reading | description | reproduces Table I |");
+        let _ = writeln!(s, "|---|---|---|");
+        for r in &self.readings {
+            let _ = writeln!(
+                s,
+                "| `{}` | {} | {} |",
+                cell(r.reading.name),
+                cell(r.reading.description),
+                if reproduces(r) { "yes" } else { "no" }
+            );
+        }
+        let winners: Vec<String> = self
+            .readings
+            .iter()
+            .filter(|r| reproduces(r))
+            .map(|r| format!("`{}`", r.reading.name))
+            .collect();
+        let _ = writeln!(
+            s,
+            "\nReading(s) that reproduce Table I: {}.\n",
+            if winners.is_empty() {
+                "none".to_string()
+            } else {
+                winners.join(", ")
+            }
+        );
+
+        // Table I of the paper reading.
+        if let Some(r) = paper {
+            let _ = writeln!(s, "## Table I (reading `{}`)\n", r.reading.name);
+            let _ = writeln!(
+                s,
+                "The printed p column skips -2: the rows printed -1 .. 6 are p = -2 .. 5. \
+                 Paper values as printed (2 decimals), ours to 3 decimals, gap = ours - paper.\n"
+            );
+            let _ = writeln!(
+                s,
+                "| p (printed) | p (run) | nq paper / ours \
+                 | KF J1 paper | KF J1 ours | KF J1 gap | KF J2 paper | KF J2 ours | KF J2 gap \
+                 | EKF J1 paper | EKF J1 ours | EKF J1 gap | EKF J2 paper | EKF J2 ours | EKF J2 gap |"
+            );
+            let _ = writeln!(s, "|---|---|---{}|", "|---".repeat(12));
+            for row in &r.table {
+                let _ = write!(
+                    s,
+                    "| {:.0} | {:.0} | {:.2} / {:.3} |",
+                    row.p_printed, row.p, row.nq.paper, row.nq.ours
+                );
+                for (_, e) in j_entries(row) {
+                    let _ = write!(s, " {:.2} | {:.3} | {:+.3} |", e.paper, e.ours, e.gap);
+                }
+                let _ = writeln!(s);
+            }
+            let _ = write!(
+                s,
+                "\nlargest |gap| = {:.3} (tolerance {TABLE_TOLERANCE}): {}",
+                r.max_abs_gap,
+                if reproduces(r) {
+                    "reproduced"
+                } else {
+                    "not reproduced"
+                }
+            );
+            if let Some((row, name, _)) = largest_gap(&r.table) {
+                let _ = write!(
+                    s,
+                    " (at {name}, p = {:.0}, printed {:.0})",
+                    row.p, row.p_printed
+                );
+            }
+            let _ = writeln!(s, ".\n");
+        }
+
+        // The gap of every reading.
+        let _ = writeln!(s, "## Largest gap per reading\n");
+        let _ = writeln!(
+            s,
+            "| reading | largest \\|gap\\| | where | within {TABLE_TOLERANCE} |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|");
+        for r in &self.readings {
+            let place = largest_gap(&r.table).map_or_else(
+                || "-".to_string(),
+                |(row, name, e)| {
+                    format!(
+                        "{name} at p = {:.0} (printed {:.0}): {:.3} vs {:.2}",
+                        row.p, row.p_printed, e.ours, e.paper
+                    )
+                },
+            );
+            let _ = writeln!(
+                s,
+                "| `{}` | {:.3} | {} | {} |",
+                cell(r.reading.name),
+                r.max_abs_gap,
+                place,
+                if reproduces(r) { "yes" } else { "no" }
+            );
+        }
+        let _ = writeln!(s);
+
+        // Crossover.
+        let (lo, hi) = CROSSOVER_NQ_RANGE;
+        let _ = writeln!(s, "## Crossover\n");
+        let _ = writeln!(
+            s,
+            "The paper: at Q_comp the plots of J1 and J2 cross, at an nq between {lo} and {hi} \
+             for both the KF and the EKF. Ours: the first sign change of J1 - J2 on the fine \
+             grid, interpolated linearly in nq; p gives Q_comp = 10^p Q_nom.\n"
+        );
+        let _ = writeln!(
+            s,
+            "| reading | filter | nq | J1 = J2 | p | paper's nq range | verdict |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+        for r in &self.readings {
+            for (filter, c) in [("KF", &r.crossover.kf), ("EKF", &r.crossover.ekf)] {
+                let _ = match c {
+                    Some(c) => writeln!(
+                        s,
+                        "| `{}` | {filter} | {:.3} | {:.3} | {:.3} | {lo} .. {hi} | {} |",
+                        cell(r.reading.name),
+                        c.nq,
+                        c.j,
+                        c.p,
+                        if (lo..=hi).contains(&c.nq) {
+                            "inside"
+                        } else {
+                            "outside"
+                        }
+                    ),
+                    None => writeln!(
+                        s,
+                        "| `{}` | {filter} | none | - | - | {lo} .. {hi} | no crossover |",
+                        cell(r.reading.name)
+                    ),
+                };
+            }
+        }
+        let _ = writeln!(s);
+
+        // The J2 spike.
+        let i = spike_row();
+        let (pp, nq_spike, _, j2k_paper, _, j2e_paper) = TABLE_I[i];
+        let neighbour = |j: Option<usize>| j.and_then(|j| TABLE_I.get(j));
+        let (before, after) = (neighbour(i.checked_sub(1)), neighbour(Some(i + 1)));
+        let _ = writeln!(s, "## The J2 spike at nq = {nq_spike:.2}\n");
+        let _ = write!(
+            s,
+            "Table I prints J2 = {j2k_paper:.2} (KF) and {j2e_paper:.2} (EKF) at the row printed \
+             p = {pp:.0} (p = {:.0} in our run)",
+            table_p(i)
+        );
+        if let (Some(b), Some(a)) = (before, after) {
+            let _ = write!(
+                s,
+                ", above both neighbours ({:.2} / {:.2} one row before, {:.2} / {:.2} one row after)",
+                b.3, b.5, a.3, a.5
+            );
+        }
+        let p0 = p0_printed();
+        let det13 = p0[(0, 0)] * p0[(2, 2)] - p0[(0, 2)] * p0[(2, 0)];
+        let _ = writeln!(
+            s,
+            ". J2k = tr((A_k + B_k)^-1 B_k) stays in [0, m = {M}] when the covariances are \
+             positive semi-definite, so a J2 that rises and falls again needs an update that \
+             leaves the bound. The printed P0 provides it: it is asymmetric ((2,4) = {:.3e}, \
+             (4,2) = {:.3e}) and indefinite (the (1,3) block has determinant {det13:.3e}), so \
+             A_k = H F P F^T H^T is indefinite at the first update; where B_k = 10^p H Q_nom H^T \
+             just offsets its negative direction, A_k + B_k is nearly singular and that single \
+             J2k is far above m, which lifts the horizon average at this one row. \
+             Symmetrising P0 keeps it indefinite, so the spike stays; what the asymmetry adds \
+             is the difference between the readings below that differ only in P0. \
+             max J2k is the largest single-step J2k of the EKF at this p.\n",
+            p0[(1, 3)],
+            p0[(3, 1)]
+        );
+        let _ = write!(
+            s,
+            "| reading | P0 | KF J2 (paper {j2k_paper:.2}) | EKF J2 (paper {j2e_paper:.2}) |"
+        );
+        if let (Some(b), Some(a)) = (before, after) {
+            let _ = write!(
+                s,
+                " EKF J2 one row before / after (paper {:.2} / {:.2}) |",
+                b.5, a.5
+            );
+        }
+        let _ = writeln!(s, " max J2k EKF | above m |");
+        let columns = if before.is_some() && after.is_some() {
+            7
+        } else {
+            6
+        };
+        let _ = writeln!(s, "|{}", "---|".repeat(columns));
+        for r in &self.readings {
+            let Some(row) = r.table.get(i) else { continue };
+            let _ = write!(
+                s,
+                "| `{}` | {} | {:.3} | {:.3} |",
+                cell(r.reading.name),
+                match r.reading.p0 {
+                    P0Use::AsPrinted => "as printed",
+                    P0Use::Symmetrised => "symmetrised",
+                },
+                row.j2_kf.ours,
+                row.j2_ekf.ours
+            );
+            if before.is_some() && after.is_some() {
+                let ekf = |j: usize| r.table.get(j).map(|t| t.j2_ekf.ours);
+                match (ekf(i - 1), ekf(i + 1)) {
+                    (Some(b), Some(a)) => {
+                        let _ = write!(s, " {b:.3} / {a:.3} |");
+                    }
+                    _ => s.push_str(" - |"),
+                }
+            }
+            let _ = writeln!(
+                s,
+                " {:.3} | {} |",
+                row.max_j2k_ekf,
+                if row.max_j2k_ekf > M { "yes" } else { "no" }
+            );
+        }
+        let _ = writeln!(s);
+        // Readings that differ only in how P0 is used: what the asymmetry adds.
+        for printed in self
+            .readings
+            .iter()
+            .filter(|r| r.reading.p0 == P0Use::AsPrinted)
+        {
+            let twin = self.readings.iter().find(|r| {
+                r.reading.p0 == P0Use::Symmetrised
+                    && r.reading.first_step == printed.reading.first_step
+                    && r.reading.divide_by_horizon == printed.reading.divide_by_horizon
+                    && r.reading.r_scale == printed.reading.r_scale
+            });
+            if let (Some(twin), Some(a), Some(b)) = (
+                twin,
+                printed.table.get(i),
+                twin.and_then(|t| t.table.get(i)),
+            ) {
+                let _ = writeln!(
+                    s,
+                    "P0 as printed (`{}`) vs symmetrised (`{}`) at this row: EKF J2 {:.3} vs \
+                     {:.3} ({:+.3}), KF J2 {:.3} vs {:.3} ({:+.3}), max J2k {:.3} vs {:.3}.\n",
+                    printed.reading.name,
+                    twin.reading.name,
+                    a.j2_ekf.ours,
+                    b.j2_ekf.ours,
+                    b.j2_ekf.ours - a.j2_ekf.ours,
+                    a.j2_kf.ours,
+                    b.j2_kf.ours,
+                    b.j2_kf.ours - a.j2_kf.ours,
+                    a.max_j2k_ekf,
+                    b.max_j2k_ekf
+                );
+            }
+        }
+
+        // The nq offset.
+        if let Some(r) = paper {
+            let ours = min_mean_max(r.table.iter().map(|t| t.nq.ours - t.p));
+            let printed = min_mean_max(r.table.iter().map(|t| t.nq.paper - t.p));
+            if let (Some((o_lo, o_mean, o_hi)), Some((_, p_mean, _))) = (ours, printed) {
+                let b_nom = (h() * q_nom() * h().transpose()).trace();
+                let _ = writeln!(s, "## nq offset\n");
+                let _ = writeln!(
+                    s,
+                    "Ours: nq = p + {o_mean:.3} at every row of Table I (range {o_lo:.6} .. \
+                     {o_hi:.6}); B_k = 10^p H Q_nom H^T at every update, so the offset is \
+                     log10 tr(H Q_nom H^T) = {:.4}. The table prints nq = p + {p_mean:.2} (p as \
+                     run). The difference, {:+.3}, is not explained in the paper; it moves the \
+                     nq axis, not the J values.\n",
+                    b_nom.log10(),
+                    o_mean - p_mean
+                );
+            }
+        }
+
+        // results.json.
+        let _ = writeln!(s, "## results.json schema\n");
+        let _ = writeln!(
+            s,
+            "The report serialises (serde) to the `results` object of `results.json`:\n\n\
+             * `config`: `fine_step` (step of the fine p grid), `threads`.\n\
+             * `horizon`: number of measurements (the divisor N of the horizon averages).\n\
+             * `readings[]`, in the order of the Readings table, each with\n\
+             \x20 * `reading`: `name`, `description`, `first_step`, `divide_by_horizon`, \
+             `r_scale`, `p0` (`\"AsPrinted\"` or `\"Symmetrised\"`);\n\
+             \x20 * `table[]`: one object per Table I row: `p_printed`, `p`, and `nq`, `j1_kf`, \
+             `j2_kf`, `j1_ekf`, `j2_ekf`, each `{{paper, ours, gap}}` (gap = ours - paper), and \
+             `max_j2k_ekf`;\n\
+             \x20 * `max_abs_gap`: the largest |gap| over the J entries of `table`;\n\
+             \x20 * `sweep`: `KF` and `EKF`, each an array over the fine grid of \
+             `{{p, nq, j1, j2, indefinite_updates, max_j2k}}` (`indefinite_updates`: updates at \
+             which A_k + B_k was not positive definite; `max_j2k`: the largest single-step J2k);\n\
+             \x20 * `crossover`: `KF` and `EKF`, each `{{nq, j, p}}` or `null` when J1 - J2 never \
+             changes sign.\n"
+        );
+
+        // Figures.
+        let _ = writeln!(s, "## Figures\n");
+        let name = paper.map_or(READINGS[0].name, |r| r.reading.name);
+        let _ = writeln!(
+            s,
+            "J1 and J2 against nq on the fine grid (reading `{name}`, lines) with Table I's \
+             values (markers), the crossover circled and the paper's range {lo} .. {hi} dashed:\n\n\
+             ![KF: J1 and J2 against nq](j1j2_kf.svg)\n\n\
+             ![EKF: J1 and J2 against nq](j1j2_ekf.svg)\n\n\
+             The EKF's J1 and J2 under every reading:\n\n\
+             ![EKF: J1 and J2 against nq, every reading](j1j2_readings.svg)"
+        );
+        s
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -549,5 +964,32 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The Markdown report shows Table I's header and one row per printed row.
+    #[test]
+    fn markdown_has_table_i() {
+        let report = run(&Config::quick()).unwrap();
+        let md = report.to_markdown();
+        assert!(md.starts_with("# Paper 000: J1/J2 for a KF and an EKF"));
+        assert!(md.contains(
+            "| p (printed) | p (run) | nq paper / ours | KF J1 paper | KF J1 ours | KF J1 gap |"
+        ));
+        let section = md
+            .split("## Table I")
+            .nth(1)
+            .and_then(|t| t.split("\n## ").next())
+            .unwrap();
+        for (i, &(pp, nq, ..)) in TABLE_I.iter().enumerate() {
+            let start = format!("| {pp:.0} | {:.0} | {nq:.2} / ", table_p(i));
+            assert_eq!(
+                section.lines().filter(|l| l.starts_with(&start)).count(),
+                1,
+                "row {start}"
+            );
+        }
+        assert!(md.contains("largest |gap| = "));
+        assert!(md.contains("(j1j2_kf.svg)") && md.contains("(j1j2_ekf.svg)"));
+        assert!(!md.contains("NaN"));
     }
 }
