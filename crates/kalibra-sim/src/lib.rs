@@ -119,17 +119,7 @@ impl MonteCarlo {
         &self,
         work: impl FnOnce() -> Result<T, SimError<E>> + Send,
     ) -> Result<T, SimError<E>> {
-        match self.threads {
-            None => work(),
-            Some(threads) => rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .map_err(|e| SimError::ThreadPool {
-                    threads,
-                    message: e.to_string(),
-                })?
-                .install(work),
-        }
+        in_pool(self.threads, work)
     }
 
     /// Runs the study into accumulators: `one(run, rng, acc)` simulates run `run` with its own
@@ -248,5 +238,23 @@ mod tests {
             .map(|run, _| Ok::<_, MetricsError>(run * 2))
             .unwrap();
         assert_eq!(out, (0..100).map(|r| r * 2).collect::<Vec<_>>());
+    }
+}
+
+/// Runs `work` on a pool of `threads` threads, or on rayon's global pool for `None`.
+pub(crate) fn in_pool<T: Send, E: std::error::Error + Send + 'static>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> Result<T, SimError<E>> + Send,
+) -> Result<T, SimError<E>> {
+    match threads {
+        None => work(),
+        Some(threads) => rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| SimError::ThreadPool {
+                threads,
+                message: e.to_string(),
+            })?
+            .install(work),
     }
 }

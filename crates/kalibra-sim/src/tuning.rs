@@ -101,18 +101,7 @@ where
             .into_iter()
             .collect()
     };
-    if threads == 0 {
-        work()
-    } else {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .map_err(|e| SimError::ThreadPool {
-                threads,
-                message: e.to_string(),
-            })?
-            .install(work)
-    }
+    crate::in_pool((threads > 0).then_some(threads), work)
 }
 
 /// Two-point differencing (Bar-Shalom, Li, Kirubarajan 2001, p. 247): from two position
