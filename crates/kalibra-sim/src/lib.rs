@@ -179,6 +179,24 @@ impl MonteCarlo {
     }
 }
 
+/// Runs `work` on a pool of `threads` threads, or on rayon's global pool for `None`.
+pub(crate) fn in_pool<T: Send, E: std::error::Error + Send + 'static>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> Result<T, SimError<E>> + Send,
+) -> Result<T, SimError<E>> {
+    match threads {
+        None => work(),
+        Some(threads) => rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| SimError::ThreadPool {
+                threads,
+                message: e.to_string(),
+            })?
+            .install(work),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -238,23 +256,5 @@ mod tests {
             .map(|run, _| Ok::<_, MetricsError>(run * 2))
             .unwrap();
         assert_eq!(out, (0..100).map(|r| r * 2).collect::<Vec<_>>());
-    }
-}
-
-/// Runs `work` on a pool of `threads` threads, or on rayon's global pool for `None`.
-pub(crate) fn in_pool<T: Send, E: std::error::Error + Send + 'static>(
-    threads: Option<usize>,
-    work: impl FnOnce() -> Result<T, SimError<E>> + Send,
-) -> Result<T, SimError<E>> {
-    match threads {
-        None => work(),
-        Some(threads) => rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .map_err(|e| SimError::ThreadPool {
-                threads,
-                message: e.to_string(),
-            })?
-            .install(work),
     }
 }
