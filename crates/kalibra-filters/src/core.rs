@@ -27,14 +27,10 @@ pub enum InitialCheck {
     /// Finite, symmetric and positive semi-definite.
     #[default]
     PositiveSemiDefinite,
-    /// Finite and symmetric only: for reproducing a paper that starts from a printed,
-    /// indefinite `P0` (paper 000). Metrics on such runs must report the indefiniteness.
+    /// Finite and symmetric only: for studying a filter started from an indefinite `P0` (such
+    /// as paper 000's printed one, symmetrised). Metrics on such runs must report the
+    /// indefiniteness.
     SymmetricOnly,
-    /// Finite only, used exactly as given, even asymmetric: for replaying a printed `P0` that
-    /// is neither symmetric nor positive semi-definite (paper 000 prints one). The first
-    /// prediction symmetrises the prior as always, but the propagated part `F P0 F^T` in the
-    /// step record keeps the asymmetry of `P0`. Metrics on such runs must report it.
-    AsGiven,
 }
 
 /// Options shared by the Kalman-type filters.
@@ -99,9 +95,6 @@ where
             InitialCheck::SymmetricOnly => {
                 check_symmetric(&p0, "initial covariance").map_err(init)?;
                 symmetrize(&mut p0);
-            }
-            InitialCheck::AsGiven => {
-                check_finite(&p0, "initial covariance").map_err(init)?;
             }
         }
         let zeros_nn = || OMatrix::<f64, N, N>::zeros_generic(n, n);

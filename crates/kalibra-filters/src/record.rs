@@ -1,6 +1,8 @@
 //! What one measurement update yields.
 
-use kalibra_linalg::{Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, propagate};
+use kalibra_linalg::{
+    Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, propagate, symmetrize,
+};
 
 /// A Gaussian estimate: mean and covariance.
 #[derive(Clone, Debug, PartialEq)]
@@ -99,13 +101,21 @@ where
         &self.process_noise
     }
     /// `A_k = H_k F P+_{k-1} F^T H_k^T` (paper 003, eq 10).
+    ///
+    /// Symmetrised: with measurement rows of very different scales (paper 003's radar: 1 to
+    /// 1e-9) rounding leaves relative asymmetries near 1e-8, which the J metrics reject.
     pub fn a(&self) -> OMatrix<f64, M, M> {
-        propagate(&self.h, &self.propagated)
+        projected(&self.h, &self.propagated)
     }
     /// `B_k = H_k Q_{k-1} H_k^T` (paper 003, eq 10); computed directly, never as `S - A - R`,
     /// which would lose all precision for a tiny `Q`.
     pub fn b(&self) -> OMatrix<f64, M, M> {
-        propagate(&self.h, &self.process_noise)
+        projected(&self.h, &self.process_noise)
+    }
+    /// `C_k = H_k P+_k H^T_k`, the posterior seen through `H_k` (for `tr(N_k)`), symmetrised
+    /// as [`StepRecord::a`].
+    pub fn c(&self) -> OMatrix<f64, M, M> {
+        projected(&self.h, &self.posterior.cov)
     }
     /// The normalised innovation squared `nu^T S^-1 nu`, from the stored factor of `S`.
     pub fn nis(&self) -> f64 {
@@ -113,4 +123,14 @@ where
             .quad_form(&self.innovation)
             .expect("innovation and S share the dimension M")
     }
+}
+
+/// `H X H^T`, symmetrised.
+fn projected<N: Dim, M: Dim>(h: &OMatrix<f64, M, N>, x: &OMatrix<f64, N, N>) -> OMatrix<f64, M, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let mut out = propagate(h, x);
+    symmetrize(&mut out);
+    out
 }

@@ -127,6 +127,20 @@ impl Params {
     }
 }
 
+impl Params {
+    /// A draw of `w ~ N(0, Q)` through the kept factor (shared by both models).
+    fn sample_noise<R: Rng + ?Sized>(&self, rng: &mut R) -> Vector4<f64> {
+        sample_with_factor(self.q.factor(), rng)
+    }
+
+    fn with_noise(&self, q: Matrix4<f64>) -> Result<Self, ModelError> {
+        Ok(Self {
+            q: PsdMatrix::named(q, "process noise covariance Q")?,
+            ..self.clone()
+        })
+    }
+}
+
 fn positive(name: &'static str, value: f64) -> Result<(), ModelError> {
     if value.is_finite() && value > 0.0 {
         Ok(())
@@ -182,9 +196,10 @@ impl Ballistic {
     /// # Errors
     /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
     pub fn with_noise(&self, q: Matrix4<f64>) -> Result<Self, ModelError> {
-        let mut out = self.clone();
-        out.params.q = PsdMatrix::named(q, "process noise covariance Q")?;
-        Ok(out)
+        Ok(Self {
+            params: self.params.with_noise(q)?,
+            ..self.clone()
+        })
     }
 
     /// The drag-free (linear) model with the same period, gravity and noise: `F1 x + G u`.
@@ -259,7 +274,7 @@ impl Dynamics<U4> for Ballistic {
         _k: usize,
         rng: &mut R,
     ) -> Result<Vector4<f64>, ModelError> {
-        Ok(sample_with_factor(self.params.q.factor(), rng))
+        Ok(self.params.sample_noise(rng))
     }
 }
 
@@ -275,9 +290,9 @@ impl BallisticDragFree {
     /// # Errors
     /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
     pub fn with_noise(&self, q: Matrix4<f64>) -> Result<Self, ModelError> {
-        let mut out = self.clone();
-        out.params.q = PsdMatrix::named(q, "process noise covariance Q")?;
-        Ok(out)
+        Ok(Self {
+            params: self.params.with_noise(q)?,
+        })
     }
 }
 
@@ -299,7 +314,7 @@ impl Dynamics<U4> for BallisticDragFree {
         _k: usize,
         rng: &mut R,
     ) -> Result<Vector4<f64>, ModelError> {
-        Ok(sample_with_factor(self.params.q.factor(), rng))
+        Ok(self.params.sample_noise(rng))
     }
 }
 
@@ -562,6 +577,20 @@ mod tests {
         assert!(((across.transpose() * ra * across)[0] - cross).abs() < 1e-8);
         assert!((along.transpose() * ra * across)[0].abs() < 1e-8);
         assert!(check_measurement_jacobian(&m, 0, &x0()).scaled_error < 1e-9);
+    }
+
+    #[test]
+    fn with_noise_replaces_q_only() {
+        let m = model();
+        let q = Matrix4::identity() * 3.0;
+        let (a, b) = (
+            m.with_noise(q).unwrap(),
+            m.drag_free().with_noise(q).unwrap(),
+        );
+        assert_eq!(a.noise_cov(0), q);
+        assert_eq!(b.noise_cov(0), q);
+        assert_eq!(a.transition(0, &x0()), m.transition(0, &x0()));
+        assert!(m.with_noise(-q).is_err());
     }
 
     #[test]

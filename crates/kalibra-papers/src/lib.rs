@@ -35,6 +35,12 @@ pub enum PaperError {
     /// A metric could not be computed.
     #[error(transparent)]
     Metrics(#[from] MetricsError),
+    /// A tuning helper failed (sweep grid, `P_ad`, `Q_ad`).
+    #[error(transparent)]
+    Tuning(#[from] kalibra_sim::TuningError),
+    /// A bound failed (CRLB, observability).
+    #[error(transparent)]
+    Bounds(#[from] kalibra_bounds::BoundsError),
     /// A Monte Carlo run failed.
     #[error("Monte Carlo run {run} failed: {message}")]
     Run {

@@ -12,7 +12,7 @@
 //! point).
 
 use kalibra_filters::StepRecord;
-use kalibra_linalg::{Alloc, DefaultAllocator, Dim, Matrix4, Vector4, propagate, symmetrize};
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, Matrix4, Vector4};
 use kalibra_metrics::{JStep, MetricsError, j_step};
 use kalibra_models::{Ballistic, Dynamics, ModelError};
 use serde::Serialize;
@@ -67,7 +67,8 @@ pub fn noise_free_truth() -> Result<Vec<Vector4<f64>>, ModelError> {
 }
 
 /// The J1/J2 step metrics of one filter update, from its step record:
-/// `A = H F P+ F^T H^T`, `B = H Q H^T`, `R`, and `C = H P+_k H^T`.
+/// `A = H F P+ F^T H^T`, `B = H Q H^T`, `R`, and `C = H P+_k H^T` ([`StepRecord::a`],
+/// [`StepRecord::b`], [`StepRecord::c`]).
 ///
 /// # Errors
 /// [`MetricsError`] if `S` is not positive definite or `A + B` is singular.
@@ -75,14 +76,7 @@ pub fn j_of<N: Dim, M: Dim>(rec: &StepRecord<N, M>) -> Result<JStep, MetricsErro
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    // The projections are symmetric in exact arithmetic; with 003's radar rows (scales from
-    // 1 to 1e-9) rounding leaves relative asymmetries near 1e-8, which j_step would reject.
-    let (mut a, mut b) = (rec.a(), rec.b());
-    let mut c = propagate(rec.h(), &rec.posterior().cov);
-    symmetrize(&mut a);
-    symmetrize(&mut b);
-    symmetrize(&mut c);
-    j_step(&a, &b, rec.r(), &c)
+    j_step(&rec.a(), &rec.b(), rec.r(), &rec.c())
 }
 
 /// One point of a `Q = 10^p Q_nom` sweep, serialised in `results.json`.

@@ -96,9 +96,9 @@ pub const CROSSOVER_NQ_RANGE: (f64, f64) = (0.21, 1.21);
 /// How the filter is started and `P0` is used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum P0Use {
-    /// Entry by entry as printed (`InitialCheck::AsGiven`).
+    /// Entry by entry as printed.
     AsPrinted,
-    /// `(P0 + P0^T) / 2` (`InitialCheck::SymmetricOnly`; still indefinite).
+    /// `(P0 + P0^T) / 2` (still indefinite).
     Symmetrised,
 }
 
@@ -445,8 +445,7 @@ impl Report {
 /// [`PaperError`] if a filter run fails or `config.fine_step` is not positive.
 pub fn run(config: &Config) -> Result<Report, PaperError> {
     let setup = Setup::new()?;
-    let fine = kalibra_sim::grid(-13.0, 6.0, config.fine_step)
-        .map_err(|e| PaperError::Harness(e.to_string()))?;
+    let fine = kalibra_sim::grid(-13.0, 6.0, config.fine_step)?;
     let mut readings = Vec::new();
     for reading in &READINGS {
         let sweep_of = |kind, grid: &[f64]| -> Result<Vec<SweepRow>, PaperError> {

@@ -300,8 +300,7 @@ fn sweep_reading(
     config: &Config,
 ) -> Result<ReadingReport, PaperError> {
     let integer: Vec<f64> = (-10..=10).map(f64::from).collect();
-    let fine = kalibra_sim::grid(-10.0, 10.0, config.fine_step)
-        .map_err(|e| PaperError::Harness(e.to_string()))?;
+    let fine = kalibra_sim::grid(-10.0, 10.0, config.fine_step)?;
     let run = |grid: &[f64]| -> Result<Vec<SweepRow>, PaperError> {
         Ok(kalibra_sim::sweep(grid, config.threads, |p| {
             point(setup, reading.divisor, p)
@@ -359,8 +358,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
 
     // Initial tuning along the noise-free truth.
     let truth_model = reentry::dynamics(qt())?;
-    let p_ad = kalibra_sim::p_ad(&truth_model, &setup.radar, &setup.truth, 0)
-        .map_err(|e| PaperError::Harness(e.to_string()))?;
+    let p_ad = kalibra_sim::p_ad(&truth_model, &setup.radar, &setup.truth, 0)?;
     let table_p0 = p0_table();
     let p_ad_diagonal = (0..4)
         .map(|i| Entry::new(table_p0[(i, i)], p_ad[(i, i)]))
@@ -370,8 +368,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
     let q_ad = kalibra_sim::q_ad(
         &qt(),
         records.iter().map(|r| (&r.prior().cov, &r.posterior().cov)),
-    )
-    .map_err(|e| PaperError::Harness(e.to_string()))?;
+    )?;
     let qn = q_nom();
     let q_ad_entries = (0..16)
         .map(|i| Entry::new(qn[(i / 4, i % 4)], q_ad[(i / 4, i % 4)]))
@@ -457,9 +454,9 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
     }
 
     // Posterior CRLB over the Monte Carlo truths.
-    let mut bound = Pcrlb::new(&p0_table()).map_err(|e| PaperError::Harness(e.to_string()))?;
+    let mut bound = Pcrlb::new(&p0_table())?;
     let sd = |b: &Pcrlb<kalibra_linalg::U4>| -> Result<[f64; 4], PaperError> {
-        let m = b.bound().map_err(|e| PaperError::Harness(e.to_string()))?;
+        let m = b.bound()?;
         Ok(std::array::from_fn(|i| m[(i, i)].sqrt()))
     };
     let mut crlb = vec![sd(&bound)?];
@@ -468,9 +465,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
             .iter()
             .map(|t| truth_model.jacobian(k, &t.states[k]))
             .collect();
-        bound
-            .predict(&f, &qt())
-            .map_err(|e| PaperError::Harness(e.to_string()))?;
+        bound.predict(&f, &qt())?;
         let h: Vec<_> = truths
             .iter()
             .map(|t| {
@@ -481,9 +476,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
                 )
             })
             .collect();
-        bound
-            .add_measurement(&h)
-            .map_err(|e| PaperError::Harness(e.to_string()))?;
+        bound.add_measurement(&h)?;
         crlb.push(sd(&bound)?);
     }
 
@@ -504,7 +497,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
         .map(|k| {
             kalibra_bounds::observability_singular_values(&fs, &hs, k, 4)
                 .map(|sv| std::array::from_fn(|i| sv[i]))
-                .map_err(|e| PaperError::Harness(e.to_string()))
+                .map_err(PaperError::from)
         })
         .collect::<Result<Vec<[f64; 4]>, _>>()?;
     let altitude_density = setup
