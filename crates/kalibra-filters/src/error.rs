@@ -40,6 +40,15 @@ pub enum FilterError {
     /// A model failed.
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// An iteration to a steady state did not converge (a Riccati recursion whose model is
+    /// not detectable, or a tolerance out of reach).
+    #[error("{what} did not converge in {iterations} iterations")]
+    NotConvergent {
+        /// Which computation.
+        what: &'static str,
+        /// Iterations run.
+        iterations: usize,
+    },
 }
 
 impl FilterError {

@@ -8,6 +8,8 @@
 //! * [`StepRecord`]: what each update computed (prior and posterior, innovation, `S`, `K`, `H`,
 //!   `R`, `F`, and the split of the prior covariance into `F P+ F^T` and `Q` that the J1/J2
 //!   metrics need), so metrics never recompute and never see the filter.
+//! * [`steady_state`]: the limit of the discrete Riccati recursion of a time-invariant model
+//!   and its gain.
 //!
 //! The unscented filters, the shifted Rayleigh filter and the constant-gain filter implement
 //! the same trait and yield the same record.
@@ -45,9 +47,11 @@ mod error;
 mod filter;
 mod kalman;
 mod record;
+mod steady;
 
 pub use crate::core::{FilterOptions, InitialCheck, UpdateForm};
 pub use error::FilterError;
 pub use filter::{Filter, Start};
 pub use kalman::{Ekf, Kf};
 pub use record::{Estimate, StepRecord};
+pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};

@@ -350,3 +350,34 @@ fn continuous_noise_model_and_ca_run_without_error() {
     // 100 NIS values of 1 degree of freedom: the mean is within 0.5 of 1 with probability > 0.999.
     assert!((mean_nis - 1.0).abs() < 0.5, "{mean_nis}");
 }
+
+#[test]
+fn steady_state_is_where_the_kf_converges() {
+    use kalibra_filters::steady_state;
+    let (f, h) = w1();
+    let ss = steady_state(f.f(), h.h(), f.q().matrix(), h.r().matrix()).unwrap();
+    // The covariance recursion does not depend on the data: run the KF long enough.
+    let t = truth(5, 400);
+    let mut kf = Kf::new(&f, &h, Vector4::zeros(), p0()).unwrap();
+    let records = kf
+        .run_collect(t.measurements.iter().map(Some), Start::PredictFirst)
+        .unwrap();
+    let last = records.last().unwrap();
+    assert_relative_eq!(*last.gain(), ss.gain, max_relative = 1e-9);
+    assert_relative_eq!(last.prior().cov, ss.prior, max_relative = 1e-9);
+    assert_relative_eq!(last.posterior().cov, ss.posterior, max_relative = 1e-9);
+    // Fixed point: one more Riccati step reproduces the prior.
+    let next = propagate(f.f(), &ss.posterior) + f.q().matrix();
+    assert_relative_eq!(next, ss.prior, max_relative = 1e-11);
+}
+
+#[test]
+fn steady_state_of_an_undetectable_model_is_an_error() {
+    use kalibra_filters::steady_state;
+    // An unstable mode the measurement never sees: the prior grows without bound.
+    let f = Matrix2::new(2.0, 0.0, 0.0, 0.5);
+    let h = kalibra_linalg::nalgebra::Matrix1x2::new(0.0, 1.0);
+    let r = kalibra_linalg::Matrix1::new(1.0);
+    assert!(steady_state(&f, &h, &Matrix2::identity(), &r).is_err());
+    assert!(steady_state(&(f * f64::NAN), &h, &Matrix2::identity(), &r).is_err());
+}

@@ -45,4 +45,13 @@ pub enum LinalgError {
         /// The size given.
         found: usize,
     },
+    /// An iteration did not converge: the discrete Lyapunov equation of a matrix whose
+    /// spectral radius is not below 1 has no bounded solution.
+    #[error("{what} did not converge in {iterations} iterations")]
+    NotConvergent {
+        /// Which computation.
+        what: &'static str,
+        /// Iterations run.
+        iterations: usize,
+    },
 }

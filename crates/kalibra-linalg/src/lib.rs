@@ -17,6 +17,8 @@
 //! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`joseph_update`],
 //!   [`standard_update`], [`symmetrize`], and [`sigma_sqrt`], a matrix square root for sigma
 //!   points with a documented fallback.
+//! * [`discrete_lyapunov`]: the stationary covariance `X = A X A^T + Q` by Smith's doubling,
+//!   with a typed error when the series diverges (spectral radius of `A` not below 1).
 //!
 //! It is not a general linear-algebra library: it has no per-operation backend traits and no
 //! large-matrix kernels (faer comes in behind a feature once a benchmark shows it pays, for state
@@ -56,6 +58,7 @@ mod alloc;
 mod covariance;
 mod error;
 mod kernels;
+mod lyapunov;
 mod psd;
 
 pub use alloc::Alloc;
@@ -64,6 +67,7 @@ pub use error::LinalgError;
 pub use kernels::{
     all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
 };
+pub use lyapunov::{LYAPUNOV_MAX_DOUBLINGS, discrete_lyapunov};
 pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
 
 pub use nalgebra;

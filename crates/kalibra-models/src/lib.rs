@@ -7,7 +7,9 @@
 //!   [`LinearMeasurement`] that the Kalman filter needs.
 //! * Concrete models: [`Kinematic`] constant-velocity and constant-acceleration models in any
 //!   number of axes, [`LinearGaussian`] and [`LinearObservation`] for any `F, Q, H, R`,
-//!   [`WithInput`] for a known control input, and [`Bearing`] from a moving [`Platform`].
+//!   [`WithInput`] for a known control input, [`Bearing`] from a moving [`Platform`], the
+//!   ballistic re-entry models of papers 000 and 003, and paper 002's angular target
+//!   ([`AngularTarget`], with the manoeuvring truth [`ManoeuvringTarget`]).
 //! * Seeded truth simulation ([`Simulator`], [`simulate`], [`simulate_until`]), where the truth
 //!   may use models and noise the filter does not.
 //! * [`check_dynamics_jacobian`] and [`check_measurement_jacobian`]: finite-difference checks
@@ -38,6 +40,7 @@
 //! # Ok::<(), kalibra_models::ModelError>(())
 //! ```
 
+mod angle;
 mod ballistic;
 mod bearing;
 mod error;
@@ -48,6 +51,7 @@ mod noise;
 mod simulate;
 mod traits;
 
+pub use angle::{AngularTarget, Manoeuvre, ManoeuvreProfile, ManoeuvringTarget};
 pub use ballistic::{
     AirDensity, Ballistic, BallisticDragFree, ConvertedPosition, RadarRates, ballistic_f1,
     ballistic_g,
