@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use kalibra_papers::{saha2012, saha2014, w1};
+use kalibra_papers::{minh2025, saha2012, saha2014, w1};
 
 /// The studies `reproduce` knows, in the order it runs them.
-const STUDIES: [&str; 3] = ["w1", "000", "003"];
+const STUDIES: [&str; 4] = ["w1", "000", "002", "003"];
 
 struct Args {
     quick: bool,
@@ -168,6 +168,47 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         ));
     }
 
+    if wanted("002") {
+        let mut config = if args.quick {
+            minh2025::Config::quick()
+        } else {
+            minh2025::Config::paper()
+        };
+        if let Some(seed) = args.seed {
+            config.seed = seed;
+        }
+        config.threads = args.threads;
+        eprintln!(
+            "002: angle tracking, 3 Q sets, {} truths, amplitude sweep {} points x {} truths ...",
+            config.truths,
+            config.sweep_scales.len(),
+            config.sweep_truths
+        );
+        let start = Instant::now();
+        let report = minh2025::run(&config)?;
+        eprintln!("002: done in {:.2} s", start.elapsed().as_secs_f64());
+        write_study(
+            &args.out,
+            "002",
+            provenance("002", Some(config.seed), serde_json::to_value(&config)?),
+            serde_json::to_value(&report)?,
+            &report.to_markdown(),
+            &crate::figures2025::minh2025(&report),
+        )?;
+        let phase = |n: &str| report.q_sets[n].rmse_theta_phase;
+        rows.push(format!(
+            "| 002 angle tracking (EKF, 3 Q sets) | phase angle RMSE Q1 {:.3}, Q2 {:.3}, Q3 {:.3} deg (paper ~0.15, ~0.10, >0.25); Q2 < Q1 < Q3 in {:.1}% of {} truths; ordering first changes at amplitude {} | [002/report.md](002/report.md) |",
+            phase("Q1"),
+            phase("Q2"),
+            phase("Q3"),
+            100.0 * report.fraction_ordering_holds,
+            config.truths,
+            report
+                .first_reversal_amplitude
+                .map_or("never (swept range)".to_string(), |a| format!("{a:.1} deg/s^2")),
+        ));
+    }
+
     if wanted("003") {
         let mut config = if args.quick {
             saha2014::Config::quick()
@@ -213,7 +254,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
     let index = format!(
         "# kalibra reproduction report\n\nRevision `{revision}`, {size} size, seed {}, threads {}.\n\n\
          | study | summary | report |\n|---|---|---|\n{}\n\n\
-         Papers 001, 002 and 004 join this table as their issues land.\n",
+         Papers 001 and 004 join this table as their issues land.\n",
         args.seed
             .map_or("default per study".to_string(), |s| s.to_string()),
         args.threads,

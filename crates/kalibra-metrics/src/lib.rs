@@ -15,6 +15,10 @@
 //!   process-noise level `nq`, and [`crossover`] finds where `J1` and `J2` cross along a sweep
 //!   of the process-noise scale.
 //! * [`itse`]: the integral of time-weighted squared error.
+//! * Error series of one run (paper 002): [`instantaneous_errors`] (`e = xhat - x`, the
+//!   estimate minus the truth, eq. 14), [`rmse`] and [`rmse_per_state`] over time (eq. 15), and
+//!   [`sliding_window`]: the RMSE, bias and local standard deviation of every forward window of
+//!   `W` samples ([`WindowStats`], eqs. 16-18), in `O(N)` and robust to large offsets.
 //!
 //! # Notation
 //! `e_k = x_k - x+_k` the estimation error of one run at step `k`, `P+_k` the filter's
@@ -46,9 +50,11 @@ mod consistency;
 mod error;
 mod innovation;
 mod itse;
+mod window;
 
 pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
 pub use consistency::{ChiSquareBand, nees, nis};
 pub use error::MetricsError;
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
 pub use itse::itse;
+pub use window::{WindowStats, instantaneous_errors, rmse, rmse_per_state, sliding_window};

@@ -13,6 +13,8 @@
 //! Every module documents the decisions its paper leaves open, and every report records its
 //! seed, run count and thread-independent results.
 
+pub mod claims;
+pub mod minh2025;
 pub mod reentry;
 pub mod saha2012;
 pub mod saha2014;
@@ -38,6 +40,9 @@ pub enum PaperError {
     /// A tuning helper failed (sweep grid, `P_ad`, `Q_ad`).
     #[error(transparent)]
     Tuning(#[from] kalibra_sim::TuningError),
+    /// A linear-algebra computation failed (a Lyapunov or Riccati limit).
+    #[error(transparent)]
+    Linalg(#[from] kalibra_linalg::LinalgError),
     /// A bound failed (CRLB, observability).
     #[error(transparent)]
     Bounds(#[from] kalibra_bounds::BoundsError),
