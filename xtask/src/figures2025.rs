@@ -20,8 +20,31 @@ fn phase_marks(fig: Figure) -> Figure {
     })
 }
 
+/// `fig` with one line per `Q` set: `pick(set)[k][state]` against `t_k`, `k = 1 .. K`.
+fn per_set(
+    report: &Report,
+    mut fig: Figure,
+    state: usize,
+    pick: impl Fn(&minh2025::QSetResult) -> &[[f64; 3]],
+) -> Figure {
+    for set in &Q_SETS {
+        let values = pick(&report.q_sets[set.name]);
+        fig = fig.series(Series::line(
+            set.name,
+            report
+                .times
+                .iter()
+                .zip(values)
+                .skip(1)
+                .map(|(t, x)| (*t, x[state]))
+                .collect(),
+        ));
+    }
+    fig
+}
+
 fn states(report: &Report, state: usize) -> String {
-    let mut fig = Figure::new(
+    let fig = Figure::new(
         format!("{} and its estimates (default truth)", STATE_NAMES[state]),
         "t (s)",
         UNITS[state],
@@ -35,24 +58,11 @@ fn states(report: &Report, state: usize) -> String {
             .map(|(t, x)| (*t, x[state]))
             .collect(),
     ));
-    for set in &Q_SETS {
-        let r = &report.q_sets[set.name];
-        fig = fig.series(Series::line(
-            set.name,
-            report
-                .times
-                .iter()
-                .zip(&r.estimates)
-                .skip(1)
-                .map(|(t, x)| (*t, x[state]))
-                .collect(),
-        ));
-    }
-    fig.to_svg()
+    per_set(report, fig, state, |r| &r.estimates).to_svg()
 }
 
 fn errors(report: &Report, state: usize) -> String {
-    let mut fig = Figure::new(
+    let fig = Figure::new(
         format!(
             "{} error e = estimate - truth (default truth)",
             STATE_NAMES[state]
@@ -60,20 +70,7 @@ fn errors(report: &Report, state: usize) -> String {
         "t (s)",
         UNITS[state],
     );
-    for set in &Q_SETS {
-        let r = &report.q_sets[set.name];
-        fig = fig.series(Series::line(
-            set.name,
-            report
-                .times
-                .iter()
-                .zip(&r.errors)
-                .skip(1)
-                .map(|(t, e)| (*t, e[state]))
-                .collect(),
-        ));
-    }
-    phase_marks(fig).to_svg()
+    phase_marks(per_set(report, fig, state, |r| &r.errors)).to_svg()
 }
 
 fn windows(report: &Report, what: &str, pick: impl Fn(&minh2025::Windows) -> &[f64]) -> String {
