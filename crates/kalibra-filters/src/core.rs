@@ -67,6 +67,9 @@ where
     phase: Phase,
     has_record: bool,
     update: UpdateForm,
+    /// A constant gain used instead of `P- H^T S^-1` (the constant-gain filter); the Joseph
+    /// update is then forced, since `(I - K H) P-` is the covariance only at the optimal gain.
+    fixed_gain: Option<OMatrix<f64, N, M>>,
 }
 
 impl<N: Dim, M: Dim> KalmanCore<N, M>
@@ -123,7 +126,25 @@ where
             phase: Phase::Posterior,
             has_record: false,
             update: options.update,
+            fixed_gain: None,
         })
+    }
+
+    /// The constant gain, if one is fixed.
+    pub(crate) fn fixed_gain(&self) -> Option<&OMatrix<f64, N, M>> {
+        self.fixed_gain.as_ref()
+    }
+
+    /// Uses `gain` in every update from now on.
+    pub(crate) fn fix_gain(&mut self, gain: OMatrix<f64, N, M>) -> Result<(), FilterError> {
+        let init = |e: LinalgError| FilterError::Initial(e);
+        let (n, m) = (self.record.gain.nrows(), self.record.gain.ncols());
+        check_dim(n, gain.nrows(), "constant gain rows").map_err(init)?;
+        check_dim(m, gain.ncols(), "constant gain columns").map_err(init)?;
+        check_finite(&gain, "constant gain").map_err(init)?;
+        self.fixed_gain = Some(gain);
+        self.update = UpdateForm::Joseph;
+        Ok(())
     }
 
     fn current(&self) -> &Estimate<N> {
@@ -218,8 +239,11 @@ where
                 .and_then(|()| check_finite(&r, "measurement noise covariance R"));
             at(culprit.err().unwrap_or(e))
         })?;
-        // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
-        let gain = s.cholesky().solve(&pht.transpose()).transpose();
+        let gain = match &self.fixed_gain {
+            Some(gain) => gain.clone(),
+            // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
+            None => s.cholesky().solve(&pht.transpose()).transpose(),
+        };
         let x_post = &prior.mean + &gain * &innovation;
         let p_post = match self.update {
             UpdateForm::Joseph => joseph_update(&prior.cov, &gain, &h, &r),

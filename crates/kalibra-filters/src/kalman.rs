@@ -114,7 +114,7 @@ constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
 
 /// The update shared by the KF and the EKF; they differ only in where `H_k` comes from.
-fn measurement_update<'a, N: Dim, M: Dim, H: Measurement<N, M>>(
+pub(crate) fn measurement_update<'a, N: Dim, M: Dim, H: Measurement<N, M>>(
     core: &'a mut KalmanCore<N, M>,
     measurement: &H,
     z: &OVector<f64, M>,

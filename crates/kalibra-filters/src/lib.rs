@@ -4,15 +4,16 @@
 //! * [`Filter`]: a recursive estimator stepped by `predict` and `update`, with provided methods
 //!   that run it over a measurement sequence from anywhere (a simulation, a log file, a sensor),
 //!   with gaps where a step has no measurement.
-//! * [`Kf`] (linear models) and [`Ekf`] (nonlinear models), sharing one numerical core.
+//! * [`Kf`] (linear models), [`Ekf`] (nonlinear models) and [`ConstantGainKf`] (a fixed gain,
+//!   the user's or the steady-state one), sharing one numerical core.
 //! * [`StepRecord`]: what each update computed (prior and posterior, innovation, `S`, `K`, `H`,
 //!   `R`, `F`, and the split of the prior covariance into `F P+ F^T` and `Q` that the J1/J2
 //!   metrics need), so metrics never recompute and never see the filter.
 //! * [`steady_state`]: the limit of the discrete Riccati recursion of a time-invariant model
 //!   and its gain.
 //!
-//! The unscented filters, the shifted Rayleigh filter and the constant-gain filter implement
-//! the same trait and yield the same record.
+//! The unscented filters and the shifted Rayleigh filter will implement the same trait and
+//! yield the same record.
 //!
 //! # Notation
 //! `x-_k, P-_k` the prior (predicted) estimate at step `k`, `x+_k, P+_k` the posterior;
@@ -42,6 +43,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod constant_gain;
 mod core;
 mod error;
 mod filter;
@@ -50,6 +52,7 @@ mod record;
 mod steady;
 
 pub use crate::core::{FilterOptions, InitialCheck, UpdateForm};
+pub use constant_gain::ConstantGainKf;
 pub use error::FilterError;
 pub use filter::{Filter, Start};
 pub use kalman::{Ekf, Kf};

@@ -381,3 +381,77 @@ fn steady_state_of_an_undetectable_model_is_an_error() {
     assert!(steady_state(&f, &h, &Matrix2::identity(), &r).is_err());
     assert!(steady_state(&(f * f64::NAN), &h, &Matrix2::identity(), &r).is_err());
 }
+
+#[test]
+fn constant_gain_kf_with_the_steady_state_gain_equals_the_kf_after_convergence() {
+    use kalibra_filters::ConstantGainKf;
+    let (f, h) = w1();
+    let t = truth(9, 600);
+    let gain = ConstantGainKf::steady_state_gain(&f, &h, 0, &Vector4::zeros()).unwrap();
+    let mut kf = Kf::new(&f, &h, Vector4::zeros(), p0()).unwrap();
+    let mut cgkf = ConstantGainKf::new(&f, &h, Vector4::zeros(), p0(), gain).unwrap();
+    let a = kf
+        .run_collect(t.measurements.iter().map(Some), Start::PredictFirst)
+        .unwrap();
+    let b = cgkf
+        .run_collect(t.measurements.iter().map(Some), Start::PredictFirst)
+        .unwrap();
+    assert!(b.iter().all(|r| *r.gain() == gain));
+    // Early on the two differ (the KF's gain is still large) ...
+    let gap = |i: usize| (a[i].posterior().mean - b[i].posterior().mean).amax();
+    assert!(gap(0) > 1.0);
+    // ... then the KF's gain converges to the constant one and the difference of the
+    // estimates decays with the closed loop: equal to rounding after convergence.
+    let last = a.len() - 1;
+    assert!(gap(last) <= 1e-9 * (1.0 + a[last].posterior().mean.amax()));
+    assert_relative_eq!(
+        a[last].posterior().cov,
+        b[last].posterior().cov,
+        max_relative = 1e-9
+    );
+}
+
+#[test]
+fn constant_gain_kf_rejects_a_bad_gain_and_keeps_its_gain() {
+    use kalibra_filters::ConstantGainKf;
+    let (f, h) = w1();
+    let mut bad = SMatrix::<f64, 4, 2>::zeros();
+    bad[(0, 0)] = f64::NAN;
+    assert!(matches!(
+        ConstantGainKf::new(&f, &h, Vector4::zeros(), p0(), bad),
+        Err(FilterError::Initial(_))
+    ));
+    // Dyn sizes: a gain of the wrong shape is a typed error.
+    let fd = LinearGaussian::new(
+        DMatrix::from_column_slice(4, 4, f.f().as_slice()),
+        DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
+    )
+    .unwrap();
+    let hd = LinearObservation::new(
+        DMatrix::from_column_slice(2, 4, h.h().as_slice()),
+        DMatrix::identity(2, 2) * 100.0,
+    )
+    .unwrap();
+    assert!(
+        ConstantGainKf::new(
+            &fd,
+            &hd,
+            DVector::zeros(4),
+            DMatrix::identity(4, 4),
+            DMatrix::zeros(4, 3)
+        )
+        .is_err()
+    );
+    // A detuned gain stays as given, and the Joseph covariance stays symmetric PSD.
+    let gain = SMatrix::<f64, 4, 2>::new(0.5, 0.0, 0.0, 0.5, 0.1, 0.0, 0.0, 0.1);
+    let mut cgkf = ConstantGainKf::new(&f, &h, Vector4::zeros(), p0(), gain).unwrap();
+    let t = truth(3, 50);
+    cgkf.run(t.measurements.iter().map(Some), Start::PredictFirst, |r| {
+        assert_eq!(*r.gain(), gain);
+        let p = &r.posterior().cov;
+        assert_eq!(*p, p.transpose());
+        assert!(p.symmetric_eigenvalues().min() > 0.0);
+    })
+    .unwrap();
+    assert_eq!(*cgkf.gain(), gain);
+}

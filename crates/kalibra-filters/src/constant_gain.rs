@@ -1,0 +1,172 @@
+//! The constant-gain Kalman filter (CGKF).
+
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
+use kalibra_models::{Dynamics, Measurement};
+
+use crate::core::KalmanCore;
+use crate::{Filter, FilterError, FilterOptions, StepRecord, steady_state};
+
+/// The constant-gain Kalman filter: the [`Ekf`](crate::Ekf)'s prediction and innovation with a
+/// fixed gain `K` instead of `P- H^T S^-1`: `x+ = f(x) + K (z - h(f(x)))`.
+///
+/// The gain is the user's, or the steady-state gain of a linear(ised) model
+/// ([`ConstantGainKf::steady_state_gain`]). The covariance is propagated as the EKF does
+/// (Jacobians at the estimate) and updated in Joseph form with the fixed gain,
+/// `(I - K H) P- (I - K H)^T + K R K^T`, which on a linear model is the exact covariance of the
+/// error under that gain, optimal or not. A constant gain saves the solve with `S` (it is still
+/// factorised for the record's NIS), and it is the setting in which paper 004's surrogate
+/// bounds are proven: the error is then an AR process with deterministic coefficients up to
+/// the Jacobian.
+///
+/// ```
+/// use kalibra_filters::{ConstantGainKf, Filter, Kf, Start};
+/// use kalibra_models::Kinematic;
+/// use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector2, Vector4};
+///
+/// let cv = Kinematic::constant_velocity(2, 1.0)?;
+/// let (f, h) = (cv.dynamics(U4)?, cv.position_measurement(U4, U2, Matrix2::identity() * 4.0)?);
+/// let gain = ConstantGainKf::steady_state_gain(&f, &h, 0, &Vector4::zeros())?;
+/// let mut cgkf = ConstantGainKf::new(&f, &h, Vector4::zeros(), Matrix4::identity(), gain)?;
+/// let z: Vec<Vector2<f64>> = (0..50).map(|k| Vector2::new(k as f64, 0.5 * k as f64)).collect();
+/// cgkf.run(z.iter().map(Some), Start::UpdateFirst, |rec| assert_eq!(*rec.gain(), gain))?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct ConstantGainKf<N: Dim, M: Dim, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    dynamics: D,
+    measurement: H,
+    core: KalmanCore<N, M>,
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> ConstantGainKf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// A filter at step 0 with initial mean `x0`, covariance `p0` and the constant `gain`.
+    ///
+    /// # Errors
+    /// [`FilterError::Initial`] if `x0`, `p0` or `gain` has the wrong size or is not finite,
+    /// or `p0` is not symmetric positive semi-definite.
+    pub fn new(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        gain: OMatrix<f64, N, M>,
+    ) -> Result<Self, FilterError> {
+        Self::with_options(
+            dynamics,
+            measurement,
+            x0,
+            p0,
+            gain,
+            FilterOptions::default(),
+        )
+    }
+
+    /// A filter with explicit [`FilterOptions`]; the update form is always Joseph (the
+    /// standard form is the covariance only at the optimal gain).
+    ///
+    /// # Errors
+    /// As [`ConstantGainKf::new`].
+    pub fn with_options(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        gain: OMatrix<f64, N, M>,
+        options: FilterOptions,
+    ) -> Result<Self, FilterError> {
+        let mut core = KalmanCore::new(
+            dynamics.state_dim(),
+            measurement.meas_dim(),
+            x0,
+            p0,
+            options,
+        )?;
+        core.fix_gain(gain)?;
+        Ok(Self {
+            dynamics,
+            measurement,
+            core,
+        })
+    }
+
+    /// The steady-state Kalman gain of the model linearised at `x_lin` and step `k` (`F`, `H`
+    /// the Jacobians there, `Q_k`, `R_k(x_lin)`): the limit of the discrete Riccati recursion
+    /// ([`steady_state`]). For a linear time-invariant model it is the KF's limiting gain.
+    ///
+    /// # Errors
+    /// As [`steady_state`].
+    pub fn steady_state_gain(
+        dynamics: &D,
+        measurement: &H,
+        k: usize,
+        x_lin: &OVector<f64, N>,
+    ) -> Result<OMatrix<f64, N, M>, FilterError> {
+        Ok(steady_state(
+            &dynamics.jacobian(k, x_lin),
+            &measurement.jacobian(k, x_lin),
+            &dynamics.noise_cov(k),
+            &measurement.noise_cov(k, x_lin),
+        )?
+        .gain)
+    }
+
+    /// The constant gain.
+    pub fn gain(&self) -> &OMatrix<f64, N, M> {
+        self.core
+            .fixed_gain()
+            .unwrap_or_else(|| unreachable!("set by the constructor"))
+    }
+
+    /// The dynamics model.
+    pub fn dynamics(&self) -> &D {
+        &self.dynamics
+    }
+
+    /// The measurement model.
+    pub fn measurement(&self) -> &H {
+        &self.measurement
+    }
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M>
+    for ConstantGainKf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn step_index(&self) -> usize {
+        self.core.step()
+    }
+    fn mean(&self) -> &OVector<f64, N> {
+        self.core.mean()
+    }
+    fn covariance(&self) -> &OMatrix<f64, N, N> {
+        self.core.cov()
+    }
+    fn last_record(&self) -> Option<&StepRecord<N, M>> {
+        self.core.record()
+    }
+
+    fn predict(&mut self) -> Result<(), FilterError> {
+        let k = self.core.step();
+        let x = self.core.mean();
+        let x_pred = self.dynamics.transition(k, x);
+        self.core.predict(
+            x_pred,
+            self.dynamics.jacobian(k, x),
+            self.dynamics.noise_cov(k),
+        )
+    }
+
+    fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+        let measurement = &self.measurement;
+        crate::kalman::measurement_update(&mut self.core, measurement, z, |k, x| {
+            measurement.jacobian(k, x)
+        })
+    }
+}
