@@ -18,7 +18,8 @@
 //!   [`standard_update`], [`symmetrize`], and [`sigma_sqrt`], a matrix square root for sigma
 //!   points with a documented fallback.
 //! * [`discrete_lyapunov`]: the stationary covariance `X = A X A^T + Q` by Smith's doubling,
-//!   with a typed error when the series diverges (spectral radius of `A` not below 1).
+//!   with a typed error when the series diverges, and [`spectral_radius`] (Gelfand's formula
+//!   by repeated squaring).
 //!
 //! It is not a general linear-algebra library: it has no per-operation backend traits and no
 //! large-matrix kernels (faer comes in behind a feature once a benchmark shows it pays, for state
@@ -67,7 +68,9 @@ pub use error::LinalgError;
 pub use kernels::{
     all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
 };
-pub use lyapunov::{LYAPUNOV_MAX_DOUBLINGS, discrete_lyapunov};
+pub use lyapunov::{
+    LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,
+};
 pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
 
 pub use nalgebra;

@@ -9,7 +9,8 @@
 //!   number of axes, [`LinearGaussian`] and [`LinearObservation`] for any `F, Q, H, R`,
 //!   [`WithInput`] for a known control input, [`Bearing`] from a moving [`Platform`], the
 //!   ballistic re-entry models of papers 000 and 003, and paper 002's angular target
-//!   ([`AngularTarget`], with the manoeuvring truth [`ManoeuvringTarget`]).
+//!   ([`AngularTarget`], with the manoeuvring truth [`ManoeuvringTarget`]), and paper 004's
+//!   3-D target with nonlinear acceleration ([`Target3d`], per axis [`AccelAxis`]).
 //! * Seeded truth simulation ([`Simulator`], [`simulate`], [`simulate_until`]), where the truth
 //!   may use models and noise the filter does not.
 //! * [`check_dynamics_jacobian`] and [`check_measurement_jacobian`]: finite-difference checks
@@ -49,6 +50,7 @@ mod kinematic;
 mod linear;
 mod noise;
 mod simulate;
+mod target3d;
 mod traits;
 
 pub use angle::{AngularTarget, Manoeuvre, ManoeuvreProfile, ManoeuvringTarget};
@@ -65,4 +67,5 @@ pub use kinematic::{Kinematic, Layout, Order, ProcessNoise};
 pub use linear::{LinearGaussian, LinearObservation, WithInput};
 pub use noise::{sample_with_factor, standard_normal};
 pub use simulate::{Simulator, Truth, TruthStep, simulate, simulate_until};
+pub use target3d::{AccelAxis, Target3d, Target3dParams};
 pub use traits::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
