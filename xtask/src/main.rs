@@ -14,6 +14,7 @@
 mod bench;
 mod figures;
 mod figures2014;
+mod figures2023;
 mod figures2025;
 mod plot;
 mod reproduce;

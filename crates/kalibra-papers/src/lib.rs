@@ -18,6 +18,7 @@ pub mod minh2025;
 pub mod reentry;
 pub mod saha2012;
 pub mod saha2014;
+pub mod spall2023;
 pub mod w1;
 
 use kalibra_filters::FilterError;
