@@ -67,5 +67,5 @@ pub use kinematic::{Kinematic, Layout, Order, ProcessNoise};
 pub use linear::{LinearGaussian, LinearObservation, WithInput};
 pub use noise::{sample_with_factor, standard_normal};
 pub use simulate::{Simulator, Truth, TruthStep, simulate, simulate_until};
-pub use target3d::{AccelAxis, Target3d, Target3dParams};
+pub use target3d::{AccelAxis, Target3d, Target3dParams, Target3dReading};
 pub use traits::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};

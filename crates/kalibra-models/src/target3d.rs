@@ -86,6 +86,42 @@ impl Target3dParams {
     }
 }
 
+/// The named readings of paper 004's measurement model, which was lost in conversion (the
+/// spec's three; each is [`Target3dParams`] plus `H` and `R`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target3dReading {
+    /// Positions observed, `R = sigma_v^2 I = 4 I`: plausible from the text.
+    Positions,
+    /// Positions and velocities observed, `R = 4 I`: keeps every printed number.
+    PositionsVelocities,
+    /// Positions observed, `R = sigma_v^2 dt I = 0.2 I`, acceleration coefficient -1 instead
+    /// of the printed -0.5: fitted to the paper's Table 2, not stated in the text.
+    Fitted,
+}
+
+impl Target3dReading {
+    /// Every reading.
+    pub const ALL: [Self; 3] = [Self::Positions, Self::PositionsVelocities, Self::Fitted];
+
+    /// The model parameters.
+    pub fn params(self) -> Target3dParams {
+        Target3dParams {
+            accel_coefficient: if self == Self::Fitted { -1.0 } else { -0.5 },
+            ..Target3dParams::default()
+        }
+    }
+
+    /// The measurement noise variance per observed component.
+    pub fn r(self) -> f64 {
+        if self == Self::Fitted { 0.2 } else { 4.0 }
+    }
+
+    /// Whether velocities are observed as well as positions.
+    pub fn observes_velocity(self) -> bool {
+        self == Self::PositionsVelocities
+    }
+}
+
 /// One axis of paper 004's target: state `[p, v, a]`,
 /// `p' = (1 + d) p + dt v + dt^2/2 a`, `v' = (c_v + d) v + dt a`,
 /// `a' = (1 + c_a) a + amp g(a)` with `g = sin` on the x and z axes and `cos` on y, plus the

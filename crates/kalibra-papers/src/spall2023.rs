@@ -38,7 +38,7 @@ use kalibra_filters::{Ekf, Filter};
 use kalibra_linalg::nalgebra::SMatrix;
 use kalibra_linalg::{Alloc, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
 use kalibra_models::{
-    AccelAxis, Dynamics, LinearObservation, Measurement, Target3d, Target3dParams,
+    AccelAxis, Dynamics, LinearObservation, Measurement, Target3d, Target3dParams, Target3dReading,
 };
 use kalibra_sim::{ChaCha8Rng, MonteCarlo};
 use serde::Serialize;
@@ -103,6 +103,9 @@ pub struct Reading {
     pub name: &'static str,
     /// What it assumes.
     pub description: &'static str,
+    /// The model-side reading (parameters, `H`, `R`).
+    #[serde(skip)]
+    pub model: Target3dReading,
     /// Velocities observed as well as positions.
     pub observe_velocity: bool,
     /// Measurement noise variance per observed component.
@@ -116,6 +119,7 @@ pub const READINGS: [Reading; 3] = [
     Reading {
         name: "positions",
         description: "positions observed, R = sigma_v^2 I = 4 I (plausible from the text)",
+        model: Target3dReading::Positions,
         observe_velocity: false,
         r: 4.0,
         accel_coefficient: -0.5,
@@ -123,6 +127,7 @@ pub const READINGS: [Reading; 3] = [
     Reading {
         name: "positions-velocities",
         description: "positions and velocities observed, R = 4 I (keeps every printed number)",
+        model: Target3dReading::PositionsVelocities,
         observe_velocity: true,
         r: 4.0,
         accel_coefficient: -0.5,
@@ -130,6 +135,7 @@ pub const READINGS: [Reading; 3] = [
     Reading {
         name: "fitted",
         description: "positions observed, R = sigma_v^2 dt I = 0.2 I, acceleration coefficient -1 (fitted to Table 2; not stated in the text)",
+        model: Target3dReading::Fitted,
         observe_velocity: false,
         r: 0.2,
         accel_coefficient: -1.0,
@@ -139,10 +145,7 @@ pub const READINGS: [Reading; 3] = [
 impl Reading {
     /// The model parameters of this reading.
     pub fn params(&self) -> Target3dParams {
-        Target3dParams {
-            accel_coefficient: self.accel_coefficient,
-            ..Target3dParams::default()
-        }
+        self.model.params()
     }
 }
 
@@ -878,5 +881,19 @@ impl Report {
             );
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_readings_agree_with_the_model_crate() {
+        for r in &READINGS {
+            assert_eq!(r.observe_velocity, r.model.observes_velocity());
+            assert_eq!(r.r, r.model.r());
+            assert_eq!(r.accel_coefficient, r.model.params().accel_coefficient);
+        }
     }
 }
