@@ -139,18 +139,7 @@ impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    fn step_index(&self) -> usize {
-        self.core.step()
-    }
-    fn mean(&self) -> &OVector<f64, N> {
-        self.core.mean()
-    }
-    fn covariance(&self) -> &OMatrix<f64, N, N> {
-        self.core.cov()
-    }
-    fn last_record(&self) -> Option<&StepRecord<N, M>> {
-        self.core.record()
-    }
+    crate::kalman::core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
         let k = self.core.step();

@@ -150,6 +150,7 @@ macro_rules! core_accessors {
         }
     };
 }
+pub(crate) use core_accessors;
 
 impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>> Filter<N, M>
     for Kf<N, M, D, H>
