@@ -38,6 +38,7 @@ where
 {
     dynamics: D,
     measurement: H,
+    gain: OMatrix<f64, N, M>,
     core: KalmanCore<N, M>,
 }
 
@@ -87,10 +88,11 @@ where
             p0,
             options,
         )?;
-        core.fix_gain(gain)?;
+        core.accept_fixed_gain(&gain)?;
         Ok(Self {
             dynamics,
             measurement,
+            gain,
             core,
         })
     }
@@ -118,9 +120,7 @@ where
 
     /// The constant gain.
     pub fn gain(&self) -> &OMatrix<f64, N, M> {
-        self.core
-            .fixed_gain()
-            .unwrap_or_else(|| unreachable!("set by the constructor"))
+        &self.gain
     }
 
     /// The dynamics model.
@@ -154,8 +154,12 @@ where
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let measurement = &self.measurement;
-        crate::kalman::measurement_update(&mut self.core, measurement, z, |k, x| {
-            measurement.jacobian(k, x)
-        })
+        crate::kalman::measurement_update(
+            &mut self.core,
+            measurement,
+            z,
+            |k, x| measurement.jacobian(k, x),
+            Some(&self.gain),
+        )
     }
 }

@@ -67,9 +67,6 @@ where
     phase: Phase,
     has_record: bool,
     update: UpdateForm,
-    /// A constant gain used instead of `P- H^T S^-1` (the constant-gain filter); the Joseph
-    /// update is then forced, since `(I - K H) P-` is the covariance only at the optimal gain.
-    fixed_gain: Option<OMatrix<f64, N, M>>,
 }
 
 impl<N: Dim, M: Dim> KalmanCore<N, M>
@@ -126,23 +123,20 @@ where
             phase: Phase::Posterior,
             has_record: false,
             update: options.update,
-            fixed_gain: None,
         })
     }
 
-    /// The constant gain, if one is fixed.
-    pub(crate) fn fixed_gain(&self) -> Option<&OMatrix<f64, N, M>> {
-        self.fixed_gain.as_ref()
-    }
-
-    /// Uses `gain` in every update from now on.
-    pub(crate) fn fix_gain(&mut self, gain: OMatrix<f64, N, M>) -> Result<(), FilterError> {
+    /// Checks a constant gain for the constant-gain filter and switches to the Joseph update,
+    /// since `(I - K H) P-` is the covariance only at the optimal gain.
+    pub(crate) fn accept_fixed_gain(
+        &mut self,
+        gain: &OMatrix<f64, N, M>,
+    ) -> Result<(), FilterError> {
         let init = |e: LinalgError| FilterError::Initial(e);
         let (n, m) = (self.record.gain.nrows(), self.record.gain.ncols());
         check_dim(n, gain.nrows(), "constant gain rows").map_err(init)?;
         check_dim(m, gain.ncols(), "constant gain columns").map_err(init)?;
-        check_finite(&gain, "constant gain").map_err(init)?;
-        self.fixed_gain = Some(gain);
+        check_finite(gain, "constant gain").map_err(init)?;
         self.update = UpdateForm::Joseph;
         Ok(())
     }
@@ -209,13 +203,16 @@ where
     }
 
     /// Updates at the current step with the predicted measurement, the innovation (residual),
-    /// the measurement Jacobian and the noise, all evaluated by the caller.
+    /// the measurement Jacobian and the noise, all evaluated by the caller; with `fixed_gain`
+    /// (the constant-gain filter) instead of the optimal gain. The KF and EKF pass `None`, a
+    /// constant the compiler folds away, so their hot path carries no branch for it.
     pub(crate) fn update(
         &mut self,
         zhat: OVector<f64, M>,
         innovation: OVector<f64, M>,
         h: OMatrix<f64, M, N>,
         r: OMatrix<f64, M, M>,
+        fixed_gain: Option<&OMatrix<f64, N, M>>,
     ) -> Result<&StepRecord<N, M>, FilterError> {
         let k = self.record.k;
         let at = |e| FilterError::at(k, e);
@@ -239,7 +236,7 @@ where
                 .and_then(|()| check_finite(&r, "measurement noise covariance R"));
             at(culprit.err().unwrap_or(e))
         })?;
-        let gain = match &self.fixed_gain {
+        let gain = match fixed_gain {
             Some(gain) => gain.clone(),
             // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
             None => s.cholesky().solve(&pht.transpose()).transpose(),

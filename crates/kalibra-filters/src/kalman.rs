@@ -119,6 +119,7 @@ pub(crate) fn measurement_update<'a, N: Dim, M: Dim, H: Measurement<N, M>>(
     measurement: &H,
     z: &OVector<f64, M>,
     h_matrix: impl FnOnce(usize, &OVector<f64, N>) -> OMatrix<f64, M, N>,
+    fixed_gain: Option<&OMatrix<f64, N, M>>,
 ) -> Result<&'a StepRecord<N, M>, FilterError>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -130,7 +131,7 @@ where
     let nu = measurement.residual(z, &zhat);
     let h = h_matrix(k, x);
     let r = measurement.noise_cov(k, x);
-    core.update(zhat, nu, h, r)
+    core.update(zhat, nu, h, r, fixed_gain)
 }
 
 /// The accessors both filters forward to their core.
@@ -168,7 +169,13 @@ where
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let measurement = &self.measurement;
-        measurement_update(&mut self.core, measurement, z, |k, _| measurement.matrix(k))
+        measurement_update(
+            &mut self.core,
+            measurement,
+            z,
+            |k, _| measurement.matrix(k),
+            None,
+        )
     }
 }
 
@@ -191,8 +198,12 @@ where
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let measurement = &self.measurement;
-        measurement_update(&mut self.core, measurement, z, |k, x| {
-            measurement.jacobian(k, x)
-        })
+        measurement_update(
+            &mut self.core,
+            measurement,
+            z,
+            |k, x| measurement.jacobian(k, x),
+            None,
+        )
     }
 }
