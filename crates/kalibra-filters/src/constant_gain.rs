@@ -142,14 +142,7 @@ where
     crate::kalman::core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        let k = self.core.step();
-        let x = self.core.mean();
-        let x_pred = self.dynamics.transition(k, x);
-        self.core.predict(
-            x_pred,
-            self.dynamics.jacobian(k, x),
-            self.dynamics.noise_cov(k),
-        )
+        crate::kalman::jacobian_predict(&mut self.core, &self.dynamics)
     }
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {

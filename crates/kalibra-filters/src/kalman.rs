@@ -134,6 +134,20 @@ where
     core.update(zhat, nu, h, r, fixed_gain)
 }
 
+/// The prediction of the filters that linearise `f` at the estimate (EKF, constant-gain KF).
+pub(crate) fn jacobian_predict<N: Dim, M: Dim, D: Dynamics<N>>(
+    core: &mut KalmanCore<N, M>,
+    dynamics: &D,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let k = core.step();
+    let x = core.mean();
+    let x_pred = dynamics.transition(k, x);
+    core.predict(x_pred, dynamics.jacobian(k, x), dynamics.noise_cov(k))
+}
+
 /// The accessors both filters forward to their core.
 macro_rules! core_accessors {
     () => {
@@ -186,14 +200,7 @@ where
     core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        let k = self.core.step();
-        let x = self.core.mean();
-        let x_pred = self.dynamics.transition(k, x);
-        self.core.predict(
-            x_pred,
-            self.dynamics.jacobian(k, x),
-            self.dynamics.noise_cov(k),
-        )
+        jacobian_predict(&mut self.core, &self.dynamics)
     }
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {

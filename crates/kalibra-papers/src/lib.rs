@@ -60,6 +60,14 @@ pub enum PaperError {
     Harness(String),
 }
 
+/// Mean and sample standard deviation (divisor `n - 1`, at least 1) of a Monte Carlo sample.
+pub(crate) fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let n = values.clone().count() as f64;
+    let mean = values.clone().sum::<f64>() / n;
+    let var = values.map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, var.sqrt())
+}
+
 impl From<kalibra_sim::SimError<PaperError>> for PaperError {
     fn from(e: kalibra_sim::SimError<PaperError>) -> Self {
         match e {

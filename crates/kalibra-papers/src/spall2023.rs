@@ -380,15 +380,18 @@ where
     out
 }
 
-/// The three tests on the batch means of one error series.
-fn tests(series: &[f64], config: &Config) -> Result<[TestResult; 3], PaperError> {
+/// The three tests on the batch means of one error series, and the number of batch means.
+fn tests(series: &[f64], config: &Config) -> Result<([TestResult; 3], usize), PaperError> {
     let means = batch_means(series, config.batch, config.burn_in)?;
     let half = means.len() / 2;
-    Ok([
-        runs_test(&means)?,
-        paired_t_test(&means[..half], &means[half..2 * half])?,
-        ks_two_sample(&means[..half], &means[half..2 * half])?,
-    ])
+    Ok((
+        [
+            runs_test(&means)?,
+            paired_t_test(&means[..half], &means[half..2 * half])?,
+            ks_two_sample(&means[..half], &means[half..2 * half])?,
+        ],
+        means.len(),
+    ))
 }
 
 /// What one full trajectory yields: the surrogate half-widths and the test p-values.
@@ -440,9 +443,9 @@ where
     let mut count = 0;
     for (a, run) in runs.iter().enumerate() {
         for i in 0..3 {
-            let t = tests(&run.errors[i], config)?;
+            let (t, means) = tests(&run.errors[i], config)?;
             p[3 * a + i] = [t[0].p_value, t[1].p_value, t[2].p_value];
-            count = batch_means(&run.errors[i], config.batch, config.burn_in)?.len();
+            count = means;
         }
     }
     Ok(TrajectoryOutcome {
@@ -532,7 +535,6 @@ where
         MonteCarlo::new(config.replicates, config.seed.wrapping_add(1)).threads(config.threads);
     let reps = replicates.map(|_, rng| replicate(&make_axes()?, config.steps, rng))?;
 
-    let z = first.half_widths.map(|h| h / 1.959_963_984_540_054);
     let mut q025 = [0.0; 9];
     let mut q975 = [0.0; 9];
     let mut ekf_hw = [0.0; 9];
@@ -540,7 +542,9 @@ where
     let mut cov_p = [0.0; 9];
     let mut densities = Vec::with_capacity(9);
     let n = reps.len() as f64;
+    // The standard normal quantile of the intervals (1.959964 at 95%).
     let zq = gaussian_half_widths(&kalibra_linalg::Matrix1::new(1.0), CONFIDENCE)?[0];
+    let sd = first.half_widths.map(|h| h / zq);
     for i in 0..9 {
         let mut e: Vec<f64> = reps.iter().map(|(e, _)| e[i]).collect();
         cov_s[i] = e.iter().filter(|v| v.abs() <= first.half_widths[i]).count() as f64 / n;
@@ -550,7 +554,7 @@ where
             .count() as f64
             / n;
         ekf_hw[i] = reps.iter().map(|(_, var)| zq * var[i].sqrt()).sum::<f64>() / n;
-        densities.push(density(&e, z[i], config.density_bins));
+        densities.push(density(&e, sd[i], config.density_bins));
         e.sort_by(f64::total_cmp);
         q025[i] = quantile(&e, 0.025);
         q975[i] = quantile(&e, 0.975);
@@ -563,13 +567,11 @@ where
     let (runs, t, ks) = (rates(0), rates(1), rates(2));
     let overall = (runs.iter().chain(&t).chain(&ks).sum::<f64>()) / 27.0;
     let spread: [f64; 9] = std::array::from_fn(|i| {
-        let v: Vec<f64> = rest.iter().map(|o| o.half_widths[i]).collect();
-        if v.len() < 2 {
+        if rest.len() < 2 {
             return f64::NAN;
         }
-        let mean = v.iter().sum::<f64>() / v.len() as f64;
-        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
-        var.sqrt() / mean
+        let (mean, sd) = crate::mean_std(rest.iter().map(|o| o.half_widths[i]));
+        sd / mean
     });
     Ok(ReadingReport {
         reading: *reading,
