@@ -55,6 +55,22 @@ enum Phase {
     Prior,
 }
 
+/// An update computed outside the core (unscented, shifted Rayleigh): what the step record
+/// stores.
+pub(crate) struct UpdateParts<N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    pub(crate) zhat: OVector<f64, M>,
+    pub(crate) innovation: OVector<f64, M>,
+    pub(crate) h: OMatrix<f64, M, N>,
+    pub(crate) r: OMatrix<f64, M, M>,
+    pub(crate) s: Covariance<M>,
+    pub(crate) gain: OMatrix<f64, N, M>,
+    pub(crate) mean: OVector<f64, N>,
+    pub(crate) cov: OMatrix<f64, N, N>,
+}
+
 /// The state of a Kalman-type filter, kept inside one step record so that a step writes each
 /// result once, where the record needs it, and copies nothing twice (with `Const` sizes the
 /// record is about a kilobyte: copying it around per step cost a quarter of the W1 run time).
@@ -170,8 +186,7 @@ where
         f: OMatrix<f64, N, N>,
         q: OMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
-        let k = self.record.k;
-        let rec = &mut self.record;
+        let rec = &self.record;
         let (propagated, noise) = match self.phase {
             Phase::Posterior => (propagate(&f, &rec.posterior.cov), q),
             // A second prediction without an update: carry both parts.
@@ -180,6 +195,31 @@ where
                 propagate(&f, &rec.process_noise) + q,
             ),
         };
+        self.predict_split(x_pred, f, propagated, noise)
+    }
+
+    /// Whether the current estimate is a prior (a prediction ran since the last update).
+    pub(crate) fn is_prior(&self) -> bool {
+        self.phase == Phase::Prior
+    }
+
+    /// The parts of the current prior covariance: carried from the last posterior, and process
+    /// noise added since (both meaningful only when [`KalmanCore::is_prior`]).
+    pub(crate) fn prior_split(&self) -> (&OMatrix<f64, N, N>, &OMatrix<f64, N, N>) {
+        (&self.record.propagated, &self.record.process_noise)
+    }
+
+    /// Predicts from step `k` to `k + 1` given the predicted mean, the Jacobian to record, and
+    /// the prior covariance already split into its propagated and process-noise parts (the
+    /// unscented prediction computes the first part itself).
+    pub(crate) fn predict_split(
+        &mut self,
+        x_pred: OVector<f64, N>,
+        f: OMatrix<f64, N, N>,
+        propagated: OMatrix<f64, N, N>,
+        noise: OMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        let k = self.record.k;
         let mut p = &propagated + &noise;
         symmetrize(&mut p);
         // Non-finite inputs always reach the outputs, so check the outputs on the hot path and
@@ -192,6 +232,7 @@ where
                 step: k + 1,
             });
         }
+        let rec = &mut self.record;
         rec.prior.mean = x_pred;
         rec.prior.cov = p;
         rec.f = f;
@@ -200,6 +241,59 @@ where
         rec.k = k + 1;
         self.phase = Phase::Prior;
         Ok(())
+    }
+
+    /// Makes the current estimate the prior of an update and returns it. After an update with
+    /// no prediction before it (a filter that starts by updating), the prior is the current
+    /// estimate, all of it counted as "propagated" (`B_k = 0`).
+    pub(crate) fn prepare_update(&mut self) -> &Estimate<N> {
+        if self.phase == Phase::Posterior {
+            let rec = &mut self.record;
+            rec.prior = rec.posterior.clone();
+            rec.propagated = rec.prior.cov.clone();
+            rec.process_noise.fill(0.0);
+            rec.f.fill_with_identity();
+            self.phase = Phase::Prior;
+        }
+        &self.record.prior
+    }
+
+    /// Stores an update computed by the caller (the unscented and shifted Rayleigh filters) and
+    /// returns its record. The posterior is symmetrised here and checked for finiteness.
+    pub(crate) fn commit_update(
+        &mut self,
+        parts: UpdateParts<N, M>,
+    ) -> Result<&StepRecord<N, M>, FilterError> {
+        let k = self.record.k;
+        let UpdateParts {
+            zhat,
+            innovation,
+            h,
+            r,
+            s,
+            gain,
+            mean,
+            mut cov,
+        } = parts;
+        symmetrize(&mut cov);
+        if !(all_finite(&mean) && all_finite(&cov)) {
+            return Err(FilterError::NonFinite {
+                what: "posterior estimate",
+                step: k,
+            });
+        }
+        let rec = &mut self.record;
+        rec.posterior.mean = mean;
+        rec.posterior.cov = cov;
+        rec.predicted_measurement = zhat;
+        rec.innovation = innovation;
+        rec.s = s;
+        rec.gain = gain;
+        rec.h = h;
+        rec.r = r;
+        self.phase = Phase::Posterior;
+        self.has_record = true;
+        Ok(&self.record)
     }
 
     /// Updates at the current step with the predicted measurement, the innovation (residual),
@@ -216,17 +310,8 @@ where
     ) -> Result<&StepRecord<N, M>, FilterError> {
         let k = self.record.k;
         let at = |e| FilterError::at(k, e);
-        if self.phase == Phase::Posterior {
-            // An update with no prediction before it: the prior is the current estimate, all of
-            // it counted as "propagated" (B_k = 0).
-            let rec = &mut self.record;
-            rec.prior = rec.posterior.clone();
-            rec.propagated = rec.prior.cov.clone();
-            rec.process_noise.fill(0.0);
-            rec.f.fill_with_identity();
-            self.phase = Phase::Prior;
-        }
-        let prior = &self.record.prior;
+        let form = self.update;
+        let prior = self.prepare_update();
         let pht = &prior.cov * h.transpose();
         let mut s = &h * &pht + &r;
         symmetrize(&mut s);
@@ -242,7 +327,7 @@ where
             None => s.cholesky().solve(&pht.transpose()).transpose(),
         };
         let x_post = &prior.mean + &gain * &innovation;
-        let p_post = match self.update {
+        let p_post = match form {
             UpdateForm::Joseph => joseph_update(&prior.cov, &gain, &h, &r),
             UpdateForm::Standard => standard_update(&prior.cov, &gain, &h),
         };

@@ -34,6 +34,15 @@ pub enum FilterError {
         /// The size given.
         found: usize,
     },
+    /// A filter parameter is out of its valid range (a sigma-point spread `n + lambda <= 0`,
+    /// an empty or non-finite kappa grid).
+    #[error("invalid parameter {name} = {value}")]
+    InvalidParameter {
+        /// Which parameter.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
     /// The initial estimate failed its check.
     #[error("invalid initial estimate: {0}")]
     Initial(#[source] LinalgError),

@@ -151,6 +151,9 @@ where
 /// The accessors both filters forward to their core.
 macro_rules! core_accessors {
     () => {
+        $crate::kalman::core_accessors!(M);
+    };
+    ($m:ty) => {
         fn step_index(&self) -> usize {
             self.core.step()
         }
@@ -160,7 +163,7 @@ macro_rules! core_accessors {
         fn covariance(&self) -> &OMatrix<f64, N, N> {
             self.core.cov()
         }
-        fn last_record(&self) -> Option<&StepRecord<N, M>> {
+        fn last_record(&self) -> Option<&StepRecord<N, $m>> {
             self.core.record()
         }
     };

@@ -14,6 +14,11 @@
 //!   `J2k` and `tr(N_k)` of one update, [`JHorizon`] averages them over a horizon with the
 //!   process-noise level `nq`, and [`crossover`] finds where `J1` and `J2` cross along a sweep
 //!   of the process-noise scale.
+//! * Monte Carlo credibility per step (paper 001): [`Credibility`] keeps every run's error and
+//!   NEES and gives, per step ([`CredibilityStep`]), the ANEES, the non-credibility index NCI
+//!   of Li and Zhao against the mean-square-error matrix (a pseudo-inverse where that matrix is
+//!   singular) and the median NEES, with [`consistent_median_nees`] for reference, and their
+//!   means over a range of steps ([`CredibilityAverage`]).
 //! * [`itse`]: the integral of time-weighted squared error.
 //! * Error series of one run (paper 002): [`instantaneous_errors`] (`e = xhat - x`, the
 //!   estimate minus the truth, eq. 14), [`rmse`] and [`rmse_per_state`] over time (eq. 15), and
@@ -47,6 +52,7 @@
 
 mod accumulate;
 mod consistency;
+mod credibility;
 mod error;
 mod innovation;
 mod itse;
@@ -54,6 +60,7 @@ mod window;
 
 pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
 pub use consistency::{ChiSquareBand, nees, nis};
+pub use credibility::{Credibility, CredibilityAverage, CredibilityStep, consistent_median_nees};
 pub use error::MetricsError;
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
 pub use itse::itse;

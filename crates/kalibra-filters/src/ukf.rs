@@ -1,0 +1,676 @@
+//! The unscented Kalman filter, with a fixed sigma-point set or with the scaling parameter
+//! `kappa` chosen at every update from a grid (paper 001, section III-C).
+
+use kalibra_linalg::{
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, SqrtMethod,
+    check_finite, propagate, sigma_sqrt, symmetrize,
+};
+use kalibra_models::{Dynamics, Measurement};
+
+use crate::core::{KalmanCore, UpdateParts};
+use crate::kalman::{core_accessors, jacobian_predict};
+use crate::{Estimate, Filter, FilterError, FilterOptions, StepRecord};
+
+/// A sigma-point set, as a value: which points and weights the unscented transform uses.
+///
+/// Both sets place `2n + 1` points at the mean and at `x +- sqrt(n + lambda) L_j`, with
+/// `L L^T = P` the lower Cholesky factor and `L_j` its columns.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SigmaSet {
+    /// The symmetric set of paper 001, eqs 16-18 (Julier and Uhlmann): `lambda = kappa`,
+    /// `W_0 = kappa / (n + kappa)`, `W_i = 1 / (2 (n + kappa))`, the same weights for the mean
+    /// and the covariance.
+    Symmetric {
+        /// The scaling parameter `kappa` (`n + kappa > 0`).
+        kappa: f64,
+    },
+    /// The scaled set (Julier 2002, Wan and van der Merwe 2000):
+    /// `lambda = alpha^2 (n + kappa) - n`, `W_0^m = lambda / (n + lambda)`,
+    /// `W_0^c = W_0^m + 1 - alpha^2 + beta`, `W_i = 1 / (2 (n + lambda))`.
+    Scaled {
+        /// Spread `alpha > 0` (small: points close to the mean).
+        alpha: f64,
+        /// Prior knowledge of the distribution (2 is optimal for a Gaussian).
+        beta: f64,
+        /// Secondary scaling `kappa`.
+        kappa: f64,
+    },
+}
+
+/// The weights and spread of a [`SigmaSet`] for a state dimension `n`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SigmaWeights {
+    /// `sqrt(n + lambda)`: the points sit at `x +- spread L_j`.
+    pub spread: f64,
+    /// Weight of the central point in the mean.
+    pub mean_center: f64,
+    /// Weight of the central point in the covariance.
+    pub cov_center: f64,
+    /// Weight of each of the other `2n` points (mean and covariance).
+    pub other: f64,
+}
+
+impl SigmaSet {
+    /// Paper 001's recommendation (after Julier and Uhlmann): the symmetric set with
+    /// `kappa = 3 - n` for `n <= 3` and `kappa = 0` otherwise.
+    pub fn recommended(n: usize) -> Self {
+        let kappa = if n <= 3 { 3.0 - n as f64 } else { 0.0 };
+        SigmaSet::Symmetric { kappa }
+    }
+
+    /// The set's `kappa`.
+    pub fn kappa(&self) -> f64 {
+        match *self {
+            SigmaSet::Symmetric { kappa } | SigmaSet::Scaled { kappa, .. } => kappa,
+        }
+    }
+
+    /// The same set with another `kappa` (what the adaptive filters vary).
+    #[must_use]
+    pub fn with_kappa(self, kappa: f64) -> Self {
+        match self {
+            SigmaSet::Symmetric { .. } => SigmaSet::Symmetric { kappa },
+            SigmaSet::Scaled { alpha, beta, .. } => SigmaSet::Scaled { alpha, beta, kappa },
+        }
+    }
+
+    /// The weights for state dimension `n`.
+    ///
+    /// ```
+    /// use kalibra_filters::SigmaSet;
+    /// let w = SigmaSet::Symmetric { kappa: 1.0 }.weights(2)?;
+    /// assert_eq!((w.mean_center, w.other), (1.0 / 3.0, 1.0 / 6.0));
+    /// assert!((w.spread - 3f64.sqrt()).abs() < 1e-15);
+    /// # Ok::<(), kalibra_filters::FilterError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] for a non-finite parameter, `alpha <= 0`, or
+    /// `n + lambda <= 0` (no real spread).
+    pub fn weights(&self, n: usize) -> Result<SigmaWeights, FilterError> {
+        let nf = n as f64;
+        let (lambda, extra) = match *self {
+            SigmaSet::Symmetric { kappa } => {
+                finite("kappa", kappa)?;
+                (kappa, 0.0)
+            }
+            SigmaSet::Scaled { alpha, beta, kappa } => {
+                finite("kappa", kappa)?;
+                finite("beta", beta)?;
+                finite("alpha", alpha)?;
+                if alpha <= 0.0 {
+                    return Err(FilterError::InvalidParameter {
+                        name: "alpha",
+                        value: alpha,
+                    });
+                }
+                (
+                    alpha * alpha * (nf + kappa) - nf,
+                    1.0 - alpha * alpha + beta,
+                )
+            }
+        };
+        let total = nf + lambda;
+        if !(total > 0.0 && total.is_finite()) {
+            return Err(FilterError::InvalidParameter {
+                name: "n + lambda",
+                value: total,
+            });
+        }
+        let mean_center = lambda / total;
+        Ok(SigmaWeights {
+            spread: total.sqrt(),
+            mean_center,
+            cov_center: mean_center + extra,
+            other: 0.5 / total,
+        })
+    }
+}
+
+fn finite(name: &'static str, value: f64) -> Result<(), FilterError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(FilterError::InvalidParameter { name, value })
+    }
+}
+
+/// How the UKF predicts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum UkfPrediction {
+    /// Sigma points of the posterior through `f_k` (the general UKF).
+    #[default]
+    Unscented,
+    /// `x- = f_k(x+)`, `P- = F P+ F^T + Q` with the Jacobian `F` (exact for linear dynamics, and
+    /// what paper 001's Alg. 1 does: only the measurement statistics are unscented). Cheaper.
+    Linearised,
+}
+
+/// The criterion an adaptive UKF minimises over its kappa grid at every update (paper 001,
+/// section III-C). `nu = z - zhat(kappa)`, `Pz(kappa)`, `Pxz(kappa)` are the unscented
+/// measurement statistics, `x+(kappa)` the updated mean.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum KappaCriterion {
+    /// Maximum likelihood, eq 23 (UKF-ML): minimise `log|Pz| + nu^T Pz^-1 nu`.
+    MaximumLikelihood,
+    /// Maximum posterior probability, eq 26 with the inverses the printed formula lost
+    /// restored (UKF-MPP): minimise
+    /// `nu^T U nu + e^T R^-1 e - nu^T Pz^-1 nu - 1/2 log|Pz|`,
+    /// `U = Pz^-1 Pxz^T P-^-1 Pxz Pz^-1`, `e = z - h(x+(kappa))`.
+    /// The coefficient 1/2 on the log-determinant is the printed one (a full derivation of
+    /// `-2 log p(x+|z)` gives 1); kept so that results compare with the paper and with the
+    /// independent implementation's traces.
+    MaximumPosterior,
+    /// The pure MAP reading of eq 24: the two terms of eq 26 that come from the evidence
+    /// `p(z_k | z^{k-1})` dropped, minimise `nu^T U nu + e^T R^-1 e`. Not in the paper; the
+    /// spec found that it, not the restored eq 26, reproduces the paper's UKF-MPP numbers in
+    /// problem III.
+    PureMap,
+}
+
+/// The candidate values of an adaptive UKF's kappa.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KappaGrid {
+    values: Vec<f64>,
+}
+
+impl KappaGrid {
+    /// A grid of the given values, in increasing order (ties in the criterion go to the
+    /// smallest kappa, so the order matters).
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] for an empty grid, a non-finite value, or values not
+    /// strictly increasing.
+    pub fn new(values: Vec<f64>) -> Result<Self, FilterError> {
+        if values.is_empty() {
+            return Err(FilterError::InvalidParameter {
+                name: "kappa grid length",
+                value: 0.0,
+            });
+        }
+        for (i, &v) in values.iter().enumerate() {
+            finite("kappa grid value", v)?;
+            if i > 0 && v <= values[i - 1] {
+                return Err(FilterError::InvalidParameter {
+                    name: "kappa grid (not increasing)",
+                    value: v,
+                });
+            }
+        }
+        Ok(Self { values })
+    }
+
+    /// `count` equidistant values from `min` to `max` inclusive.
+    ///
+    /// # Errors
+    /// As [`KappaGrid::new`]; `count == 0`, or `count > 1` with `max <= min`.
+    pub fn equidistant(min: f64, max: f64, count: usize) -> Result<Self, FilterError> {
+        let values = match count {
+            0 => Vec::new(),
+            1 => vec![min],
+            _ => {
+                let step = (max - min) / (count - 1) as f64;
+                (0..count).map(|i| min + step * i as f64).collect()
+            }
+        };
+        Self::new(values)
+    }
+
+    /// Paper 001's grid for state dimension `n`: 10 equidistant values on
+    /// `[0, 19 n]`. The upper end keeps every non-central weight `W_i = 1/(2(n + kappa))` at
+    /// least `0.025 / n`; the lower end keeps all weights non-negative, which keeps the
+    /// unscented covariances positive semi-definite (the paper says only that its minimum
+    /// "ensures positive definiteness").
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] for `n == 0`.
+    pub fn paper001(n: usize) -> Result<Self, FilterError> {
+        if n == 0 {
+            return Err(FilterError::InvalidParameter {
+                name: "state dimension",
+                value: 0.0,
+            });
+        }
+        Self::equidistant(0.0, 19.0 * n as f64, 10)
+    }
+
+    /// The values.
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+}
+
+/// The unscented Kalman filter (Julier and Uhlmann), paper 001 eqs 16-22.
+///
+/// Update: the `2n + 1` sigma points of the prior through `h_k`, each measurement taken as a
+/// residual from the central point's (so sigma bearings are unwrapped around the central
+/// bearing and never straddle +-pi), `zhat = Z_0 + sum W_i (Z_i - Z_0)`,
+/// `Pz = sum W_i (Z_i - zhat)(Z_i - zhat)^T + R`, `Pxz = sum W_i (X_i - x-)(Z_i - zhat)^T`,
+/// `K = Pxz Pz^-1`, `x+ = x- + K nu`, `P+ = P- - K Pz K^T` (eq 7), symmetrised. `R` is the
+/// model's `R_k` at the prior mean.
+///
+/// With [`Ukf::with_adaptive_kappa`] the update is computed for every kappa of a grid and
+/// the one minimising a [`KappaCriterion`] is kept (UKF-ML, UKF-MPP); ties go to the smallest
+/// kappa and kappas whose criterion is not finite are never chosen.
+///
+/// The step record is the Kalman filter's: `S = Pz`, `K`, and as `H` the statistical
+/// linearisation `Pxz^T P-^-1` (equal to `H` for a linear measurement; the model's Jacobian at
+/// the prior mean when `P-` is singular). On linear-Gaussian models the UKF equals the KF for
+/// any valid sigma set (tested).
+///
+/// ```
+/// use kalibra_filters::{Filter, SigmaSet, Ukf};
+/// use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary};
+/// use kalibra_linalg::{Matrix4, U4, Vector1, Vector2, Vector4};
+///
+/// let cv = Kinematic::constant_velocity(2, 1.0)?.dynamics(U4)?;
+/// let sensor = Bearing::new(U4, [0, 1], BearingReference::XAxis, 1e-4, Stationary(Vector2::zeros()))?;
+/// let x0 = Vector4::new(100.0, 10.0, -1.0, 0.0);
+/// let mut ukf = Ukf::new(cv, sensor, x0, Matrix4::identity() * 10.0, SigmaSet::recommended(4))?;
+/// ukf.predict()?;
+/// let record = ukf.update(&Vector1::new(0.11))?;
+/// assert!(record.nis() >= 0.0);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Ukf<N: Dim, M: Dim, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    dynamics: D,
+    measurement: H,
+    core: KalmanCore<N, M>,
+    set: SigmaSet,
+    prediction: UkfPrediction,
+    adaptive: Option<(KappaCriterion, KappaGrid)>,
+    last_kappa: Option<f64>,
+    // Scratch for the 2n transformed points, allocated once so that a step allocates nothing
+    // on the fixed-size path.
+    scratch_z: Vec<OVector<f64, M>>,
+    scratch_x: Vec<OVector<f64, N>>,
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Ukf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// A UKF at step 0 with initial mean `x0`, covariance `p0` and sigma set `set`, predicting
+    /// with [`UkfPrediction::Unscented`].
+    ///
+    /// # Errors
+    /// [`FilterError::Initial`] for a bad initial estimate (as [`crate::Kf::new`]),
+    /// [`FilterError::InvalidParameter`] for a sigma set invalid at this dimension.
+    pub fn new(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+    ) -> Result<Self, FilterError> {
+        Self::with_options(dynamics, measurement, x0, p0, set, FilterOptions::default())
+    }
+
+    /// As [`Ukf::new`] with [`FilterOptions`] (the first step and the initial check; the
+    /// update form is always eq 7's `P- - K Pz K^T`, since the UKF has no `H` for a Joseph
+    /// form).
+    ///
+    /// # Errors
+    /// As [`Ukf::new`].
+    pub fn with_options(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+        options: FilterOptions,
+    ) -> Result<Self, FilterError> {
+        let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
+        set.weights(n.value())?;
+        let core = KalmanCore::new(n, m, x0, p0, options)?;
+        let zeros_z = OVector::<f64, M>::zeros_generic(m, nalgebra::U1);
+        let zeros_x = OVector::<f64, N>::zeros_generic(n, nalgebra::U1);
+        Ok(Self {
+            dynamics,
+            measurement,
+            core,
+            set,
+            prediction: UkfPrediction::default(),
+            adaptive: None,
+            last_kappa: None,
+            scratch_z: vec![zeros_z; 2 * n.value()],
+            scratch_x: vec![zeros_x; 2 * n.value()],
+        })
+    }
+
+    /// The same filter predicting as `prediction` says.
+    #[must_use]
+    pub fn with_prediction(mut self, prediction: UkfPrediction) -> Self {
+        self.prediction = prediction;
+        self
+    }
+
+    /// The same filter choosing kappa at every update: the value of `grid` minimising
+    /// `criterion` (UKF-ML, UKF-MPP of paper 001). The prediction keeps the set's own kappa.
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] if a grid value gives an invalid sigma set.
+    pub fn with_adaptive_kappa(
+        mut self,
+        criterion: KappaCriterion,
+        grid: KappaGrid,
+    ) -> Result<Self, FilterError> {
+        let n = self.dynamics.state_dim().value();
+        for &kappa in grid.values() {
+            self.set.with_kappa(kappa).weights(n)?;
+        }
+        self.adaptive = Some((criterion, grid));
+        Ok(self)
+    }
+
+    /// The sigma set (its kappa is the one used when not adapting, and in the prediction).
+    pub fn sigma_set(&self) -> SigmaSet {
+        self.set
+    }
+
+    /// The kappa of the last update (the chosen one when adapting); `None` before the first.
+    pub fn last_kappa(&self) -> Option<f64> {
+        self.last_kappa
+    }
+
+    /// The dynamics model.
+    pub fn dynamics(&self) -> &D {
+        &self.dynamics
+    }
+
+    /// The measurement model.
+    pub fn measurement(&self) -> &H {
+        &self.measurement
+    }
+
+    fn unscented_predict(&mut self) -> Result<(), FilterError> {
+        let k = self.core.step();
+        let n = self.dynamics.state_dim().value();
+        let w = self.set.weights(n)?;
+        let x = self.core.mean().clone();
+        let (l, _) = sigma_sqrt(self.core.cov(), "covariance for sigma points")
+            .map_err(|e| FilterError::at(k, e))?;
+        let x0 = self.dynamics.transition(k, &x);
+        for j in 0..n {
+            let d = l.column(j) * w.spread;
+            self.scratch_x[j] = self.dynamics.transition(k, &(&x + &d));
+            self.scratch_x[n + j] = self.dynamics.transition(k, &(&x - &d));
+        }
+        let mut mean = &x0 * w.mean_center;
+        for xi in &self.scratch_x {
+            mean += xi * w.other;
+        }
+        let d0 = &x0 - &mean;
+        let mut cov = &d0 * d0.transpose() * w.cov_center;
+        for xi in &self.scratch_x {
+            let d = xi - &mean;
+            cov += &d * d.transpose() * w.other;
+        }
+        symmetrize(&mut cov);
+        let f = self.dynamics.jacobian(k, &x);
+        let q = self.dynamics.noise_cov(k);
+        let (propagated, noise) = if self.core.is_prior() {
+            // A second prediction without an update: carry the split through the Jacobian and
+            // count what the unscented transform adds beyond it as propagated, so the parts
+            // still sum to the unscented prior (and equal the KF's split for linear f).
+            let (_, old_noise) = self.core.prior_split();
+            let carried_noise = propagate(&f, old_noise);
+            (&cov - &carried_noise, carried_noise + q)
+        } else {
+            (cov, q)
+        };
+        self.core.predict_split(mean, f, propagated, noise)
+    }
+
+    fn unscented_update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+        let k = self.core.step();
+        self.core
+            .check_measurement(self.measurement.meas_dim().value(), z)?;
+        let prior: Estimate<N> = self.core.prepare_update().clone();
+        let n = prior.mean.nrows();
+        let (l, method) = sigma_sqrt(&prior.cov, "prior covariance for sigma points")
+            .map_err(|e| FilterError::at(k, e))?;
+        let r = self.measurement.noise_cov(k, &prior.mean);
+        check_finite(&r, "measurement noise covariance R").map_err(|e| FilterError::at(k, e))?;
+        let z0 = self.measurement.measure(k, &prior.mean);
+
+        let best = match &self.adaptive {
+            None => {
+                let kappa = self.set.kappa();
+                let w = self.set.weights(n)?;
+                let c = candidate(
+                    &self.measurement,
+                    &mut self.scratch_z,
+                    k,
+                    &prior,
+                    &l,
+                    &z0,
+                    &r,
+                    z,
+                    w,
+                )?;
+                (kappa, c)
+            }
+            Some((criterion, grid)) => {
+                let r_chol = Covariance::from_symmetric(r.clone(), "R").ok();
+                let mut best: Option<(f64, f64, Candidate<N, M>)> = None;
+                let mut first_error = None;
+                for &kappa in grid.values() {
+                    let w = self.set.with_kappa(kappa).weights(n)?;
+                    let c = match candidate(
+                        &self.measurement,
+                        &mut self.scratch_z,
+                        k,
+                        &prior,
+                        &l,
+                        &z0,
+                        &r,
+                        z,
+                        w,
+                    ) {
+                        Ok(c) => c,
+                        Err(e) => {
+                            first_error.get_or_insert(e);
+                            continue;
+                        }
+                    };
+                    let value = criterion_value(
+                        *criterion,
+                        &self.measurement,
+                        k,
+                        z,
+                        &c,
+                        &l,
+                        method,
+                        r_chol.as_ref(),
+                    );
+                    // Strictly smaller: ties keep the smaller kappa; NaN never wins.
+                    if value.is_finite() && best.as_ref().is_none_or(|(b, _, _)| value < *b) {
+                        best = Some((value, kappa, c));
+                    }
+                }
+                match best {
+                    Some((_, kappa, c)) => (kappa, c),
+                    None => {
+                        return Err(first_error.unwrap_or(FilterError::NonFinite {
+                            what: "adaptive kappa criterion (every grid value)",
+                            step: k,
+                        }));
+                    }
+                }
+            }
+        };
+        let (kappa, c) = best;
+        // The statistical linearisation H = Pxz^T P-^-1, through the Cholesky factor.
+        let h = match method {
+            SqrtMethod::Cholesky => l
+                .solve_lower_triangular(&c.pxz)
+                .and_then(|y| l.tr_solve_lower_triangular(&y))
+                .map(|ht| ht.transpose()),
+            _ => None,
+        }
+        .unwrap_or_else(|| self.measurement.jacobian(k, &prior.mean));
+        self.last_kappa = Some(kappa);
+        self.core.commit_update(UpdateParts {
+            zhat: c.zhat,
+            innovation: c.nu,
+            h,
+            r,
+            s: c.s,
+            gain: c.gain,
+            mean: c.mean,
+            cov: c.cov,
+        })
+    }
+}
+
+/// The update at one kappa.
+#[derive(Clone, Debug)]
+struct Candidate<N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    zhat: OVector<f64, M>,
+    nu: OVector<f64, M>,
+    s: Covariance<M>,
+    pxz: OMatrix<f64, N, M>,
+    gain: OMatrix<f64, N, M>,
+    mean: OVector<f64, N>,
+    cov: OMatrix<f64, N, N>,
+}
+
+/// The unscented measurement update with weights `w`, the prior's factor `l` and the central
+/// measurement `z0` given (they do not depend on kappa).
+#[allow(clippy::too_many_arguments)]
+fn candidate<N: Dim, M: Dim, H: Measurement<N, M>>(
+    measurement: &H,
+    scratch: &mut [OVector<f64, M>],
+    k: usize,
+    prior: &Estimate<N>,
+    l: &OMatrix<f64, N, N>,
+    z0: &OVector<f64, M>,
+    r: &OMatrix<f64, M, M>,
+    z: &OVector<f64, M>,
+    w: SigmaWeights,
+) -> Result<Candidate<N, M>, FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let n = prior.mean.nrows();
+    let x = &prior.mean;
+    // Sigma measurements as residuals from the central one: unwrapped around it.
+    for j in 0..n {
+        let d = l.column(j) * w.spread;
+        scratch[j] = measurement.residual(&measurement.measure(k, &(x + &d)), z0);
+        scratch[n + j] = measurement.residual(&measurement.measure(k, &(x - &d)), z0);
+    }
+    let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, nalgebra::U1);
+    for d in scratch.iter() {
+        dbar += d * w.other;
+    }
+    let mut pz = &dbar * dbar.transpose() * w.cov_center;
+    for d in scratch.iter() {
+        let dd = d - &dbar;
+        pz += &dd * dd.transpose() * w.other;
+    }
+    pz += r;
+    symmetrize(&mut pz);
+    // The central point has no state deviation, and dbar cancels between each pair.
+    let mut pxz = OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
+    for j in 0..n {
+        let dz = &scratch[j] - &scratch[n + j];
+        pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
+    }
+    let mut zhat = z0 + &dbar;
+    measurement.normalize(&mut zhat);
+    let nu = measurement.residual(z, &zhat);
+    let s = Covariance::from_symmetric(pz, "innovation covariance Pz").map_err(|e| {
+        let e = if all_ok(&dbar) {
+            e
+        } else {
+            LinalgError::NonFinite {
+                what: "sigma-point measurements",
+            }
+        };
+        FilterError::at(k, e)
+    })?;
+    let gain = s.cholesky().solve(&pxz.transpose()).transpose();
+    let mean = x + &gain * &nu;
+    let cov = &prior.cov - &gain * s.matrix() * gain.transpose();
+    Ok(Candidate {
+        zhat,
+        nu,
+        s,
+        pxz,
+        gain,
+        mean,
+        cov,
+    })
+}
+
+fn all_ok<M: Dim>(v: &OVector<f64, M>) -> bool
+where
+    DefaultAllocator: Alloc<M>,
+{
+    v.iter().all(|x| x.is_finite())
+}
+
+/// The value of `criterion` for one candidate (smaller is better); NaN when it cannot be
+/// evaluated (a singular `P-` or `R` for the posterior criteria).
+#[allow(clippy::too_many_arguments)]
+fn criterion_value<N: Dim, M: Dim, H: Measurement<N, M>>(
+    criterion: KappaCriterion,
+    measurement: &H,
+    k: usize,
+    z: &OVector<f64, M>,
+    c: &Candidate<N, M>,
+    l: &OMatrix<f64, N, N>,
+    method: SqrtMethod,
+    r: Option<&Covariance<M>>,
+) -> f64
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let nis = c.s.quad_form(&c.nu).unwrap_or(f64::NAN);
+    if criterion == KappaCriterion::MaximumLikelihood {
+        return c.s.log_det() + nis;
+    }
+    // nu^T U nu = (K nu)^T P-^-1 (K nu) = |L^-1 K nu|^2: the prior's density at x+.
+    let step = &c.gain * &c.nu;
+    let prior_term = match method {
+        SqrtMethod::Cholesky => l
+            .solve_lower_triangular(&step)
+            .map_or(f64::NAN, |y| y.norm_squared()),
+        _ => f64::NAN,
+    };
+    let e = measurement.residual(z, &measurement.measure(k, &c.mean));
+    let meas_term = r.map_or(f64::NAN, |r| r.quad_form(&e).unwrap_or(f64::NAN));
+    match criterion {
+        KappaCriterion::PureMap => prior_term + meas_term,
+        _ => prior_term + meas_term - nis - 0.5 * c.s.log_det(),
+    }
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M> for Ukf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    core_accessors!();
+
+    fn predict(&mut self) -> Result<(), FilterError> {
+        match self.prediction {
+            UkfPrediction::Unscented => self.unscented_predict(),
+            UkfPrediction::Linearised => jacobian_predict(&mut self.core, &self.dynamics),
+        }
+    }
+
+    fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+        self.unscented_update(z)
+    }
+}

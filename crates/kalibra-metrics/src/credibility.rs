@@ -1,0 +1,981 @@
+//! Monte Carlo credibility of a filter's covariance, per step (paper 001): ANEES, the
+//! non-credibility index NCI of Li and Zhao, and the median NEES. Definitions, numerical
+//! choices and memory are documented at [`Credibility`], the accumulator that computes them.
+
+use std::ops::Range;
+
+use kalibra_linalg::nalgebra::SymmetricEigen;
+use kalibra_linalg::{Alloc, DMatrix, DefaultAllocator, Dim, LinalgError, OMatrix, OVector};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+use crate::{Merge, MetricsError, nees};
+
+/// Iterations of the symmetric QR algorithm allowed per dimension of `Sigma_k`. It takes two
+/// or three per eigenvalue in practice (LAPACK allows 30); running out is reported, not looped
+/// on.
+const EIGEN_ITERATIONS_PER_DIM: usize = 60;
+
+/// Per-step credibility of a filter over Monte Carlo runs: ANEES, the non-credibility index
+/// NCI of Li and Zhao, and the median NEES.
+///
+/// Each run pushes its error and covariance ([`Credibility::push`]), or its error and an
+/// already computed NEES ([`Credibility::push_nees`]), at every step;
+/// [`Credibility::step_summary`] and [`Credibility::summaries`] then give the statistics of
+/// each step ([`CredibilityStep`]), [`Credibility::over_time`] their means over a range of
+/// steps. Partial accumulators of one study combine with [`Merge`], which appends the other's
+/// runs after this one's.
+///
+/// # Definitions
+/// At step `k`, run `i` of `M` has the error `e_i = x_i - xhat_i` (an `n`-vector) and the
+/// filter's covariance `P_i`, so `NEES_i = e_i^T P_i^-1 e_i`. Then
+///
+/// * `ANEES_k = (1 / (n M)) sum_i NEES_i`, 1 for a consistent filter;
+/// * `Sigma_k = (1 / M) sum_i e_i e_i^T`, the Monte Carlo mean-square-error matrix (no mean
+///   removed: a bias counts as error);
+/// * `NCI_k = (1 / M) sum_i [10 log10(e_i^T P_i^-1 e_i) - 10 log10(e_i^T Sigma_k^-1 e_i)]`
+///   (X. R. Li and Z. Zhao, "Measuring estimator's credibility: noncredibility index", FUSION
+///   2006), in decibels: 0 for a filter whose covariance matches the actual mean-square error,
+///   positive for an optimistic filter (`P` too small), negative for a pessimistic one. Scaling
+///   every `P_i` by `1 / c` adds exactly `10 log10 c`. For a consistent filter NCI is about
+///   `(10 / ln 10) (ANEES - 1)`, so it fluctuates with a standard deviation of about
+///   `4.34 sqrt(2 / (n M))` dB;
+/// * the median over runs of `NEES_i / n`, a companion of ANEES that a few diverged runs cannot
+///   move; a consistent filter gives the median of `chi-square(n) / n`
+///   ([`consistent_median_nees`]).
+///
+/// # Singular `Sigma_k`, and runs without a logarithm
+/// `Sigma_k` is singular when every run's error lies in a subspace, for example at the first
+/// step of a problem whose initial error comes from one scalar noise. `Sigma_k^-1` is then the
+/// Moore-Penrose pseudo-inverse `Sigma_k^+` ([`CredibilityStep::mse_rank`] reports the rank
+/// kept). Every `e_i` lies in the range of `Sigma_k`, so `e_i^T Sigma_k^+ e_i` is `M` times
+/// the leverage of run `i` (the diagonal of the projector onto the span of the errors) and
+/// sums to `M rank(Sigma_k)` over the runs.
+///
+/// A run whose `NEES_i` or `e_i^T Sigma_k^+ e_i` is exactly 0 (an error of exactly zero) has no
+/// logarithm: it is left out of NCI, which then averages over the other runs, and counted in
+/// [`CredibilityStep::nci_skipped`]. It still counts in ANEES, the median and `Sigma_k`. If no
+/// run is left, NCI is NaN, never `-inf`.
+///
+/// # Numerical choices
+/// * NEES goes through a Cholesky factor of `P_i` ([`nees`]).
+/// * The pseudo-inverse is taken of `Sigma_k` scaled to unit diagonal (a correlation matrix),
+///   through its symmetric eigen-decomposition: eigenvalues at or below `n eps lambda_max`
+///   (`eps` the `f64` machine epsilon, `lambda_max >= 1` the largest eigenvalue of the
+///   correlation matrix) count as zero, the others are inverted. A component that is exactly 0
+///   in every run takes no part. The scaling changes no `e_i^T Sigma_k^+ e_i` (the projector
+///   onto the span of the errors does not depend on the units of the components), but it makes
+///   the tolerance independent of them: unscaled, a component whose variance is below about
+///   `1e-15` times the largest would be thrown away, whatever its units. A direction kept
+///   although it is only rounding noise (an eigenvalue of order `eps` instead of 0) changes the
+///   quadratic forms by a relative `O(eps)` only, since the errors' components along it are
+///   themselves rounding.
+/// * The errors are divided by their largest magnitude per component before any product, so
+///   the quadratic forms of NCI neither overflow nor underflow; `Sigma_k` itself is reported
+///   in the caller's units ([`CredibilityStep::mse`]), and overflows for errors beyond about
+///   `1e154`.
+/// * Every sum runs over the runs in the order they were pushed and merged, so a study that
+///   merges partial accumulators in a fixed order gets bit-identical summaries whatever the
+///   thread count.
+///
+/// # Memory
+/// Unlike the other accumulators, `Credibility` keeps every run: `Sigma_k` is known only after
+/// the last run, and NCI needs every run's error against it. It holds `n + 1` numbers per run
+/// and step, `O(steps M n)`: 1000 runs of 51 steps of a 4-state filter take 2.0 MB (1.6 MB of
+/// errors, 0.4 MB of NEES).
+///
+/// # Example
+/// ```
+/// use kalibra_linalg::{Matrix2, Vector2};
+/// use kalibra_metrics::Credibility;
+/// let mut cred = Credibility::new(1, 2);
+/// // Four runs whose mean-square-error matrix is Sigma = 0.5 I, with a filter that reports
+/// // P = 0.25 I: half the actual error, so 3 dB optimistic.
+/// let p = Matrix2::identity() * 0.25;
+/// for e in [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]] {
+///     cred.push(0, &Vector2::from(e), &p)?;
+/// }
+/// let s = cred.step_summary(0)?;
+/// assert_eq!((s.runs, s.mse_rank, s.nci_skipped), (4, 2, 0));
+/// assert!((s.anees - 2.0).abs() < 1e-15);
+/// assert!((s.median_nees - 2.0).abs() < 1e-15);
+/// assert!((s.nci - 10.0 * 2f64.log10()).abs() < 1e-12);
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct Credibility {
+    dim: usize,
+    /// Per step, the errors of the runs pushed there, one after the other (`dim` values each).
+    errors: Vec<Vec<f64>>,
+    /// Per step, the NEES of the same runs, in the same order.
+    nees: Vec<Vec<f64>>,
+}
+
+/// The credibility statistics of one step (see [`Credibility`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CredibilityStep {
+    /// Number of runs `M` at the step.
+    pub runs: usize,
+    /// `ANEES = mean NEES / n`; 1 for a consistent filter.
+    pub anees: f64,
+    /// The non-credibility index in decibels, averaged over the runs not skipped; NaN if every
+    /// run was skipped.
+    pub nci: f64,
+    /// Runs left out of NCI because their NEES or `e^T Sigma^+ e` is exactly 0.
+    pub nci_skipped: usize,
+    /// The median over runs of `NEES / n` (the mean of the two middle values for an even
+    /// count); [`consistent_median_nees`] gives its value for a consistent filter.
+    pub median_nees: f64,
+    /// The mean-square-error matrix `Sigma = (1 / M) sum_i e_i e_i^T`, `n x n`, exactly
+    /// symmetric.
+    pub mse: DMatrix<f64>,
+    /// The rank of `Sigma` used for its pseudo-inverse: `n` unless the errors span a subspace.
+    pub mse_rank: usize,
+}
+
+/// Plain means over a range of steps of the per-step statistics ([`Credibility::over_time`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CredibilityAverage {
+    /// Number of steps averaged.
+    pub steps: usize,
+    /// Mean of the per-step ANEES.
+    pub anees: f64,
+    /// Mean of the per-step NCI, in decibels (NaN if a step's NCI is NaN).
+    pub nci: f64,
+    /// Mean of the per-step median of `NEES / n`.
+    pub median_nees: f64,
+}
+
+impl CredibilityAverage {
+    /// Plain means of the statistics of `steps`, each step weighing the same whatever its
+    /// number of runs. A NaN NCI (a step where every run was skipped) gives a NaN mean NCI.
+    ///
+    /// # Errors
+    /// [`MetricsError::Empty`] for no steps.
+    pub fn from_steps(steps: &[CredibilityStep]) -> Result<Self, MetricsError> {
+        if steps.is_empty() {
+            return Err(MetricsError::Empty {
+                what: "credibility steps",
+            });
+        }
+        let len = steps.len() as f64;
+        let mean = |f: fn(&CredibilityStep) -> f64| steps.iter().map(f).sum::<f64>() / len;
+        Ok(Self {
+            steps: steps.len(),
+            anees: mean(|s| s.anees),
+            nci: mean(|s| s.nci),
+            median_nees: mean(|s| s.median_nees),
+        })
+    }
+}
+
+impl Credibility {
+    /// An empty accumulator over `steps` steps of a `dim`-component state.
+    pub fn new(steps: usize, dim: usize) -> Self {
+        Self {
+            dim,
+            errors: vec![Vec::new(); steps],
+            nees: vec![Vec::new(); steps],
+        }
+    }
+
+    /// Number of steps held.
+    pub fn steps(&self) -> usize {
+        self.nees.len()
+    }
+
+    /// Number of state components `n`.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Number of runs pushed at `step` (0 beyond the horizon).
+    pub fn runs(&self, step: usize) -> usize {
+        self.nees.get(step).map_or(0, Vec::len)
+    }
+
+    /// Adds one run's error `e = x - xhat` and covariance `P` at `step`, computing its NEES
+    /// through a Cholesky factor of `P` ([`nees`]). Nothing is stored on failure.
+    ///
+    /// # Errors
+    /// [`MetricsError::StepOutOfRange`] beyond the horizon; [`MetricsError::DimensionMismatch`]
+    /// if the error does not have `dim` components; [`MetricsError::InvalidParameter`] for an
+    /// accumulator of dimension 0; [`MetricsError::Linalg`] if the error is not finite, or `P`
+    /// is not finite, symmetric and positive definite, or (`Dyn`) its size differs from the
+    /// error's.
+    pub fn push<N: Dim>(
+        &mut self,
+        step: usize,
+        error: &OVector<f64, N>,
+        cov: &OMatrix<f64, N, N>,
+    ) -> Result<(), MetricsError>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.check(step, error.as_slice())?;
+        let value = nees(error, cov)?;
+        self.store(step, error.as_slice(), value);
+        Ok(())
+    }
+
+    /// Adds one run's error and its NEES, when the caller has computed the NEES already (from
+    /// a filter's own factor of `P`, say). Nothing is stored on failure.
+    ///
+    /// # Errors
+    /// As [`Credibility::push`] for the step and the error; [`MetricsError::InvalidParameter`]
+    /// for a NEES that is negative or not finite.
+    pub fn push_nees(&mut self, step: usize, error: &[f64], nees: f64) -> Result<(), MetricsError> {
+        self.check(step, error)?;
+        if !(nees.is_finite() && nees >= 0.0) {
+            return Err(MetricsError::InvalidParameter {
+                name: "NEES",
+                value: nees,
+            });
+        }
+        self.store(step, error, nees);
+        Ok(())
+    }
+
+    /// Checks what both pushes need: the step, the error's length and finiteness.
+    fn check(&self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
+        self.check_step(step)?;
+        if self.dim == 0 {
+            return Err(MetricsError::InvalidParameter {
+                name: "state dimension",
+                value: 0.0,
+            });
+        }
+        if error.len() != self.dim {
+            return Err(MetricsError::DimensionMismatch {
+                what: "error vector",
+                expected: self.dim,
+                found: error.len(),
+            });
+        }
+        // Non-short-circuiting, as `kalibra_linalg::all_finite`: no data-dependent branch.
+        if !error.iter().fold(true, |ok, v| ok & v.is_finite()) {
+            return Err(LinalgError::NonFinite {
+                what: "error vector",
+            }
+            .into());
+        }
+        Ok(())
+    }
+
+    fn check_step(&self, step: usize) -> Result<(), MetricsError> {
+        if step < self.steps() {
+            Ok(())
+        } else {
+            Err(MetricsError::StepOutOfRange {
+                step,
+                steps: self.steps(),
+            })
+        }
+    }
+
+    fn store(&mut self, step: usize, error: &[f64], nees: f64) {
+        self.errors[step].extend_from_slice(error);
+        self.nees[step].push(nees);
+    }
+
+    /// The statistics of `step` over the runs pushed there (definitions at [`Credibility`]).
+    /// Costs `O(M n^2 + n^3)` and a sort of the `M` NEES values.
+    ///
+    /// # Errors
+    /// [`MetricsError::StepOutOfRange`] beyond the horizon; [`MetricsError::Empty`] if no run
+    /// was pushed at `step`; [`MetricsError::Linalg`] with [`LinalgError::NotConvergent`] if
+    /// the eigen-decomposition of `Sigma` does not converge (not seen in practice).
+    pub fn step_summary(&self, step: usize) -> Result<CredibilityStep, MetricsError> {
+        self.check_step(step)?;
+        let (errors, nees) = (&self.errors[step], &self.nees[step]);
+        let runs = nees.len();
+        if runs == 0 {
+            return Err(MetricsError::Empty {
+                what: "runs at this step",
+            });
+        }
+        let n = self.dim as f64;
+        let nci = nci_of_step(errors, nees, self.dim)?;
+        Ok(CredibilityStep {
+            runs,
+            anees: nees.iter().sum::<f64>() / runs as f64 / n,
+            nci: nci.value,
+            nci_skipped: nci.skipped,
+            median_nees: median(nees) / n,
+            mse: mse_matrix(errors, self.dim),
+            mse_rank: nci.rank,
+        })
+    }
+
+    /// The statistics of every step.
+    ///
+    /// # Errors
+    /// As [`Credibility::step_summary`], for the first step that fails (an empty one, say).
+    pub fn summaries(&self) -> Result<Vec<CredibilityStep>, MetricsError> {
+        (0..self.steps()).map(|k| self.step_summary(k)).collect()
+    }
+
+    /// Plain means of the per-step statistics over the steps `range`
+    /// ([`CredibilityAverage::from_steps`]).
+    ///
+    /// # Errors
+    /// [`MetricsError::InvalidParameter`] for an empty range;
+    /// [`MetricsError::StepOutOfRange`] if it reaches beyond the horizon; as
+    /// [`Credibility::step_summary`] for each step of the range.
+    pub fn over_time(&self, range: Range<usize>) -> Result<CredibilityAverage, MetricsError> {
+        if range.is_empty() {
+            return Err(MetricsError::InvalidParameter {
+                name: "step range length",
+                value: 0.0,
+            });
+        }
+        // The whole range is checked before any step is summarised.
+        self.check_step(range.end - 1)?;
+        let steps = range
+            .map(|k| self.step_summary(k))
+            .collect::<Result<Vec<_>, _>>()?;
+        CredibilityAverage::from_steps(&steps)
+    }
+}
+
+impl Merge for Credibility {
+    /// Appends `other`'s runs after this accumulator's, step by step.
+    fn merge(&mut self, other: &Self) {
+        assert_eq!(
+            (self.steps(), self.dim),
+            (other.steps(), other.dim),
+            "merging accumulators of different shapes"
+        );
+        for (a, b) in self.errors.iter_mut().zip(&other.errors) {
+            a.extend_from_slice(b);
+        }
+        for (a, b) in self.nees.iter_mut().zip(&other.nees) {
+            a.extend_from_slice(b);
+        }
+    }
+}
+
+/// The median of `chi-square(dim) / dim`: the value of [`CredibilityStep::median_nees`] for a
+/// consistent filter with many runs (`ln 2 = 0.693` for `dim = 2`; it tends to 1 as `dim`
+/// grows). From statrs's chi-square quantile.
+///
+/// ```
+/// let m = kalibra_metrics::consistent_median_nees(2)?;
+/// assert!((m - 2f64.ln()).abs() < 1e-9);
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
+/// ```
+///
+/// # Errors
+/// [`MetricsError::InvalidParameter`] for `dim == 0`.
+pub fn consistent_median_nees(dim: usize) -> Result<f64, MetricsError> {
+    let invalid = MetricsError::InvalidParameter {
+        name: "degrees of freedom",
+        value: dim as f64,
+    };
+    if dim == 0 {
+        return Err(invalid);
+    }
+    let chi2 = ChiSquared::new(dim as f64).map_err(|_| invalid)?;
+    Ok(chi2.inverse_cdf(0.5) / dim as f64)
+}
+
+/// `Sigma = (1 / M) sum_i e_i e_i^T` of run-major errors, summed in run order and exactly
+/// symmetric (each product is computed once).
+fn mse_matrix(errors: &[f64], dim: usize) -> DMatrix<f64> {
+    let mut sigma = DMatrix::zeros(dim, dim);
+    let mut runs = 0usize;
+    for e in errors.chunks_exact(dim) {
+        for a in 0..dim {
+            for b in 0..=a {
+                sigma[(a, b)] += e[a] * e[b];
+            }
+        }
+        runs += 1;
+    }
+    for a in 0..dim {
+        for b in 0..=a {
+            let v = sigma[(a, b)] / runs as f64;
+            sigma[(a, b)] = v;
+            sigma[(b, a)] = v;
+        }
+    }
+    sigma
+}
+
+/// The median of a non-empty slice (NaN for an empty one, which callers rule out).
+fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_unstable_by(f64::total_cmp);
+    let mid = sorted.len() / 2;
+    match sorted.len() {
+        0 => f64::NAN,
+        len if len % 2 == 1 => sorted[mid],
+        _ => 0.5 * (sorted[mid - 1] + sorted[mid]),
+    }
+}
+
+/// NCI of one step and what it was computed with.
+struct Nci {
+    value: f64,
+    skipped: usize,
+    rank: usize,
+}
+
+/// NCI from run-major errors and their NEES (definitions at [`Credibility`]).
+fn nci_of_step(errors: &[f64], nees: &[f64], dim: usize) -> Result<Nci, MetricsError> {
+    let (quad, rank) = pinv_quad_forms(errors, dim)?;
+    let mut sum = 0.0;
+    let mut used = 0usize;
+    for (&q_p, &q_sigma) in nees.iter().zip(&quad) {
+        // log10(0) = -inf would swamp the mean: such a run has no credibility to measure.
+        if q_p > 0.0 && q_sigma > 0.0 {
+            sum += 10.0 * (q_p.log10() - q_sigma.log10());
+            used += 1;
+        }
+    }
+    Ok(Nci {
+        value: if used > 0 {
+            sum / used as f64
+        } else {
+            f64::NAN
+        },
+        skipped: nees.len() - used,
+        rank,
+    })
+}
+
+/// `e_i^T Sigma^+ e_i` for every run, and the rank of `Sigma` kept, through the eigen-
+/// decomposition of `Sigma` scaled to unit diagonal (numerical choices at [`Credibility`]).
+fn pinv_quad_forms(errors: &[f64], dim: usize) -> Result<(Vec<f64>, usize), MetricsError> {
+    let runs = errors.len() / dim;
+    // Largest magnitude of each component: dividing by it keeps every product below 1, so
+    // nothing overflows, and errors of any scale keep their precision.
+    let mut scale = vec![0.0f64; dim];
+    for e in errors.chunks_exact(dim) {
+        for (s, v) in scale.iter_mut().zip(e) {
+            *s = s.max(v.abs());
+        }
+    }
+    // A component that is exactly 0 in every run has no variance to invert: it takes no part,
+    // as in the pseudo-inverse (its row and column of Sigma are 0).
+    let active: Vec<usize> = (0..dim).filter(|&j| scale[j] > 0.0).collect();
+    let m = active.len();
+    if m == 0 {
+        return Ok((vec![0.0; runs], 0));
+    }
+    let scaled = |e: &[f64], out: &mut [f64]| {
+        for (o, &j) in out.iter_mut().zip(&active) {
+            *o = e[j] / scale[j];
+        }
+    };
+
+    // G = (1 / M) sum g g^T of the scaled errors; its diagonal is at least 1 / M, since one
+    // run reaches magnitude 1 in each active component.
+    let mut g = DMatrix::<f64>::zeros(m, m);
+    let mut buf = vec![0.0; m];
+    for e in errors.chunks_exact(dim) {
+        scaled(e, &mut buf);
+        for a in 0..m {
+            for b in 0..=a {
+                g[(a, b)] += buf[a] * buf[b];
+            }
+        }
+    }
+    let d: Vec<f64> = (0..m).map(|a| (g[(a, a)] / runs as f64).sqrt()).collect();
+    let mut corr = DMatrix::zeros(m, m);
+    for a in 0..m {
+        for b in 0..=a {
+            let v = g[(a, b)] / runs as f64 / (d[a] * d[b]);
+            corr[(a, b)] = v;
+            corr[(b, a)] = v;
+        }
+    }
+
+    let iterations = EIGEN_ITERATIONS_PER_DIM * m;
+    let eig = SymmetricEigen::try_new(corr, f64::EPSILON, iterations).ok_or(
+        LinalgError::NotConvergent {
+            what: "eigen-decomposition of the mean-square-error matrix",
+            iterations,
+        },
+    )?;
+    let lambda_max = eig.eigenvalues.max();
+    let tol = dim as f64 * f64::EPSILON * lambda_max;
+    // Eigenvalues at or below the tolerance (including rounding-negative ones) count as 0.
+    let kept: Vec<usize> = (0..m).filter(|&j| eig.eigenvalues[j] > tol).collect();
+
+    let mut quad = Vec::with_capacity(runs);
+    for e in errors.chunks_exact(dim) {
+        scaled(e, &mut buf);
+        for (f, dj) in buf.iter_mut().zip(&d) {
+            *f /= dj;
+        }
+        // A sum of squares over positive eigenvalues: never negative, 0 only for a zero error
+        // (or one entirely along directions counted as null).
+        let q: f64 = kept
+            .iter()
+            .map(|&j| {
+                let proj: f64 = eig
+                    .eigenvectors
+                    .column(j)
+                    .iter()
+                    .zip(&buf)
+                    .map(|(v, f)| v * f)
+                    .sum();
+                proj * proj / eig.eigenvalues[j]
+            })
+            .sum();
+        quad.push(q);
+    }
+    Ok((quad, kept.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::StepMean;
+    use kalibra_linalg::{DVector, Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    fn normal(rng: &mut ChaCha8Rng) -> f64 {
+        StandardNormal.sample(rng)
+    }
+
+    /// `m` correlated 3-D errors of different scales per component, spanning the space.
+    fn errors3(seed: u64, m: usize) -> Vec<Vector3<f64>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mix = Matrix3::new(2.0, 0.0, 0.0, 0.7, 0.5, 0.0, -1.0, 0.3, 0.1);
+        (0..m)
+            .map(|_| mix * Vector3::from_fn(|_, _| normal(&mut rng)))
+            .collect()
+    }
+
+    /// A random symmetric positive definite 3 x 3 matrix, `A A^T + 0.1 I`.
+    fn random_cov3(rng: &mut ChaCha8Rng) -> Matrix3<f64> {
+        let a = Matrix3::from_fn(|_, _| normal(rng));
+        a * a.transpose() + Matrix3::identity() * 0.1
+    }
+
+    /// `Sigma = (1 / M) sum e e^T`, computed independently of the module.
+    fn sigma_by_hand<N: Dim>(errors: &[OVector<f64, N>]) -> OMatrix<f64, N, N>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        let (n, _) = errors[0].shape_generic();
+        let mut sigma = OMatrix::<f64, N, N>::zeros_generic(n, n);
+        for e in errors {
+            sigma += e * e.transpose();
+        }
+        sigma / errors.len() as f64
+    }
+
+    #[test]
+    fn nci_is_zero_when_p_equals_sigma() {
+        let errors = errors3(1, 50);
+        let sigma = sigma_by_hand(&errors);
+        let mut cred = Credibility::new(1, 3);
+        for e in &errors {
+            cred.push(0, e, &sigma).unwrap();
+        }
+        let s = cred.step_summary(0).unwrap();
+        assert_eq!((s.runs, s.mse_rank, s.nci_skipped), (50, 3, 0));
+        assert!(s.nci.abs() < 1e-12, "nci {}", s.nci);
+        // sum_i e_i^T Sigma^-1 e_i = M tr(Sigma^-1 Sigma) = M n: ANEES is 1 exactly.
+        assert!((s.anees - 1.0).abs() < 1e-12, "anees {}", s.anees);
+        for (a, b) in s.mse.iter().zip(sigma.iter()) {
+            assert!((a - b).abs() <= 1e-14 * b.abs().max(1.0));
+        }
+        assert_eq!(s.mse, s.mse.transpose());
+    }
+
+    #[test]
+    fn nci_shifts_by_ten_log10_c_when_p_is_scaled() {
+        let errors = errors3(2, 40);
+        let sigma = sigma_by_hand(&errors);
+        for c in [1e-3, 0.1, 0.5, 2.0, 10.0, 1e4] {
+            let mut cred = Credibility::new(1, 3);
+            for e in &errors {
+                cred.push(0, e, &(sigma / c)).unwrap();
+            }
+            let s = cred.step_summary(0).unwrap();
+            let expected = 10.0 * c.log10();
+            assert!((s.nci - expected).abs() < 1e-12, "c {c}: {}", s.nci);
+            assert!((s.anees - c).abs() < 1e-12 * c, "c {c}: {}", s.anees);
+        }
+    }
+
+    #[test]
+    fn anees_matches_step_mean_of_nees_over_n() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut cred = Credibility::new(2, 3);
+        let mut mean = StepMean::new(2);
+        for (i, e) in errors3(4, 60).iter().enumerate() {
+            let p = random_cov3(&mut rng);
+            let k = i % 2;
+            cred.push(k, e, &p).unwrap();
+            mean.push(k, nees(e, &p).unwrap() / 3.0).unwrap();
+        }
+        for k in 0..2 {
+            let anees = cred.step_summary(k).unwrap().anees;
+            assert!((anees - mean.mean(k)).abs() <= 1e-14 * mean.mean(k));
+        }
+    }
+
+    #[test]
+    fn singular_sigma_uses_the_pseudo_inverse() {
+        // Errors e_i = a_i u along one direction: Sigma = mean(a^2) u u^T has rank 1, and
+        // e_i^T Sigma^+ e_i = a_i^2 / mean(a^2). The run with a = 0 is skipped.
+        let u = Vector2::new(0.6, 0.8);
+        let a = [1.5, -0.3, 2.0, 0.0, -1.1, 0.7, 0.05];
+        let mean_a2 = a.iter().map(|x| x * x).sum::<f64>() / a.len() as f64;
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut cred = Credibility::new(1, 2);
+        let (mut hand, mut used) = (0.0, 0);
+        for &ai in &a {
+            let (p11, p22, r) = (
+                0.5 + normal(&mut rng).abs(),
+                0.5 + normal(&mut rng).abs(),
+                0.5 * normal(&mut rng).tanh(),
+            );
+            let p12 = r * (p11 * p22).sqrt();
+            let e = u * ai;
+            cred.push(0, &e, &Matrix2::new(p11, p12, p12, p22)).unwrap();
+            if ai != 0.0 {
+                // e^T P^-1 e from the explicit 2 x 2 inverse.
+                let nees = (p22 * e.x * e.x - 2.0 * p12 * e.x * e.y + p11 * e.y * e.y)
+                    / (p11 * p22 - p12 * p12);
+                hand += 10.0 * nees.log10() - 10.0 * (ai * ai / mean_a2).log10();
+                used += 1;
+            }
+        }
+        let s = cred.step_summary(0).unwrap();
+        assert_eq!((s.mse_rank, s.nci_skipped, used), (1, 1, 6));
+        assert!(s.nci.is_finite());
+        assert!(
+            (s.nci - hand / used as f64).abs() < 1e-10,
+            "{} vs {}",
+            s.nci,
+            hand / 6.0
+        );
+    }
+
+    #[test]
+    fn quadratic_forms_sum_to_runs_times_rank() {
+        // sum_i e_i^T Sigma^+ e_i = M tr(Sigma^+ Sigma) = M rank(Sigma).
+        let full: Vec<f64> = errors3(6, 30)
+            .iter()
+            .flat_map(|e| e.iter().copied())
+            .collect();
+        // Rank 2 in 3-D: the third component is the sum of the first two.
+        let rank2: Vec<f64> = errors3(7, 30)
+            .iter()
+            .flat_map(|e| [e.x, e.y, e.x + e.y])
+            .collect();
+        for (errors, rank) in [(&full, 3), (&rank2, 2)] {
+            let (quad, r) = pinv_quad_forms(errors, 3).unwrap();
+            assert_eq!(r, rank);
+            let total: f64 = quad.iter().sum();
+            assert!((total - 30.0 * rank as f64).abs() < 1e-11, "{total}");
+            assert!(quad.iter().all(|&q| q > 0.0));
+        }
+    }
+
+    #[test]
+    fn nci_does_not_depend_on_units() {
+        // e -> T e and P -> T P T^T leave every NEES and e^T Sigma^+ e unchanged. With
+        // T = diag(1e10, 1, 1e-10) the variances are 1e40 apart: an unscaled tolerance would drop
+        // the third component.
+        let t = Matrix3::from_diagonal(&Vector3::new(1e10, 1.0, 1e-10));
+        let full = errors3(8, 25);
+        let rank2: Vec<Vector3<f64>> = errors3(9, 25)
+            .iter()
+            .map(|e| Vector3::new(e.x, e.y, e.x - 2.0 * e.y))
+            .collect();
+        for (errors, rank) in [(full, 3), (rank2, 2)] {
+            let mut rng = ChaCha8Rng::seed_from_u64(10);
+            let mut plain = Credibility::new(1, 3);
+            let mut scaled = Credibility::new(1, 3);
+            for e in &errors {
+                let p = random_cov3(&mut rng);
+                plain.push(0, e, &p).unwrap();
+                scaled.push(0, &(t * e), &(t * p * t)).unwrap();
+            }
+            let (a, b) = (
+                plain.step_summary(0).unwrap(),
+                scaled.step_summary(0).unwrap(),
+            );
+            assert_eq!((a.mse_rank, b.mse_rank), (rank, rank));
+            assert!((a.nci - b.nci).abs() < 1e-10, "{} vs {}", a.nci, b.nci);
+            assert!((a.anees - b.anees).abs() < 1e-10 * a.anees);
+        }
+    }
+
+    #[test]
+    fn zero_errors_are_skipped_not_minus_infinity() {
+        let mut cred = Credibility::new(1, 2);
+        for _ in 0..4 {
+            cred.push(0, &Vector2::zeros(), &Matrix2::identity())
+                .unwrap();
+        }
+        let s = cred.step_summary(0).unwrap();
+        assert!(s.nci.is_nan());
+        assert_eq!((s.nci_skipped, s.mse_rank), (4, 0));
+        assert_eq!((s.anees, s.median_nees), (0.0, 0.0));
+        assert_eq!(s.mse, DMatrix::zeros(2, 2));
+        // Either factor at 0 skips the run: a zero NEES passed with a non-zero error, and a
+        // zero error passed with a positive NEES.
+        let mut cred = Credibility::new(1, 1);
+        cred.push_nees(0, &[1.0], 0.0).unwrap();
+        cred.push_nees(0, &[-1.0], 2.0).unwrap();
+        cred.push_nees(0, &[0.0], 3.0).unwrap();
+        let s = cred.step_summary(0).unwrap();
+        assert_eq!(s.nci_skipped, 2);
+        // The remaining run: e^T Sigma^+ e = 1 / (2 / 3), NEES 2.
+        assert!(
+            (s.nci - 10.0 * (2.0f64 / 1.5).log10()).abs() < 1e-12,
+            "{}",
+            s.nci
+        );
+        assert!((s.anees - 5.0 / 3.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn median_by_hand_odd_and_even() {
+        let mut cred = Credibility::new(1, 2);
+        for (e, v) in [(1.0, 5.0), (2.0, 1.0), (3.0, 3.0)] {
+            cred.push_nees(0, &[e, 0.0], v).unwrap();
+        }
+        // Sorted NEES 1, 3, 5: median 3, over n = 2.
+        assert_eq!(cred.step_summary(0).unwrap().median_nees, 1.5);
+        cred.push_nees(0, &[4.0, 0.0], 7.0).unwrap();
+        // 1, 3, 5, 7: (3 + 5) / 2 = 4, over 2.
+        let s = cred.step_summary(0).unwrap();
+        assert_eq!(s.median_nees, 2.0);
+        assert_eq!(s.anees, 2.0);
+        assert_eq!(median(&[2.0]), 2.0);
+        assert!(median(&[]).is_nan());
+    }
+
+    #[test]
+    fn consistent_median_matches_closed_forms() {
+        // chi-square(2) is exponential with mean 2: median 2 ln 2, over n = 2.
+        let m2 = consistent_median_nees(2).unwrap();
+        assert!((m2 - 2f64.ln()).abs() < 1e-9, "{m2}");
+        // chi-square(1) is a squared standard normal: median 0.6744897501960817^2.
+        let m1 = consistent_median_nees(1).unwrap();
+        assert!(
+            (m1 - 0.674_489_750_196_081_7f64.powi(2)).abs() < 1e-9,
+            "{m1}"
+        );
+        // Below 1 and rising towards it (the mean) as n grows.
+        let m4 = consistent_median_nees(4).unwrap();
+        assert!(m2 < m4 && m4 < 1.0);
+        assert!(matches!(
+            consistent_median_nees(0),
+            Err(MetricsError::InvalidParameter { .. })
+        ));
+    }
+
+    /// A study of `runs` runs over `steps` steps with a different covariance per run and step.
+    fn push_runs(cred: &mut Credibility, runs: Range<usize>, steps: usize) {
+        for i in runs {
+            let mut rng = ChaCha8Rng::seed_from_u64(1000 + i as u64);
+            for k in 0..steps {
+                let p = random_cov3(&mut rng);
+                let e = Vector3::from_fn(|_, _| normal(&mut rng)) * (1.0 + k as f64);
+                cred.push(k, &e, &p).unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn merging_chunks_in_order_is_bit_identical() {
+        let (steps, runs) = (3, 37);
+        let mut whole = Credibility::new(steps, 3);
+        push_runs(&mut whole, 0..runs, steps);
+        let mut merged = Credibility::new(steps, 3);
+        let mut start = 0;
+        for len in [5, 11, 0, 21] {
+            let mut part = Credibility::new(steps, 3);
+            push_runs(&mut part, start..start + len, steps);
+            merged.merge(&part);
+            start += len;
+        }
+        assert_eq!(start, runs);
+        assert_eq!(merged, whole);
+        let (a, b) = (merged.summaries().unwrap(), whole.summaries().unwrap());
+        assert_eq!(a, b);
+        assert!(a.iter().all(|s| s.runs == runs && s.nci.is_finite()));
+        assert_eq!(
+            merged.over_time(0..3).unwrap(),
+            whole.over_time(0..3).unwrap()
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "different shapes")]
+    fn merging_different_shapes_panics() {
+        Credibility::new(2, 3).merge(&Credibility::new(2, 4));
+    }
+
+    #[test]
+    fn over_time_is_the_plain_mean_of_steps() {
+        let mut cred = Credibility::new(3, 1);
+        // One run per step with e = 1 (Sigma = 1, e^T Sigma^+ e = 1): NCI = 10 log10 NEES.
+        for (k, v) in [1.0, 10.0, 100.0].into_iter().enumerate() {
+            cred.push_nees(k, &[1.0], v).unwrap();
+        }
+        let avg = cred.over_time(0..3).unwrap();
+        assert_eq!(avg.steps, 3);
+        assert!((avg.anees - 37.0).abs() < 1e-12);
+        assert!((avg.median_nees - 37.0).abs() < 1e-12);
+        assert!((avg.nci - 10.0).abs() < 1e-12);
+        let tail = cred.over_time(1..3).unwrap();
+        assert!((tail.nci - 15.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn consistent_filter_has_nci_near_zero() {
+        // e_i ~ N(0, P) with the filter reporting the true P, M = 2000 runs, n = 4, at five
+        // independent steps with different P.
+        //
+        // Bounds. To first order in Sigma - P, NCI = (10 / ln 10) (ANEES - 1), and ANEES is a
+        // mean of M chi-square(n) / n variables: sd(NCI) = (10 / ln 10) sqrt(2 / (n M)) =
+        // 0.069 dB here (measured over 400 seeds: 0.067, largest |NCI| 0.17). Per step the bound
+        // is 4.5 sd, 0.31 dB; the mean over the five steps has sd 0.031 dB and the bound
+        // 0.15 dB (4.9 sd). The same expansion makes NCI - 10 log10(ANEES) second order:
+        // measured mean -0.0016 dB, sd 0.0016 dB, largest 0.008 dB; bound 0.015 dB. The sample
+        // median of chi-square(4) / 4 has sd 1 / (8 f(m) sqrt(M)) = 0.018 with f the
+        // chi-square(4) density at its median m = 3.357 (measured 0.017); bound 0.08.
+        let (n, runs, steps) = (4, 2000, 5);
+        let base = Matrix4::new(
+            4.0, 1.0, 0.5, 0.0, //
+            1.0, 3.0, 0.2, 0.1, //
+            0.5, 0.2, 0.5, 0.05, //
+            0.0, 0.1, 0.05, 0.2,
+        );
+        let mut rng = ChaCha8Rng::seed_from_u64(2024);
+        let mut cred = Credibility::new(steps, n);
+        for k in 0..steps {
+            // Rescale the components differently at each step.
+            let t = Matrix4::from_diagonal(&Vector4::new(1.0, 2.0 + k as f64, 0.1, 10.0));
+            let p = t * base * t;
+            let l = p.cholesky().unwrap().l();
+            for _ in 0..runs {
+                let e = l * Vector4::from_fn(|_, _| normal(&mut rng));
+                cred.push(k, &e, &p).unwrap();
+            }
+        }
+        let reference = consistent_median_nees(n).unwrap();
+        for s in cred.summaries().unwrap() {
+            assert_eq!((s.runs, s.mse_rank, s.nci_skipped), (runs, n, 0));
+            assert!(s.nci.abs() < 0.31, "nci {}", s.nci);
+            let second_order = s.nci - 10.0 * s.anees.log10();
+            assert!(second_order.abs() < 0.015, "{second_order}");
+            assert!(
+                (s.median_nees - reference).abs() < 0.08,
+                "{}",
+                s.median_nees
+            );
+        }
+        let avg = cred.over_time(0..steps).unwrap();
+        assert!(avg.nci.abs() < 0.15, "mean nci {}", avg.nci);
+    }
+
+    #[test]
+    fn errors_are_typed_and_store_nothing() {
+        let mut cred = Credibility::new(2, 2);
+        let p = Matrix2::identity();
+        assert_eq!(
+            cred.push(2, &Vector2::new(1.0, 0.0), &p),
+            Err(MetricsError::StepOutOfRange { step: 2, steps: 2 })
+        );
+        assert!(matches!(
+            cred.push_nees(5, &[1.0, 0.0], 1.0),
+            Err(MetricsError::StepOutOfRange { .. })
+        ));
+        assert_eq!(
+            cred.push(0, &Vector3::new(1.0, 0.0, 0.0), &Matrix3::identity()),
+            Err(MetricsError::DimensionMismatch {
+                what: "error vector",
+                expected: 2,
+                found: 3
+            })
+        );
+        assert!(matches!(
+            cred.push_nees(0, &[1.0], 1.0),
+            Err(MetricsError::DimensionMismatch { found: 1, .. })
+        ));
+        // A `Dyn` covariance of the wrong size.
+        assert!(matches!(
+            cred.push(
+                0,
+                &DVector::from_vec(vec![1.0, 0.0]),
+                &DMatrix::identity(3, 3)
+            ),
+            Err(MetricsError::Linalg(LinalgError::DimensionMismatch { .. }))
+        ));
+        for bad in [f64::NAN, f64::INFINITY] {
+            assert!(matches!(
+                cred.push(0, &Vector2::new(1.0, bad), &p),
+                Err(MetricsError::Linalg(LinalgError::NonFinite { .. }))
+            ));
+            assert!(matches!(
+                cred.push_nees(0, &[bad, 0.0], 1.0),
+                Err(MetricsError::Linalg(LinalgError::NonFinite { .. }))
+            ));
+        }
+        assert!(matches!(
+            cred.push(
+                0,
+                &Vector2::new(1.0, 0.0),
+                &Matrix2::new(1.0, 2.0, 2.0, 1.0)
+            ),
+            Err(MetricsError::Linalg(
+                LinalgError::NotPositiveDefinite { .. }
+            ))
+        ));
+        for bad in [-1.0, f64::NAN, f64::INFINITY] {
+            assert!(matches!(
+                cred.push_nees(0, &[1.0, 0.0], bad),
+                Err(MetricsError::InvalidParameter { name: "NEES", .. })
+            ));
+        }
+        assert!(matches!(
+            Credibility::new(1, 0).push_nees(0, &[], 1.0),
+            Err(MetricsError::InvalidParameter { .. })
+        ));
+        assert_eq!(cred, Credibility::new(2, 2));
+        assert_eq!((cred.runs(0), cred.runs(9)), (0, 0));
+
+        assert!(matches!(
+            cred.step_summary(0),
+            Err(MetricsError::Empty { .. })
+        ));
+        assert_eq!(
+            cred.step_summary(2),
+            Err(MetricsError::StepOutOfRange { step: 2, steps: 2 })
+        );
+        cred.push(0, &Vector2::new(1.0, 0.0), &p).unwrap();
+        assert_eq!(cred.runs(0), 1);
+        // Step 1 is still empty.
+        assert!(matches!(cred.summaries(), Err(MetricsError::Empty { .. })));
+        assert!(matches!(
+            cred.over_time(0..2),
+            Err(MetricsError::Empty { .. })
+        ));
+        assert!(matches!(
+            cred.over_time(1..1),
+            Err(MetricsError::InvalidParameter { .. })
+        ));
+        assert!(cred.over_time(0..1).is_ok());
+        assert_eq!(
+            cred.over_time(0..3),
+            Err(MetricsError::StepOutOfRange { step: 2, steps: 2 })
+        );
+        assert!(matches!(
+            CredibilityAverage::from_steps(&[]),
+            Err(MetricsError::Empty { .. })
+        ));
+    }
+}

@@ -1,0 +1,1139 @@
+//! Paper 001's three bearings-only tracking (BOT) problems as ready scenarios: the truth, the
+//! platform, the filter's dynamics and bearing model, and the filter's initialisation.
+//!
+//! Each problem is a [`BotScenario`]: [`BotScenario::problem_i`], [`BotScenario::problem_ii`],
+//! [`BotScenario::problem_iii`]. [`BotScenario::simulate`] draws one Monte Carlo run (true
+//! states, bearings, the filter's initial estimate) from a seeded generator. The filters live in
+//! `kalibra-filters`; this module says only how a run starts ([`BotStart`]) and from which index
+//! the metrics count (`eval_from`).
+//!
+//! Every reading of the paper (units, geometry, noise, initialisation, indexing) is documented
+//! on [`BotScenario`], where users of the re-exported types see it.
+
+use std::f64::consts::PI;
+use std::ops::Range;
+
+use kalibra_linalg::{
+    Alloc, DefaultAllocator, Dim, Matrix2, Matrix4, OMatrix, OVector, SMatrix, SVector, U1, U2, U4,
+    Vector1, Vector2, Vector4,
+};
+use rand::Rng;
+
+use crate::{
+    Bearing, BearingReference, Coordinate, Dynamics, Kinematic, LinearGaussian, ModelError,
+    ProcessNoise, Tabulated, simulate, standard_normal,
+};
+
+/// One knot in km/min.
+const KNOT: f64 = 1.852 / 60.0;
+
+/// Problem I: the truth's initial state `[x, xdot]` (m, m/s).
+const I_X0: [f64; 2] = [80.0, 1.0];
+/// Problem I: platform speed along x (m/s) and its y (m).
+const I_PLATFORM_SPEED: f64 = 4.0;
+const I_PLATFORM_Y: f64 = -20.0;
+/// Problem I: variance of the velocity's initial estimate, (m/s)^2.
+const I_INIT_VELOCITY_VAR: f64 = 1.0;
+
+/// Problem II: target start (km), course (deg) and speed (knots).
+const II_TARGET_START: [f64; 2] = [7.0, 7.0];
+const II_TARGET_COURSE_DEG: f64 = -135.4;
+const II_TARGET_SPEED_KN: f64 = 15.0;
+/// Problem II: platform courses (deg), speed (knots) and the index of the turn.
+const II_PLATFORM_COURSE_DEG: [f64; 2] = [-80.0, 146.0];
+const II_PLATFORM_SPEED_KN: f64 = 5.0;
+const II_TURN_INDEX: usize = 14;
+/// Problem II: the filter's process-noise intensity, km^2/min^4.
+const II_Q: f64 = 9.92e-8;
+/// Problem II: the initial range's standard deviation (km) and the speed's (knots).
+const II_INIT_RANGE_SD: f64 = 4.0;
+const II_INIT_SPEED_SD_KN: f64 = 4.0;
+
+/// Problem III: prior mean and variance per axis.
+const III_MEAN: [f64; 2] = [20.0, 5.0];
+const III_VAR: f64 = 0.1;
+
+/// Which of paper 001's bearings-only problems a scenario is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BotProblem {
+    /// Problem I: a target on a line, translational noise (metres, seconds).
+    I,
+    /// Problem II: the manoeuvring-observer problem of the paper's reference \[1\] (km, minutes).
+    II,
+    /// Problem III: a decelerating target seen from a platform on the unit circle
+    /// (dimensionless).
+    III,
+}
+
+impl BotProblem {
+    /// The length unit of states and positions: `"m"`, `"km"`, or `""` (dimensionless).
+    pub fn length_unit(self) -> &'static str {
+        match self {
+            BotProblem::I => "m",
+            BotProblem::II => "km",
+            BotProblem::III => "",
+        }
+    }
+
+    /// The time unit of steps and velocities: `"s"`, `"min"`, or `""` (dimensionless).
+    pub fn time_unit(self) -> &'static str {
+        match self {
+            BotProblem::I => "s",
+            BotProblem::II => "min",
+            BotProblem::III => "",
+        }
+    }
+}
+
+/// How a filter starts on a scenario.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BotStart {
+    /// The initial estimate is the estimate at index 0; the filter predicts to index 1 and
+    /// updates with the measurement there, and the measurement at index 0 is used only by the
+    /// initialisation (problems I and II).
+    PredictFirst,
+    /// The initial estimate is a prior at index 0, which the filter first updates with the
+    /// measurement at index 0 (problem III).
+    UpdateFirst,
+}
+
+/// One of paper 001's bearings-only problems: truth, platform, the filter's models and how the
+/// filter starts, with every reading of the paper below.
+///
+/// The fields are public so a study can vary them (a `Q` sweep replaces `dynamics`); the
+/// constructors are the only way to build one, and [`BotScenario::simulate`] and
+/// [`BotScenario::initialize`] follow `problem` for the true initial state and the
+/// initialisation, reading the noise levels from `measurement`.
+///
+/// # Conventions shared by the three problems
+/// * Indices `i = 0 .. steps-1` are the entries of a run; the paper's step label is
+///   `first_label + i` ([`BotScenario::labels`]). The sampling period is `T = 1` in each
+///   problem's time unit, so index `i` is at time `i`.
+/// * Bearings are four-quadrant (`atan2`) and wrapped to (-pi, pi]; so are residuals.
+/// * The platform is a [`Tabulated`] table with one position per index; past its end it stays
+///   put, so a filter run longer than `steps` sees a parked platform.
+/// * The truth measures `x_i`, then steps to `x_{i+1}` ([`crate::Simulator`]); the filter's
+///   prediction is the exact linear one, with `Qd = G Q G^T`.
+///
+/// # Problem I (metres, seconds; paper section IV.A, its reference \[8\])
+/// * State `[x, xdot]` of a target on the line `y = 0`; `x_0 = [80, 1]`; `F = [[1, T], [0, 1]]`,
+///   process noise `G w` with `G = [T^2/2, T]^T`, `Q = 0.01` (m/s^2)^2, in the truth and in the
+///   filter alike.
+/// * Platform at `(4k, -20)`, so the relative position is `(x_k - 4k, 20)`; the target's `y` is
+///   [`Coordinate::Constant`]`(0)`. Bearings from the x axis with translational noise of
+///   variance 1 m^2 per axis and `R_theta = 0.0524^2` rad^2 (the paper's value; `(3 deg)^2` is
+///   `0.05236^2`): `z_k = atan2(20 + v_y, x_k - 4k + v_x) + v_theta` (eq 38).
+/// * The truth draws that law exactly; the filter's [`Bearing`] reports the effective variance
+///   `R_eff = R_theta + g^T diag(1, 1) g` linearised where it is asked ([`Bearing`] docs).
+/// * 41 indices, labels `k = 0..40`. Initialisation (the paper gives none): from `z_0`, the
+///   position that puts the target on its line at bearing `z_0`, `x = 4 * 0 + 20 / tan z_0`,
+///   with the first-order variance of the three noises at `z_0`:
+///   `var_x + var_y cot^2 z_0 + R_theta 20^2 / sin^4 z_0`; velocity 0 with variance 1 (m/s)^2;
+///   no correlation. That is the estimate at index 0: filters predict to index 1 and update with
+///   `z_1` ([`BotStart::PredictFirst`]), and metrics count from index 1 (`eval_from = 1`), as the
+///   paper's figures show `k = 1..40`.
+/// * The first-order variance is exact only for small noise: at the paper's noise the spread
+///   of `20 / tan z_0` is about twice it (a heavy tail from bearings near 0, where `cot` is
+///   steep); the tests measure both.
+///
+/// # Problem II (kilometres, minutes; paper section IV.B, its reference \[1\])
+/// * State `[x, y, xdot, ydot]` (km, km/min), `T = 1` min, 50 indices for `t = 0..49` min,
+///   labelled `k = 1..50`.
+/// * Courses are nautical (clockwise from north, velocity `s (sin c, cos c)`), and 1 knot is
+///   `1.852 / 60` km/min. Target from `(7, 7)` km on course -135.4 deg at 15 knots; platform from
+///   `(0, 0)` on course -80 deg at 5 knots, turning instantly to 146 deg at index 14 (`t = 14`
+///   min, label `k = 15`): it moves on the old course over `[0, 14]` min and on the new one
+///   after. With this reading the bearing rate peaks at about 125 deg/min near `t = 25` min, as
+///   the paper describes (it says 135 deg/min at the 26th minute); a turn one minute later
+///   gives a peak of only about 58 deg/min. The tests check it.
+/// * Near the closest approach (about 0.21 km at `t` = 24.9 min) the bearing sweeps from 91 deg
+///   (index 24) to 166 deg (index 25) and through 180 deg to -139 deg (index 26): the true
+///   bearing crosses +-180 deg once, between indices 25 and 26 (labels 26 and 27), so the
+///   measurements jump by about -305 deg while the wrapped change is +55 deg. Residuals and
+///   sigma-point bearings must wrap there.
+/// * Truth without process noise (straight lines). Bearings nautical, `z = atan2(x - x_p, y -
+///   y_p)`, `R = (2 deg)^2`, no translational noise.
+/// * Filter `Q`: the printed "9.92e-2 km^2/s^2" is read as `9.92e-8` km^2/min^4 (the printed
+///   number in m^2/min^4; taken literally in km and minutes every filter diverges), with the
+///   printed `G` reordered for the state `[x, y, xdot, ydot]`: `G = [[T^2/2, 0], [0, T^2/2],
+///   [T, 0], [0, T]]`, `Qd = q G G^T`.
+/// * Initialisation from `z_1` (index 0), following the paper's reference \[1\]: range
+///   `r ~ N(sqrt(98), 4^2)` km, speed `s ~ N(15, 4^2)` knots (the true speed), course
+///   `c ~ N(z_1 + pi, pi^2 / 12)` (heading toward the observer), bearing `theta ~ N(z_1,
+///   R)`, all independent, mapped to the state `[p + r u(theta), s u(c)]` (`p` the platform at
+///   index 0, `u(a) = (sin a, cos a)`). The mean is the map at the means and the covariance is
+///   first order: with `u' = du/da`,
+///   `P_pos = var_r u u^T + r^2 R u' u'^T` at `theta = z_1`,
+///   `P_vel = var_s u u^T + s^2 var_c u' u'^T` at `c = z_1 + pi`, and no position-velocity
+///   correlation (the course spread is its own, not the bearing's). It is the estimate at index
+///   0: filters predict to index 1 before the first update ([`BotStart::PredictFirst`]);
+///   metrics count from index 0 (`eval_from = 0`).
+/// * The course spread `pi / sqrt(12)` = 0.91 rad is far from small, so the first-order
+///   velocity covariance is not the polar draw's: the exact cross-course variance is about half
+///   the first-order one, the along-course variance about three times, and the exact mean speed
+///   is shrunk by `exp(-var_c / 2)` = 0.66. The position part is close (the cross-range variance
+///   is `(r^2 + var_r) R` exactly, 16% above first order). The tests measure these.
+///
+/// # Problem III (dimensionless, `T = 1`; paper section IV.C, its reference \[27\])
+/// * State `[x, y]`; `x_0 ~ N([20, 5], 0.1 I)`, `x_{k+1} = diag(0.9, 1) x_k + w_k`,
+///   `Q = [[0.1, 0.01], [0.01, 0.1]]` in the truth and the filter.
+/// * Platform at `(cos k, sin k)`, `k` read as radians; bearings from the x axis with
+///   `R = 0.025`, no translational noise.
+/// * 51 indices, labels `k = 0..50`. The filter starts from the prior `[20, 5]`, `0.1 I` at
+///   index 0 and updates it with `z_0` ([`BotStart::UpdateFirst`]); metrics count from index 0.
+///
+/// ```
+/// use kalibra_models::{BotScenario, BotStart};
+/// use rand_chacha::{ChaCha8Rng, rand_core::SeedableRng};
+///
+/// let scenario = BotScenario::problem_iii()?;
+/// let run = scenario.simulate(&mut ChaCha8Rng::seed_from_u64(1))?;
+/// assert_eq!(run.states.len(), 51);
+/// assert_eq!(scenario.start, BotStart::UpdateFirst);
+/// assert_eq!(scenario.labels().last(), Some(50));
+/// # Ok::<(), kalibra_models::ModelError>(())
+/// ```
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct BotScenario<N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// Which problem.
+    pub problem: BotProblem,
+    /// The filter's dynamics: `F` and `Qd = G Q G^T`.
+    pub dynamics: LinearGaussian<N>,
+    /// The truth's dynamics: the filter's, except problem II's truth, which has no process
+    /// noise.
+    pub truth_dynamics: LinearGaussian<N>,
+    /// The bearing sensor, for the truth and the filter alike (problem I's includes the
+    /// translational noise: the truth draws it exactly, the filter sees it linearised).
+    pub measurement: Bearing<N, Tabulated<2>>,
+    /// Number of indices in a run (I: 41, II: 50, III: 51).
+    pub steps: usize,
+    /// The paper's label of index 0 (I: 0, II: 1, III: 0).
+    pub first_label: usize,
+    /// Whether the initial estimate is predicted or updated first.
+    pub start: BotStart,
+    /// The first index whose estimate the metrics use (I: 1, II: 0, III: 0).
+    pub eval_from: usize,
+}
+
+/// One simulated run of a [`BotScenario`]: `states[i]` and `measurements[i]` at index `i`, and
+/// the filter's initial estimate (at index 0, see [`BotStart`]).
+#[derive(Clone, Debug)]
+pub struct BotRun<N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// True states.
+    pub states: Vec<OVector<f64, N>>,
+    /// Bearings (rad), wrapped to (-pi, pi].
+    pub measurements: Vec<Vector1<f64>>,
+    /// The filter's initial mean.
+    pub init_mean: OVector<f64, N>,
+    /// The filter's initial covariance.
+    pub init_cov: OMatrix<f64, N, N>,
+}
+
+impl BotScenario<U2> {
+    /// Problem I (metres, seconds): target on `y = 0` with state `[x, xdot]`, platform at
+    /// `(4k, -20)`, translational noise; see [`BotScenario`].
+    ///
+    /// # Errors
+    /// None in practice: the constants are valid; the signature carries the model
+    /// constructors' errors.
+    pub fn problem_i() -> Result<Self, ModelError> {
+        let steps = 41;
+        let dynamics = Kinematic::constant_velocity(1, 1.0)?
+            .noise(ProcessNoise::Discrete { q: 0.01 })
+            .dynamics(U2)?;
+        let platform = Tabulated::new(
+            (0..steps)
+                .map(|k| Vector2::new(I_PLATFORM_SPEED * k as f64, I_PLATFORM_Y))
+                .collect(),
+        )?;
+        let measurement = Bearing::from_coordinates(
+            U2,
+            [Coordinate::State(0), Coordinate::Constant(0.0)],
+            BearingReference::XAxis,
+            0.0524 * 0.0524,
+            platform,
+        )?
+        .with_translational_noise(1.0, 1.0)?;
+        Ok(Self {
+            problem: BotProblem::I,
+            truth_dynamics: dynamics.clone(),
+            dynamics,
+            measurement,
+            steps,
+            first_label: 0,
+            start: BotStart::PredictFirst,
+            eval_from: 1,
+        })
+    }
+
+    /// Problem III (dimensionless): `x_{k+1} = diag(0.9, 1) x_k + w_k`, platform on the unit
+    /// circle; see [`BotScenario`].
+    ///
+    /// # Errors
+    /// None in practice, as [`BotScenario::problem_i`].
+    pub fn problem_iii() -> Result<Self, ModelError> {
+        let steps = 51;
+        let dynamics = LinearGaussian::new(
+            Matrix2::new(0.9, 0.0, 0.0, 1.0),
+            Matrix2::new(0.1, 0.01, 0.01, 0.1),
+        )?;
+        let platform = Tabulated::new(
+            (0..steps)
+                .map(|k| Vector2::new((k as f64).cos(), (k as f64).sin()))
+                .collect(),
+        )?;
+        let measurement = Bearing::new(U2, [0, 1], BearingReference::XAxis, 0.025, platform)?;
+        Ok(Self {
+            problem: BotProblem::III,
+            truth_dynamics: dynamics.clone(),
+            dynamics,
+            measurement,
+            steps,
+            first_label: 0,
+            start: BotStart::UpdateFirst,
+            eval_from: 0,
+        })
+    }
+}
+
+impl BotScenario<U4> {
+    /// Problem II (km, minutes): state `[x, y, xdot, ydot]`, the manoeuvring platform, nautical
+    /// bearings; see [`BotScenario`].
+    ///
+    /// # Errors
+    /// None in practice, as [`BotScenario::problem_i`].
+    pub fn problem_ii() -> Result<Self, ModelError> {
+        let steps = 50;
+        let cv = Kinematic::constant_velocity(2, 1.0)?;
+        let dynamics = cv.noise(ProcessNoise::Discrete { q: II_Q }).dynamics(U4)?;
+        let truth_dynamics = LinearGaussian::new(*dynamics.f(), Matrix4::zeros())?;
+        let measurement = Bearing::new(
+            U4,
+            [0, 1],
+            BearingReference::North,
+            2f64.to_radians().powi(2),
+            Tabulated::new(problem_ii_platform(steps))?,
+        )?;
+        Ok(Self {
+            problem: BotProblem::II,
+            dynamics,
+            truth_dynamics,
+            measurement,
+            steps,
+            first_label: 1,
+            start: BotStart::PredictFirst,
+            eval_from: 0,
+        })
+    }
+}
+
+/// A velocity on a nautical course (deg) at a speed (knots), in km/min.
+fn nautical_velocity(course_deg: f64, speed_kn: f64) -> Vector2<f64> {
+    BearingReference::North.direction(course_deg.to_radians()) * (speed_kn * KNOT)
+}
+
+/// Problem II's platform per minute: the first course up to the turn index, the second after.
+fn problem_ii_platform(steps: usize) -> Vec<Vector2<f64>> {
+    let v1 = nautical_velocity(II_PLATFORM_COURSE_DEG[0], II_PLATFORM_SPEED_KN);
+    let v2 = nautical_velocity(II_PLATFORM_COURSE_DEG[1], II_PLATFORM_SPEED_KN);
+    let turn = II_TURN_INDEX as f64;
+    (0..steps)
+        .map(|i| {
+            let t = i as f64;
+            // Positions from the start and from the turn directly, not accumulated, so no
+            // rounding builds up along the table.
+            if i <= II_TURN_INDEX {
+                v1 * t
+            } else {
+                v1 * turn + v2 * (t - turn)
+            }
+        })
+        .collect()
+}
+
+impl<N: Dim> BotScenario<N>
+where
+    DefaultAllocator: Alloc<N> + Alloc<N, U1>,
+{
+    /// The paper's step labels of indices `0 .. steps`.
+    pub fn labels(&self) -> Range<usize> {
+        self.first_label..self.first_label + self.steps
+    }
+
+    /// State indices of the target position (I: `[0]`, II and III: `[0, 1]`).
+    pub fn position_indices(&self) -> &'static [usize] {
+        match self.problem {
+            BotProblem::I => &[0],
+            BotProblem::II | BotProblem::III => &[0, 1],
+        }
+    }
+
+    /// State indices of the target velocity (I: `[1]`, II: `[2, 3]`); `None` for problem III,
+    /// whose state has no velocity.
+    pub fn velocity_indices(&self) -> Option<&'static [usize]> {
+        match self.problem {
+            BotProblem::I => Some(&[1]),
+            BotProblem::II => Some(&[2, 3]),
+            BotProblem::III => None,
+        }
+    }
+
+    /// Draws one run: the true initial state (problem III draws it from its prior; I and II
+    /// start at fixed states and draw nothing here), then per index the bearing noise and the
+    /// process noise (see [`crate::Simulator::step`]), then the filter's initial estimate from
+    /// the bearings ([`BotScenario::initialize`]). A run is fixed by the generator's state.
+    ///
+    /// ```
+    /// use kalibra_models::BotScenario;
+    /// use rand_chacha::{ChaCha8Rng, rand_core::SeedableRng};
+    ///
+    /// let run = BotScenario::problem_ii()?.simulate(&mut ChaCha8Rng::seed_from_u64(3))?;
+    /// assert_eq!((run.states.len(), run.measurements.len()), (50, 50));
+    /// assert_eq!(run.states[0][0], 7.0);
+    /// # Ok::<(), kalibra_models::ModelError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`ModelError::DimensionMismatch`] if the state dimension does not fit `problem`,
+    /// [`ModelError::NonFinite`] if the truth or the initial estimate is not finite, and the
+    /// models' sampling errors.
+    pub fn simulate<R: Rng + ?Sized>(&self, rng: &mut R) -> Result<BotRun<N>, ModelError> {
+        let n = self.truth_dynamics.state_dim();
+        let x0 = match self.problem {
+            BotProblem::I => to_vector(n, &SVector::<f64, 2>::from(I_X0))?,
+            BotProblem::II => {
+                let v = nautical_velocity(II_TARGET_COURSE_DEG, II_TARGET_SPEED_KN);
+                let [x, y] = II_TARGET_START;
+                to_vector(n, &Vector4::new(x, y, v[0], v[1]))?
+            }
+            BotProblem::III => {
+                // Explicit type: the generic allocator bounds in scope confuse inference.
+                let n0: Vector2<f64> = standard_normal::<U2, R>(U2, rng);
+                let draw = Vector2::from(III_MEAN) + n0 * III_VAR.sqrt();
+                to_vector(n, &draw)?
+            }
+        };
+        let truth = simulate(&self.truth_dynamics, &self.measurement, x0, self.steps, rng)?;
+        let (init_mean, init_cov) = self.initialize(&truth.measurements)?;
+        Ok(BotRun {
+            states: truth.states,
+            measurements: truth.measurements,
+            init_mean,
+            init_cov,
+        })
+    }
+
+    /// The filter's initial mean and covariance at index 0 from a run's bearings (problems I
+    /// and II read the bearing at index 0; problem III ignores them): see the
+    /// [`BotScenario`] docs for each problem's formula.
+    ///
+    /// ```
+    /// use kalibra_models::BotScenario;
+    /// use kalibra_linalg::Vector1;
+    ///
+    /// // Problem I: a bearing of 45 degrees puts the target 20 m along x from the platform.
+    /// let s = BotScenario::problem_i()?;
+    /// let (x, p) = s.initialize(&[Vector1::new(std::f64::consts::FRAC_PI_4)])?;
+    /// assert!((x[0] - 20.0).abs() < 1e-12 && x[1] == 0.0);
+    /// // 1 + 1 * cot^2 + R_theta 20^2 / sin^4 at 45 degrees.
+    /// assert!((p[(0, 0)] - (2.0 + 0.0524_f64.powi(2) * 1600.0)).abs() < 1e-9);
+    /// # Ok::<(), kalibra_models::ModelError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`ModelError::DimensionMismatch`] if problem I or II gets no bearing or the state
+    /// dimension does not fit `problem`, [`ModelError::NonFinite`] if the estimate is not finite
+    /// (problem I with a bearing of 0 or pi, parallel to the target's line).
+    pub fn initialize(&self, measurements: &[Vector1<f64>]) -> Result<Gaussian<N>, ModelError> {
+        let n = self.dynamics.state_dim();
+        let first = || {
+            measurements
+                .first()
+                .map(|z| z[0])
+                .ok_or(ModelError::DimensionMismatch {
+                    what: "bearings for the initialisation",
+                    expected: 1,
+                    found: 0,
+                })
+        };
+        let (mean, cov) = match self.problem {
+            BotProblem::I => {
+                let (m, p) = self.line_initialisation(first()?);
+                (to_vector(n, &m)?, to_matrix(n, &p)?)
+            }
+            BotProblem::II => {
+                let polar = Polar {
+                    range: 98f64.sqrt(),
+                    var_range: II_INIT_RANGE_SD.powi(2),
+                    bearing: first()?,
+                    var_bearing: self.measurement.variance(),
+                    speed: II_TARGET_SPEED_KN * KNOT,
+                    var_speed: (II_INIT_SPEED_SD_KN * KNOT).powi(2),
+                    course: first()? + PI,
+                    var_course: PI * PI / 12.0,
+                };
+                let origin = self.measurement.shift(0);
+                let (m, p) = polar.first_order(self.measurement.reference(), origin);
+                (to_vector(n, &m)?, to_matrix(n, &p)?)
+            }
+            BotProblem::III => (
+                to_vector(n, &Vector2::from(III_MEAN))?,
+                to_matrix(n, &(Matrix2::identity() * III_VAR))?,
+            ),
+        };
+        if !(kalibra_linalg::all_finite(&mean) && kalibra_linalg::all_finite(&cov)) {
+            return Err(ModelError::NonFinite {
+                what: "initial estimate",
+                step: 0,
+            });
+        }
+        Ok((mean, cov))
+    }
+
+    /// Problem I's estimate from one bearing: the point of the target's line at bearing `z`,
+    /// with the first-order variance of the three noises.
+    ///
+    /// The line is `d_y` = constant (the y coordinate is a constant, so `d = -shift` at the
+    /// zero state gives it), and `z = angle(d_x + v_x, d_y + v_y) + v_theta` inverts to
+    /// `d_x = (d_y + v_y) rho(z - v_theta) - v_x` with `rho = u_x / u_y` for the unit vector
+    /// `u` of the bearing (`cot` from the x axis). Its gradient at zero noise gives the
+    /// variance `var_x + var_y rho^2 + R_theta d_y^2 rho'^2`, `rho' = (u'_x u_y - u_x u'_y) /
+    /// u_y^2` (`-1 / sin^2` from the x axis).
+    fn line_initialisation(&self, z: f64) -> (Vector2<f64>, Matrix2<f64>) {
+        let m = &self.measurement;
+        let reference = m.reference();
+        let shift = m.shift(0);
+        let dy = -shift[1];
+        let u = reference.direction(z);
+        let du = reference.direction(z + PI / 2.0);
+        let rho = u[0] / u[1];
+        let drho = (du[0] * u[1] - u[0] * du[1]) / (u[1] * u[1]);
+        let (var_x, var_y) = m.translational_variance();
+        let var = var_x + var_y * rho * rho + m.variance() * dy * dy * drho * drho;
+        (
+            Vector2::new(shift[0] + dy * rho, 0.0),
+            Matrix2::new(var, 0.0, 0.0, I_INIT_VELOCITY_VAR),
+        )
+    }
+}
+
+/// A Gaussian polar description of a target: position `origin + range u(bearing)`, velocity
+/// `speed u(course)`, all six quantities independent.
+#[derive(Clone, Copy, Debug)]
+struct Polar {
+    range: f64,
+    var_range: f64,
+    bearing: f64,
+    var_bearing: f64,
+    speed: f64,
+    var_speed: f64,
+    course: f64,
+    var_course: f64,
+}
+
+impl Polar {
+    /// The state `[position, velocity]` at the means, with the first-order covariance: for a
+    /// map `a u(b)` of independent `a`, `b` the Jacobian columns are `u` and `a u'`, so the
+    /// covariance is `var_a u u^T + a^2 var_b u' u'^T`.
+    fn first_order(
+        &self,
+        reference: BearingReference,
+        origin: Vector2<f64>,
+    ) -> (Vector4<f64>, Matrix4<f64>) {
+        let block = |a: f64, var_a: f64, b: f64, var_b: f64| {
+            let u = reference.direction(b);
+            let du = reference.direction(b + PI / 2.0);
+            (
+                u * a,
+                u * u.transpose() * var_a + du * du.transpose() * (a * a * var_b),
+            )
+        };
+        let (pos, p_pos) = block(self.range, self.var_range, self.bearing, self.var_bearing);
+        let (vel, p_vel) = block(self.speed, self.var_speed, self.course, self.var_course);
+        let pos = pos + origin;
+        let mut p = Matrix4::zeros();
+        p.fixed_view_mut::<2, 2>(0, 0).copy_from(&p_pos);
+        p.fixed_view_mut::<2, 2>(2, 2).copy_from(&p_vel);
+        (Vector4::new(pos[0], pos[1], vel[0], vel[1]), p)
+    }
+}
+
+/// A mean and a covariance.
+type Gaussian<N> = (OVector<f64, N>, OMatrix<f64, N, N>);
+
+/// A fixed-size vector as the scenario's state type, checking the dimension.
+fn to_vector<N: Dim, const D: usize>(
+    n: N,
+    v: &SVector<f64, D>,
+) -> Result<OVector<f64, N>, ModelError>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    check_state_dim(n, D)?;
+    Ok(OVector::<f64, N>::from_fn_generic(n, U1, |i, _| v[i]))
+}
+
+/// A fixed-size matrix as the scenario's covariance type, checking the dimension.
+fn to_matrix<N: Dim, const D: usize>(
+    n: N,
+    m: &SMatrix<f64, D, D>,
+) -> Result<OMatrix<f64, N, N>, ModelError>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    check_state_dim(n, D)?;
+    Ok(OMatrix::<f64, N, N>::from_fn_generic(n, n, |i, j| {
+        m[(i, j)]
+    }))
+}
+
+fn check_state_dim<N: Dim>(n: N, expected: usize) -> Result<(), ModelError> {
+    if n.value() == expected {
+        Ok(())
+    } else {
+        Err(ModelError::DimensionMismatch {
+            what: "bearings-only scenario state",
+            expected,
+            found: n.value(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Measurement, Platform, wrap_angle};
+    use rand_chacha::ChaCha8Rng;
+    use rand_chacha::rand_core::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    fn close(a: f64, b: f64, tol: f64) -> bool {
+        (a - b).abs() <= tol * b.abs().max(1e-300)
+    }
+
+    /// Sample mean and covariance of 2-vectors.
+    fn moments(samples: &[Vector2<f64>]) -> (Vector2<f64>, Matrix2<f64>) {
+        let n = samples.len() as f64;
+        let mean = samples.iter().sum::<Vector2<f64>>() / n;
+        let cov = samples
+            .iter()
+            .map(|s| (s - mean) * (s - mean).transpose())
+            .sum::<Matrix2<f64>>()
+            / n;
+        (mean, cov)
+    }
+
+    #[test]
+    fn problem_i_constants() {
+        let s = BotScenario::problem_i().unwrap();
+        assert_eq!(s.problem, BotProblem::I);
+        assert_eq!((s.steps, s.first_label, s.eval_from), (41, 0, 1));
+        assert_eq!(s.labels(), 0..41);
+        assert_eq!(s.start, BotStart::PredictFirst);
+        assert_eq!(s.position_indices(), &[0]);
+        assert_eq!(s.velocity_indices(), Some(&[1][..]));
+        assert_eq!(*s.dynamics.f(), Matrix2::new(1.0, 1.0, 0.0, 1.0));
+        let q = Matrix2::new(0.25, 0.5, 0.5, 1.0) * 0.01;
+        assert!((s.dynamics.q().matrix() - q).norm() < 1e-17);
+        assert_eq!(s.truth_dynamics.q().matrix(), s.dynamics.q().matrix());
+        let m = &s.measurement;
+        assert_eq!(m.variance(), 0.0524 * 0.0524);
+        assert_eq!(m.translational_variance(), (1.0, 1.0));
+        assert_eq!(m.reference(), BearingReference::XAxis);
+        assert_eq!(m.platform().positions().len(), 41);
+        assert_eq!(m.platform().position(40), Vector2::new(160.0, -20.0));
+        // Relative position (x_k - 4k, 20), whatever the velocity.
+        for k in [0, 13, 40] {
+            let x = Vector2::new(80.0 + k as f64, 1.0);
+            let d = m.relative_position(k, &x);
+            assert_eq!(d, Vector2::new(80.0 + k as f64 - 4.0 * k as f64, 20.0));
+            let d2 = m.selection() * x - m.shift(k);
+            assert_eq!(d, d2);
+        }
+        assert_eq!(
+            (BotProblem::I.length_unit(), BotProblem::I.time_unit()),
+            ("m", "s")
+        );
+    }
+
+    #[test]
+    fn problem_ii_constants() {
+        let s = BotScenario::problem_ii().unwrap();
+        assert_eq!((s.steps, s.first_label, s.eval_from), (50, 1, 0));
+        assert_eq!(s.labels(), 1..51);
+        assert_eq!(s.start, BotStart::PredictFirst);
+        assert_eq!(s.position_indices(), &[0, 1]);
+        assert_eq!(s.velocity_indices(), Some(&[2, 3][..]));
+        let f = s.dynamics.f();
+        assert_eq!(f[(0, 2)], 1.0);
+        assert_eq!(f[(1, 3)], 1.0);
+        assert_eq!(f[(0, 1)], 0.0);
+        // Qd = q G G^T with G for [x, y, xdot, ydot].
+        let g = kalibra_linalg::nalgebra::Matrix4x2::new(0.5, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 1.0);
+        let qd = g * g.transpose() * 9.92e-8;
+        assert!((s.dynamics.q().matrix() - qd).norm() < 1e-22);
+        assert_eq!(*s.truth_dynamics.q().matrix(), Matrix4::zeros());
+        assert_eq!(s.truth_dynamics.f(), f);
+        let m = &s.measurement;
+        assert_eq!(m.reference(), BearingReference::North);
+        assert!(close(m.variance(), (2.0 * PI / 180.0).powi(2), 1e-15));
+        assert_eq!(m.translational_variance(), (0.0, 0.0));
+        // Platform: 5 knots on -80 deg up to index 14, then on 146 deg.
+        let p = m.platform().positions();
+        assert_eq!(p.len(), 50);
+        assert_eq!(p[0], Vector2::zeros());
+        let knot = 1.852 / 60.0;
+        for i in 0..49 {
+            let v = p[i + 1] - p[i];
+            let course = if i < 14 { -80.0 } else { 146.0 };
+            assert!(close(v.norm(), 5.0 * knot, 1e-12), "{i}");
+            let c = BearingReference::North.angle(v[0], v[1]).to_degrees();
+            assert!((c - course).abs() < 1e-9, "{i}: {c}");
+        }
+        // Target: (7, 7) km, 15 knots on -135.4 deg, no process noise.
+        let run = s.simulate(&mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+        let x0 = run.states[0];
+        assert_eq!((x0[0], x0[1]), (7.0, 7.0));
+        assert!(close(Vector2::new(x0[2], x0[3]).norm(), 15.0 * knot, 1e-12));
+        assert!((BearingReference::North.angle(x0[2], x0[3]).to_degrees() + 135.4).abs() < 1e-9);
+        for (i, x) in run.states.iter().enumerate() {
+            let straight = x0.fixed_rows::<2>(0) + x0.fixed_rows::<2>(2) * i as f64;
+            assert!((x.fixed_rows::<2>(0) - straight).norm() < 1e-12, "{i}");
+        }
+        assert_eq!(
+            (BotProblem::II.length_unit(), BotProblem::II.time_unit()),
+            ("km", "min")
+        );
+    }
+
+    #[test]
+    fn problem_iii_constants() {
+        let s = BotScenario::problem_iii().unwrap();
+        assert_eq!((s.steps, s.first_label, s.eval_from), (51, 0, 0));
+        assert_eq!(s.labels(), 0..51);
+        assert_eq!(s.start, BotStart::UpdateFirst);
+        assert_eq!(s.position_indices(), &[0, 1]);
+        assert_eq!(s.velocity_indices(), None);
+        assert_eq!(*s.dynamics.f(), Matrix2::new(0.9, 0.0, 0.0, 1.0));
+        assert_eq!(*s.dynamics.q().matrix(), Matrix2::new(0.1, 0.01, 0.01, 0.1));
+        let m = &s.measurement;
+        assert_eq!(
+            (m.variance(), m.reference()),
+            (0.025, BearingReference::XAxis)
+        );
+        assert_eq!(m.platform().positions().len(), 51);
+        for k in [0usize, 1, 7, 50] {
+            let p = m.platform().position(k);
+            assert_eq!(p, Vector2::new((k as f64).cos(), (k as f64).sin()));
+        }
+        let (x, p) = s.initialize(&[]).unwrap();
+        assert_eq!(x, Vector2::new(20.0, 5.0));
+        assert_eq!(p, Matrix2::identity() * 0.1);
+        assert_eq!(
+            (BotProblem::III.length_unit(), BotProblem::III.time_unit()),
+            ("", "")
+        );
+    }
+
+    /// Problem II's true relative position and its rate at time `t` (min), on the
+    /// piecewise-straight paths between the tabulated minutes.
+    fn problem_ii_relative(
+        states: &[Vector4<f64>],
+        platform: &[Vector2<f64>],
+        t: f64,
+    ) -> (Vector2<f64>, Vector2<f64>) {
+        let i = (t.floor() as usize).min(states.len() - 2);
+        let f = t - i as f64;
+        let d = |j: usize| states[j].fixed_rows::<2>(0).into_owned() - platform[j];
+        let rate = d(i + 1) - d(i);
+        (d(i) + rate * f, rate)
+    }
+
+    #[test]
+    fn problem_ii_bearing_rate_peaks_near_125_deg_per_min_at_25_min() {
+        let s = BotScenario::problem_ii().unwrap();
+        let run = s.simulate(&mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        let platform = s.measurement.platform().positions();
+        let (mut peak, mut at) = (0.0f64, 0.0);
+        for j in 0..49_000 {
+            let t = j as f64 / 1000.0;
+            let (d, dd) = problem_ii_relative(&run.states, platform, t);
+            // Nautical bearing atan2(dx, dy): rate (dy dx' - dx dy') / r^2.
+            let rate = ((d[1] * dd[0] - d[0] * dd[1]) / d.norm_squared()).to_degrees();
+            if rate.abs() > peak.abs() {
+                (peak, at) = (rate, t);
+            }
+        }
+        assert!(
+            (120.0..130.0).contains(&peak),
+            "peak {peak} deg/min at {at}"
+        );
+        assert!((24.5..25.5).contains(&at), "peak {peak} deg/min at {at}");
+    }
+
+    #[test]
+    fn problem_ii_bearing_crosses_180_degrees_once_after_closest_approach() {
+        let s = BotScenario::problem_ii().unwrap();
+        let run = s.simulate(&mut ChaCha8Rng::seed_from_u64(2)).unwrap();
+        let m = &s.measurement;
+        let truth: Vec<f64> = (0..s.steps)
+            .map(|i| m.measure(i, &run.states[i])[0])
+            .collect();
+        let jumps: Vec<usize> = (0..s.steps - 1)
+            .filter(|&i| (truth[i + 1] - truth[i]).abs() > PI)
+            .collect();
+        assert_eq!(jumps, [25]);
+        assert!(
+            (truth[25].to_degrees() - 166.3).abs() < 0.1,
+            "{}",
+            truth[25]
+        );
+        assert!(
+            (truth[26].to_degrees() + 138.8).abs() < 0.1,
+            "{}",
+            truth[26]
+        );
+        // The wrapped change is +55 deg; the noisy bearings (sigma 2 deg) do the same.
+        let wrapped = wrap_angle(truth[26] - truth[25]).to_degrees();
+        assert!((wrapped - 54.9).abs() < 0.1, "{wrapped}");
+        let z = &run.measurements;
+        let noisy = m.residual(&z[26], &z[25])[0].to_degrees();
+        assert!((noisy - wrapped).abs() < 20.0, "{noisy}");
+        assert!(z[26][0] - z[25][0] < -PI);
+        // Closest approach: about 0.21 km at t = 24.9 min, just before the crossing.
+        let platform = m.platform().positions();
+        let (mut closest, mut at) = (f64::INFINITY, 0.0);
+        for j in 0..49_000 {
+            let t = j as f64 / 1000.0;
+            let r = problem_ii_relative(&run.states, platform, t).0.norm();
+            if r < closest {
+                (closest, at) = (r, t);
+            }
+        }
+        assert!(
+            (closest - 0.21).abs() < 0.01 && (at - 24.9).abs() < 0.05,
+            "{closest} at {at}"
+        );
+    }
+
+    #[test]
+    fn problem_i_initial_variance_matches_a_monte_carlo() {
+        let x0 = Vector2::from(I_X0);
+        let draws = 200_000;
+        // Returns (Monte Carlo variance of the position estimate about the truth, first-order
+        // variance at the noiseless bearing) for the noises scaled by `scale`.
+        let trial = |scale: f64, seed: u64| {
+            let mut s = BotScenario::problem_i().unwrap();
+            let m = &s.measurement;
+            s.measurement = Bearing::from_coordinates(
+                U2,
+                m.coordinates(),
+                m.reference(),
+                m.variance() * scale,
+                m.platform().clone(),
+            )
+            .unwrap()
+            .with_translational_noise(scale, scale)
+            .unwrap();
+            let m = &s.measurement;
+            let clean = m.measure(0, &x0);
+            let first_order = s.initialize(&[clean]).unwrap().1[(0, 0)];
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let mut acc = 0.0;
+            for _ in 0..draws {
+                let mut z = clean + m.sample_noise(0, &x0, &mut rng).unwrap();
+                m.normalize(&mut z);
+                let e = s.initialize(&[z]).unwrap().0[0] - x0[0];
+                acc += e * e;
+            }
+            (acc / draws as f64, first_order)
+        };
+        // Small noise (sigmas / 10): first order holds; the 2e5-draw estimate has a 0.3%
+        // standard error and the second-order bias is 0.05% of the variance.
+        let (mc, fo) = trial(0.01, 3);
+        assert!(close(mc, fo, 0.02), "{mc} vs {fo}");
+        assert!(close(
+            fo,
+            0.01 * (1.0 + 16.0)
+                + 0.0524f64.powi(2) * 0.01 * 400.0 / (20f64 / 6800f64.sqrt()).powi(4),
+            1e-9
+        ));
+        // The paper's noise: the true spread (a heavy tail from bearings near 0) is about twice
+        // the first-order variance, which is what the filters get. Documented in the module.
+        let (mc, fo) = trial(1.0, 4);
+        assert!(
+            (1.7..2.7).contains(&(mc / fo)),
+            "{mc} vs {fo}: ratio {}",
+            mc / fo
+        );
+        assert!((fo - 334.4).abs() < 0.1, "{fo}");
+    }
+
+    /// Draws the polar description exactly and returns the sample moments of position and
+    /// velocity.
+    fn polar_draw(p: &Polar, draws: usize, seed: u64) -> [(Vector2<f64>, Matrix2<f64>); 2] {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+        let u = |a: f64| BearingReference::North.direction(a);
+        let (mut pos, mut vel) = (Vec::with_capacity(draws), Vec::with_capacity(draws));
+        for _ in 0..draws {
+            let r = p.range + p.var_range.sqrt() * normal();
+            let b = p.bearing + p.var_bearing.sqrt() * normal();
+            let s = p.speed + p.var_speed.sqrt() * normal();
+            let c = p.course + p.var_course.sqrt() * normal();
+            pos.push(u(b) * r);
+            vel.push(u(c) * s);
+        }
+        [moments(&pos), moments(&vel)]
+    }
+
+    #[test]
+    fn problem_ii_first_order_initialisation_matches_the_polar_draw_for_small_spreads() {
+        let z = 0.7;
+        let knot = 1.852 / 60.0;
+        // Spreads small enough for first order: relative errors of order var_b and
+        // var_a / a^2, here 1e-4 or less.
+        let small = Polar {
+            range: 98f64.sqrt(),
+            var_range: 0.05f64.powi(2),
+            bearing: z,
+            var_bearing: 0.005f64.powi(2),
+            speed: 15.0 * knot,
+            var_speed: (0.1 * knot).powi(2),
+            course: z + PI,
+            var_course: 0.01f64.powi(2),
+        };
+        let (mean, cov) = small.first_order(BearingReference::North, Vector2::zeros());
+        let [(mp, cp), (mv, cv)] = polar_draw(&small, 200_000, 5);
+        let block = |i: usize| cov.fixed_view::<2, 2>(i, i).into_owned();
+        for (sample, model, m_mean, s_mean) in [
+            (cp, block(0), mean.fixed_rows::<2>(0), mp),
+            (cv, block(2), mean.fixed_rows::<2>(2), mv),
+        ] {
+            // Entries to 3% of the block's scale (sampling error about 0.3%), means to a small
+            // fraction of a standard deviation.
+            assert!(
+                (sample - model).abs().max() < 0.03 * model.abs().max(),
+                "{sample} vs {model}"
+            );
+            let sd = model.trace().sqrt();
+            assert!((s_mean - m_mean).norm() < 0.02 * sd, "{s_mean} vs {m_mean}");
+        }
+        assert_eq!(cov.fixed_view::<2, 2>(0, 2).into_owned(), Matrix2::zeros());
+    }
+
+    #[test]
+    fn problem_ii_initialisation_and_its_first_order_gap_at_the_paper_spreads() {
+        let s = BotScenario::problem_ii().unwrap();
+        let z = PI / 4.0; // the noiseless z_1: the target at (7, 7) from (0, 0)
+        let (x, p) = s.initialize(&[Vector1::new(z)]).unwrap();
+        let knot = 1.852 / 60.0;
+        assert!(
+            (x[0] - 7.0).abs() < 1e-12 && (x[1] - 7.0).abs() < 1e-12,
+            "{x}"
+        );
+        // Course z + pi = -135 deg at the true 15 knots: heading at the observer.
+        assert!(close(Vector2::new(x[2], x[3]).norm(), 15.0 * knot, 1e-12));
+        assert!((BearingReference::North.angle(x[2], x[3]) + 0.75 * PI).abs() < 1e-12);
+        // Along range the variance is 16 km^2; across range r^2 R.
+        let radial = Vector2::new(1.0, 1.0) / 2f64.sqrt();
+        let across = Vector2::new(1.0, -1.0) / 2f64.sqrt();
+        let pos = p.fixed_view::<2, 2>(0, 0).into_owned();
+        let vel = p.fixed_view::<2, 2>(2, 2).into_owned();
+        let r_theta = s.measurement.variance();
+        assert!(close((radial.transpose() * pos * radial)[0], 16.0, 1e-12));
+        assert!(close(
+            (across.transpose() * pos * across)[0],
+            98.0 * r_theta,
+            1e-12
+        ));
+        assert!(close(
+            (radial.transpose() * vel * radial)[0],
+            (4.0 * knot).powi(2),
+            1e-12
+        ));
+        let var_c = PI * PI / 12.0;
+        let s2 = (15.0 * knot).powi(2);
+        assert!(close(
+            (across.transpose() * vel * across)[0],
+            s2 * var_c,
+            1e-12
+        ));
+
+        // The exact polar draw at the paper's spreads, in the same frame, against closed forms.
+        let paper = Polar {
+            range: 98f64.sqrt(),
+            var_range: 16.0,
+            bearing: z,
+            var_bearing: r_theta,
+            speed: 15.0 * knot,
+            var_speed: (4.0 * knot).powi(2),
+            course: z + PI,
+            var_course: var_c,
+        };
+        let [(_, cp), (mv, cv)] = polar_draw(&paper, 400_000, 6);
+        let along = |c: &Matrix2<f64>, u: &Vector2<f64>| (u.transpose() * c * u)[0];
+        // Position: radial sigma_r^2; cross-range (r^2 + var_r) R, 16% above first order.
+        assert!(close(along(&cp, &radial), 16.0, 0.02));
+        assert!(close(along(&cp, &across), (98.0 + 16.0) * r_theta, 0.02));
+        // Velocity: E[s^2] (1 - e^{-2 var_c}) / 2 across (about half of first order), and
+        // E[s^2] (1 + e^{-2 var_c}) / 2 - s^2 e^{-var_c} along (about 2.8 times), mean speed
+        // shrunk by e^{-var_c / 2}.
+        let es2 = s2 + (4.0 * knot).powi(2);
+        let exact_across = es2 * (1.0 - (-2.0 * var_c).exp()) / 2.0;
+        let exact_along = es2 * (1.0 + (-2.0 * var_c).exp()) / 2.0 - s2 * (-var_c).exp();
+        assert!(close(along(&cv, &across), exact_across, 0.02));
+        assert!(close(along(&cv, &radial), exact_along, 0.02));
+        assert!((0.5..0.55).contains(&(exact_across / (s2 * var_c))));
+        assert!((2.6..3.0).contains(&(exact_along / (4.0 * knot).powi(2))));
+        assert!(close(mv.norm(), 15.0 * knot * (-var_c / 2.0).exp(), 0.02));
+    }
+
+    #[test]
+    fn simulate_is_fixed_by_the_seed() {
+        fn check<N: Dim>(s: &BotScenario<N>)
+        where
+            DefaultAllocator: Alloc<N> + Alloc<N, U1>,
+        {
+            let a = s.simulate(&mut ChaCha8Rng::seed_from_u64(9)).unwrap();
+            let b = s.simulate(&mut ChaCha8Rng::seed_from_u64(9)).unwrap();
+            let c = s.simulate(&mut ChaCha8Rng::seed_from_u64(10)).unwrap();
+            assert_eq!(a.states, b.states);
+            assert_eq!(a.measurements, b.measurements);
+            assert_eq!((&a.init_mean, &a.init_cov), (&b.init_mean, &b.init_cov));
+            assert_ne!(a.measurements, c.measurements);
+        }
+        check(&BotScenario::problem_i().unwrap());
+        check(&BotScenario::problem_ii().unwrap());
+        check(&BotScenario::problem_iii().unwrap());
+    }
+
+    #[test]
+    fn runs_have_the_scenario_dimensions_and_wrapped_bearings() {
+        fn check<N: Dim>(s: &BotScenario<N>, n: usize)
+        where
+            DefaultAllocator: Alloc<N> + Alloc<N, U1>,
+        {
+            for seed in 0..20 {
+                let run = s.simulate(&mut ChaCha8Rng::seed_from_u64(seed)).unwrap();
+                assert_eq!(run.states.len(), s.steps);
+                assert_eq!(run.measurements.len(), s.steps);
+                assert!(run.states.iter().all(|x| x.nrows() == n));
+                assert_eq!(run.init_mean.nrows(), n);
+                assert_eq!(run.init_cov.shape(), (n, n));
+                assert!(run.measurements.iter().all(|z| z[0] > -PI && z[0] <= PI));
+                assert!(kalibra_linalg::all_finite(&run.init_cov));
+                // The initial covariance is a covariance.
+                assert!(run.init_cov.clone().cholesky().is_some());
+            }
+        }
+        check(&BotScenario::problem_i().unwrap(), 2);
+        check(&BotScenario::problem_ii().unwrap(), 4);
+        check(&BotScenario::problem_iii().unwrap(), 2);
+    }
+
+    #[test]
+    fn problem_iii_prior_draw_has_its_law() {
+        let s = BotScenario::problem_iii().unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let firsts: Vec<Vector2<f64>> = (0..4000)
+            .map(|_| s.simulate(&mut rng).unwrap().states[0])
+            .collect();
+        let (mean, cov) = moments(&firsts);
+        // Standard errors: 0.005 for the mean, 0.0022 for the variances.
+        assert!(
+            (mean - Vector2::new(20.0, 5.0)).abs().max() < 0.02,
+            "{mean}"
+        );
+        assert!(
+            (cov - Matrix2::identity() * 0.1).abs().max() < 0.01,
+            "{cov}"
+        );
+    }
+
+    #[test]
+    fn bad_data_and_a_mismatched_problem_are_errors() {
+        let s = BotScenario::problem_i().unwrap();
+        assert!(matches!(
+            s.initialize(&[]),
+            Err(ModelError::DimensionMismatch { .. })
+        ));
+        // A bearing along the target's line has no intersection.
+        assert!(matches!(
+            s.initialize(&[Vector1::new(0.0)]),
+            Err(ModelError::NonFinite { .. })
+        ));
+        let mut wrong = BotScenario::problem_iii().unwrap();
+        wrong.problem = BotProblem::II;
+        assert!(matches!(
+            wrong.simulate(&mut ChaCha8Rng::seed_from_u64(0)),
+            Err(ModelError::DimensionMismatch { .. })
+        ));
+        let mut wrong = BotScenario::problem_ii().unwrap();
+        wrong.problem = BotProblem::III;
+        assert!(matches!(
+            wrong.initialize(&[]),
+            Err(ModelError::DimensionMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn problem_iii_agrees_with_the_reference_traces() {
+        // An independent implementation's runs (tests/data/README in the shared data): their
+        // truth cannot be reproduced (another generator), but their bearings must be our
+        // measurement function of their truth plus noise of the stated size.
+        let text = include_str!("../../../tests/data/bot-problem3-traces.json");
+        let data: serde_json::Value = serde_json::from_str(text).unwrap();
+        let s = BotScenario::problem_iii().unwrap();
+        let num = |v: &serde_json::Value| v.as_f64().unwrap();
+        let vec2 = |v: &serde_json::Value| Vector2::new(num(&v[0]), num(&v[1]));
+        let mat2 = |v: &serde_json::Value| {
+            Matrix2::new(num(&v[0][0]), num(&v[0][1]), num(&v[1][0]), num(&v[1][1]))
+        };
+        let config = &data["config"];
+        assert_eq!(config["K"].as_u64(), Some(s.steps as u64));
+        assert_eq!(config["ref"].as_str(), Some("x"));
+        assert_eq!(num(&config["R_theta"]), s.measurement.variance());
+        assert_eq!(mat2(&config["Qd"]), *s.dynamics.q().matrix());
+        assert_eq!(mat2(&config["Qd_truth"]), *s.truth_dynamics.q().matrix());
+        let labels: Vec<u64> = config["labels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| l.as_u64().unwrap())
+            .collect();
+        assert_eq!(labels, s.labels().map(|l| l as u64).collect::<Vec<_>>());
+        let (init_x, init_p) = s.initialize(&[]).unwrap();
+        let sigma = s.measurement.variance().sqrt();
+        let (mut worst, mut sum2, mut count) = (0.0f64, 0.0, 0);
+        for run in data["runs"].as_array().unwrap() {
+            assert_eq!(vec2(&run["init_x"]), init_x);
+            assert_eq!(mat2(&run["init_P"]), init_p);
+            let truth: Vec<Vector2<f64>> =
+                run["truth"].as_array().unwrap().iter().map(vec2).collect();
+            let z: Vec<f64> = run["z"].as_array().unwrap().iter().map(num).collect();
+            assert_eq!((truth.len(), z.len()), (s.steps, s.steps));
+            for (k, (x, z)) in truth.iter().zip(&z).enumerate() {
+                assert!(*z > -PI && *z <= PI);
+                let e = wrap_angle(z - s.measurement.measure(k, x)[0]);
+                worst = worst.max(e.abs());
+                sum2 += e * e;
+                count += 1;
+            }
+        }
+        assert!(worst < 5.0 * sigma, "worst residual {worst}");
+        // 153 residuals: their RMS is within 20% of sigma unless the model disagrees.
+        let rms = (sum2 / count as f64).sqrt();
+        assert!(
+            (0.8 * sigma..1.2 * sigma).contains(&rms),
+            "rms {rms} vs {sigma}"
+        );
+    }
+}
