@@ -13,6 +13,7 @@
 
 mod bench;
 mod figures;
+mod figures2013;
 mod figures2014;
 mod figures2023;
 mod figures2025;

@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use kalibra_papers::{minh2025, saha2012, saha2014, spall2023, w1};
+use kalibra_papers::{bot, minh2025, saha2012, saha2014, spall2023, w1};
 
 /// The studies `reproduce` knows, in the order it runs them.
-const STUDIES: [&str; 5] = ["w1", "000", "002", "003", "004"];
+const STUDIES: [&str; 6] = ["w1", "000", "001", "002", "003", "004"];
 
 struct Args {
     quick: bool,
@@ -168,6 +168,52 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         ));
     }
 
+    if wanted("001") {
+        let mut config = if args.quick {
+            bot::Config::quick()
+        } else {
+            bot::Config::paper()
+        };
+        if let Some(seed) = args.seed {
+            config.seed = seed;
+        }
+        config.threads = args.threads;
+        eprintln!(
+            "001: bearings-only tracking, 3 problems x {} filters x {} runs, {} seeds; Table II from {} runs ...",
+            bot::FILTERS.len(),
+            config.runs,
+            1 + config.extra_seeds,
+            config.cost_runs
+        );
+        let start = Instant::now();
+        let report = bot::run(&config)?;
+        eprintln!("001: done in {:.2} s", start.elapsed().as_secs_f64());
+        write_study(
+            &args.out,
+            "001",
+            provenance("001", Some(config.seed), serde_json::to_value(&config)?),
+            serde_json::to_value(&report)?,
+            &report.to_markdown(),
+            &crate::figures2013::bot(&report),
+        )?;
+        let table1: Vec<_> = report.claims.iter().filter(|c| c.id == "table1").collect();
+        let count =
+            |v: kalibra_papers::claims::Verdict| table1.iter().filter(|c| c.verdict == v).count();
+        rows.push(format!(
+            "| 001 bearings-only tracking (EKF, UKF, UKF-ML, UKF-MPP, SRF) | Table I: {} of {} cells reproduced, {} not, {} noise-dominated; problem III RMSE ours/paper: {} | [001/report.md](001/report.md) |",
+            count(kalibra_papers::claims::Verdict::Reproduced),
+            table1.len(),
+            count(kalibra_papers::claims::Verdict::NotReproduced),
+            count(kalibra_papers::claims::Verdict::NotTestable),
+            bot::FILTERS[..bot::PAPER_FILTERS]
+                .iter()
+                .zip(bot::TABLE_I[2].1[2].unwrap_or([f64::NAN; 5]))
+                .map(|(n, p)| format!("{n} {:.2}/{p}", report.problems["III"].filters[n].rmse_pos))
+                .collect::<Vec<_>>()
+                .join(", "),
+        ));
+    }
+
     if wanted("002") {
         let mut config = if args.quick {
             minh2025::Config::quick()
@@ -298,7 +344,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
     let index = format!(
         "# kalibra reproduction report\n\nRevision `{revision}`, {size} size, seed {}, threads {}.\n\n\
          | study | summary | report |\n|---|---|---|\n{}\n\n\
-         Paper 001 joins this table when its issue lands.\n",
+         \n",
         args.seed
             .map_or("default per study".to_string(), |s| s.to_string()),
         args.threads,

@@ -13,6 +13,7 @@
 //! Every module documents the decisions its paper leaves open, and every report records its
 //! seed, run count and thread-independent results.
 
+pub mod bot;
 pub mod claims;
 pub mod minh2025;
 pub mod reentry;
