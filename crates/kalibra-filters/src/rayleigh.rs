@@ -82,7 +82,7 @@ const CF_SWITCH: f64 = -1.0;
 const CF_TERMS: u32 = 250;
 
 /// Terms of the Taylor shift from `t = 1` for `-1 < y < 0`; 28 reach rounding at `y = 0`.
-const SHIFT_TERMS: usize = 20;
+const SHIFT_TERMS: usize = 40;
 
 /// `y` from which `Phi(y) = 1` to rounding (`1 - Phi(8.5) = 1e-17`).
 const CDF_IS_ONE: f64 = 8.5;
