@@ -12,16 +12,22 @@
 //! * [`steady_state`]: the limit of the discrete Riccati recursion of a time-invariant model
 //!   and its gain.
 //!
-//! The unscented filters and the shifted Rayleigh filter will implement the same trait and
-//! yield the same record.
+//! * [`Ukf`]: the unscented Kalman filter with a [`SigmaSet`] value (paper 001's symmetric set,
+//!   eqs 16-18, or the scaled set), angle-aware through the measurement residual, and with
+//!   kappa chosen per update on a [`KappaGrid`] by a [`KappaCriterion`] (UKF-ML, UKF-MPP).
+//! * [`Srf`]: the shifted Rayleigh filter for bearings (paper 001, Alg. 2, typos fixed) on any
+//!   [`BearingSensor`], with [`shifted_rayleigh_moments`] evaluated stably.
+//!
+//! Every filter yields the same [`StepRecord`].
 //!
 //! # Notation
 //! `x-_k, P-_k` the prior (predicted) estimate at step `k`, `x+_k, P+_k` the posterior;
 //! `nu_k = z_k - h_k(x-_k)` the innovation, `S_k = H_k P-_k H_k^T + R_k`, `K_k = P-_k H_k^T S_k^-1`.
 //!
 //! # Numerical choices
-//! * Joseph-form covariance update by default ([`UpdateForm`]), symmetrised after every
-//!   prediction and update.
+//! * Joseph-form covariance update by default ([`UpdateForm`]) for the KF and EKF; the UKF
+//!   uses eq 7's `P- - K Pz K^T` and the SRF its eq 28; all symmetrised after every prediction
+//!   and update.
 //! * The gain is a Cholesky solve with `S`, whose factor the record keeps for NIS and
 //!   likelihoods; no explicit inverse.
 //! * A failing step returns a typed [`FilterError`] and leaves the filter as it was.
