@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use kalibra_papers::claims::{Claim, Verdict};
 use kalibra_papers::{bot, minh2025, saha2012, saha2014, spall2023, w1};
 
 /// The studies `reproduce` knows, in the order it runs them.
@@ -99,6 +100,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         })
     };
     let mut rows = Vec::new();
+    let mut claims: Vec<(&str, Vec<Claim>)> = Vec::new();
     let total = Instant::now();
 
     if wanted("w1") {
@@ -116,7 +118,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
             config.runs, config.steps
         );
         let start = Instant::now();
-        let report = w1::run(&config)?;
+        let report = with_progress("w1", || w1::run(&config))?;
         eprintln!("w1: done in {:.2} s", start.elapsed().as_secs_f64());
         write_study(
             &args.out,
@@ -144,7 +146,8 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         config.threads = args.threads;
         eprintln!("000: J1/J2 sweeps of the KF and EKF (4 readings) ...");
         let start = Instant::now();
-        let report = saha2012::run(&config)?;
+        let report = with_progress("000", || saha2012::run(&config))?;
+        claims.push(("000", report.claims()));
         eprintln!("000: done in {:.2} s", start.elapsed().as_secs_f64());
         write_study(
             &args.out,
@@ -186,7 +189,8 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
             config.cost_runs
         );
         let start = Instant::now();
-        let report = bot::run(&config)?;
+        let report = with_progress("001", || bot::run(&config))?;
+        claims.push(("001", report.claims.clone()));
         eprintln!("001: done in {:.2} s", start.elapsed().as_secs_f64());
         write_study(
             &args.out,
@@ -231,7 +235,8 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
             config.sweep_truths
         );
         let start = Instant::now();
-        let report = minh2025::run(&config)?;
+        let report = with_progress("002", || minh2025::run(&config))?;
+        claims.push(("002", report.claims.clone()));
         eprintln!("002: done in {:.2} s", start.elapsed().as_secs_f64());
         write_study(
             &args.out,
@@ -270,7 +275,8 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
             config.runs
         );
         let start = Instant::now();
-        let report = saha2014::run(&config)?;
+        let report = with_progress("003", || saha2014::run(&config))?;
+        claims.push(("003", report.claims()));
         eprintln!("003: done in {:.2} s", start.elapsed().as_secs_f64());
         write_study(
             &args.out,
@@ -315,7 +321,8 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
             config.trajectory
         );
         let start = Instant::now();
-        let report = spall2023::run(&config)?;
+        let report = with_progress("004", || spall2023::run(&config))?;
+        claims.push(("004", report.claims.clone()));
         eprintln!("004: done in {:.2} s", start.elapsed().as_secs_f64());
         write_study(
             &args.out,
@@ -341,15 +348,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         ));
     }
 
-    let index = format!(
-        "# kalibra reproduction report\n\nRevision `{revision}`, {size} size, seed {}, threads {}.\n\n\
-         | study | summary | report |\n|---|---|---|\n{}\n\n\
-         \n",
-        args.seed
-            .map_or("default per study".to_string(), |s| s.to_string()),
-        args.threads,
-        rows.join("\n"),
-    );
+    let index = index_markdown(&revision, size, &args, &rows, &claims);
     std::fs::create_dir_all(&args.out)?;
     std::fs::write(args.out.join("index.md"), &index)?;
     println!("{index}");
@@ -359,4 +358,181 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         total.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// Paper titles for the summary.
+fn title(paper: &str) -> &'static str {
+    match paper {
+        "000" => "Saha, Goswami, Ghosh 2012: J1/J2 tuning metrics (KF, EKF)",
+        "001" => "Local filters in bearings-only tracking (EKF, UKF, adaptive UKF, SRF)",
+        "002" => "Minh et al.: EKF angle tracking of a manoeuvring target",
+        "003" => "Saha, Ghosh, Goswami 2014: J1/J2 for the EKF, Q_comp, initial tuning",
+        _ => "Spall and Wei 2023: surrogate uncertainty bounds for the EKF",
+    }
+}
+
+/// `index.md`: the per-paper verdict counts, the per-study highlights, then every published
+/// claim with its verdict and a link to the section of the paper's report that explains it.
+fn index_markdown(
+    revision: &str,
+    size: &str,
+    args: &Args,
+    highlights: &[String],
+    claims: &[(&str, Vec<Claim>)],
+) -> String {
+    let count = |c: &[Claim], v: Verdict| c.iter().filter(|c| c.verdict == v).count();
+    let mut summary = String::from(
+        "| paper | claims | reproduced | not reproduced | not testable | report |\n|---|---|---|---|---|---|\n",
+    );
+    let mut table = String::from(
+        "| paper | claim | published | ours | tolerance | verdict |\n|---|---|---|---|---|---|\n",
+    );
+    for (paper, list) in claims {
+        summary.push_str(&format!(
+            "| {paper}: {} | {} | {} | {} | {} | [{paper}/report.md]({paper}/report.md) |\n",
+            title(paper),
+            list.len(),
+            count(list, Verdict::Reproduced),
+            count(list, Verdict::NotReproduced),
+            count(list, Verdict::NotTestable),
+        ));
+        for c in list {
+            table.push_str(&format!(
+                "| {paper} | {} | {} | {} | {} | {} ([why]({paper}/report.md#{})) |\n",
+                c.claim.replace('|', "\\|"),
+                c.published.replace('|', "\\|"),
+                c.ours.replace('|', "\\|"),
+                c.tolerance.replace('|', "\\|"),
+                c.verdict.label(),
+                c.section
+            ));
+        }
+    }
+    format!(
+        "# kalibra reproduction report\n\nRevision `{revision}`, {size} size, seed {}, threads {}.\n\n\
+         ## Summary\n\n{summary}\n\
+         A claim is reproduced when ours is within the stated tolerance of the published value \
+         (or the claimed property holds), not reproduced otherwise, and not testable when the \
+         paper gives too little or the seed-to-seed spread exceeds the tolerance. Each paper's \
+         report explains every gap.\n\n\
+         ## Studies\n\n| study | summary | report |\n|---|---|---|\n{}\n\n\
+         ## Every published claim\n\n{table}",
+        args.seed
+            .map_or("default per study".to_string(), |s| s.to_string()),
+        args.threads,
+        highlights.join("\n"),
+    )
+}
+
+/// Runs a stage, printing its elapsed time every 5 s while it runs (stderr), so a long stage
+/// shows it is alive.
+fn with_progress<T>(stage: &str, work: impl FnOnce() -> T) -> T {
+    let (done, wait) = std::sync::mpsc::channel::<()>();
+    let start = Instant::now();
+    let stage_name = stage.to_string();
+    let ticker = std::thread::spawn(move || {
+        while wait
+            .recv_timeout(std::time::Duration::from_secs(5))
+            .is_err_and(|e| e == std::sync::mpsc::RecvTimeoutError::Timeout)
+        {
+            eprintln!(
+                "{stage_name}: running, {:.0} s",
+                start.elapsed().as_secs_f64()
+            );
+        }
+    });
+    let out = work();
+    let _ = done.send(());
+    let _ = ticker.join();
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    /// Drops what legitimately differs between two runs: the recorded thread count, and the
+    /// wall times of paper 001's Table II (with the claim and the report section built on
+    /// them).
+    fn strip(value: &mut serde_json::Value) {
+        match value {
+            serde_json::Value::Object(map) => {
+                for key in ["threads", "cost_relative_to_srf", "cost_ns_per_step"] {
+                    map.remove(key);
+                }
+                map.values_mut().for_each(strip);
+            }
+            serde_json::Value::Array(items) => {
+                items.retain(|v| v["id"] != "table2_ordering");
+                items.iter_mut().for_each(strip);
+            }
+            _ => {}
+        }
+    }
+
+    fn text_without_timing(text: &str) -> String {
+        let body = text.split("## Table II").next().unwrap_or(text);
+        body.lines()
+            .filter(|l| !l.contains("threads") && !l.contains("Table II"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    /// Every file of `dir`, relative path to contents, normalised for comparison.
+    fn outputs(dir: &Path) -> std::collections::BTreeMap<String, String> {
+        let mut out = std::collections::BTreeMap::new();
+        let mut stack = vec![dir.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for entry in std::fs::read_dir(&d).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                    continue;
+                }
+                let text = std::fs::read_to_string(&path).unwrap();
+                let norm = if path.extension().is_some_and(|e| e == "json") {
+                    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+                    strip(&mut v);
+                    v.to_string()
+                } else if path.extension().is_some_and(|e| e == "md") {
+                    text_without_timing(&text)
+                } else {
+                    text
+                };
+                let rel = path.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(rel, norm);
+            }
+        }
+        out
+    }
+
+    /// `cargo xtask reproduce --quick` writes the same reports, results and figures with 1
+    /// and 2 threads (apart from the recorded thread count and the timed Table II).
+    #[test]
+    fn quick_reproduction_is_the_same_for_1_and_2_threads() {
+        let base = std::env::temp_dir().join(format!("kalibra-reproduce-{}", std::process::id()));
+        let run = |threads: &str| {
+            let out = base.join(threads);
+            let args = [
+                "--quick",
+                "--out",
+                out.to_str().unwrap(),
+                "--threads",
+                threads,
+            ];
+            super::main(args.iter().map(Into::into).collect()).unwrap();
+            outputs(&out)
+        };
+        let one = run("1");
+        let two = run("2");
+        let _ = std::fs::remove_dir_all(&base);
+        assert!(one.len() > 40, "only {} files", one.len());
+        assert_eq!(
+            one.keys().collect::<Vec<_>>(),
+            two.keys().collect::<Vec<_>>()
+        );
+        for (file, text) in &one {
+            assert!(text == &two[file], "{file} differs between 1 and 2 threads");
+        }
+    }
 }

@@ -548,6 +548,39 @@ fn min_mean_max(values: impl Iterator<Item = f64>) -> Option<(f64, f64, f64)> {
 }
 
 impl Report {
+    /// The published claims beside ours (the `paper` reading, the one asserted): Table I's 76
+    /// J entries within [`TABLE_TOLERANCE`], and the crossover `nq` of each filter inside
+    /// [`CROSSOVER_NQ_RANGE`].
+    pub fn claims(&self) -> Vec<crate::claims::Claim> {
+        use crate::claims::{Claim, Verdict};
+        let Some(r) = self.reading(READINGS[0].name) else {
+            return Vec::new();
+        };
+        let entries = r.table.len() * 4;
+        let mut out = vec![Claim {
+            id: "table1",
+            claim: format!("Table I: all {entries} J1/J2 entries (KF and EKF, 19 values of p)"),
+            published: "printed to two decimals".into(),
+            ours: format!("largest gap {:.3}", r.max_abs_gap),
+            tolerance: format!("±{TABLE_TOLERANCE} each"),
+            verdict: Verdict::from_bool(r.max_abs_gap <= TABLE_TOLERANCE),
+            section: "largest-gap-per-reading",
+        }];
+        let (lo, hi) = CROSSOVER_NQ_RANGE;
+        for (filter, c) in [("KF", &r.crossover.kf), ("EKF", &r.crossover.ekf)] {
+            out.push(Claim {
+                id: "crossover",
+                claim: format!("{filter}: J1 and J2 cross at nq between {lo} and {hi}"),
+                published: format!("{lo} .. {hi}"),
+                ours: c.map_or("no crossover".into(), |c| format!("nq {:.3}", c.nq)),
+                tolerance: "inside the range".into(),
+                verdict: Verdict::from_bool(c.is_some_and(|c| c.nq >= lo && c.nq <= hi)),
+                section: "crossover",
+            });
+        }
+        out
+    }
+
     /// The report as Markdown: set-up and readings, Table I of the `paper` reading beside the
     /// printed one, the largest gap of every reading, the crossover against the paper's claim,
     /// the J2 spike, the `nq` offset, the `results.json` keys and links to the figures

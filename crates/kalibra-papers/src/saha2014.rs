@@ -577,6 +577,46 @@ impl ReadingReport {
 }
 
 impl Report {
+    /// The published claims beside ours (the `paper` reading, the one asserted): `J1max`,
+    /// `J2max`, the crossover `J` and `nq`, the plateau edges, and Table II's `P0` diagonal
+    /// recovered by `P_ad` within [`P_AD_TOLERANCE`].
+    pub fn claims(&self) -> Vec<crate::claims::Claim> {
+        use crate::claims::{Claim, Verdict};
+        let mut out = Vec::new();
+        if let Some(r) = self
+            .readings
+            .iter()
+            .find(|r| r.reading.name == READINGS[0].name)
+        {
+            for (claim, entry, tol) in r.claims() {
+                out.push(Claim {
+                    id: "j_claims",
+                    claim: claim.to_string(),
+                    published: entry.map_or("-".into(), |e| format!("{:.2}", e.paper)),
+                    ours: entry.map_or("no crossover".into(), |e| format!("{:.3}", e.ours)),
+                    tolerance: format!("±{tol}"),
+                    verdict: Verdict::from_bool(entry.is_some_and(|e| e.gap.abs() <= tol)),
+                    section: "claims",
+                });
+            }
+        }
+        let worst = self
+            .p_ad_diagonal
+            .iter()
+            .map(|e| (e.ours / e.paper - 1.0).abs())
+            .fold(0.0, f64::max);
+        out.push(Claim {
+            id: "p_ad",
+            claim: "P_ad (eq 22) gives Table II's P0 diagonal".into(),
+            published: "Table II".into(),
+            ours: format!("largest relative gap {:.1}%", 100.0 * worst),
+            tolerance: format!("±{:.0}%", 100.0 * P_AD_TOLERANCE),
+            verdict: Verdict::from_bool(worst <= P_AD_TOLERANCE),
+            section: "initial-tuning",
+        });
+        out
+    }
+
     /// The Monte Carlo setting named `name` (`S3`, `S2`, `C`, `R2`, `R3`).
     pub fn setting(&self, name: &str) -> Option<&McSetting> {
         self.monte_carlo.iter().find(|s| s.name == name)
