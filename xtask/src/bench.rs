@@ -1,4 +1,8 @@
 //! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
+//!
+//! `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: W1 (KF,
+//! `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF, `--runs` x 51 steps,
+//! in `bench_w2`) by default, or only the one named. `--steps` applies to W1 only.
 
 use std::ffi::OsString;
 use std::time::Instant;
@@ -10,11 +14,20 @@ use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
-struct Args {
-    runs: usize,
+/// Which workloads to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Workloads {
+    All,
+    W1,
+    W2,
+}
+
+pub(crate) struct Args {
+    workloads: Workloads,
+    pub(crate) runs: usize,
     steps: usize,
-    threads: usize,
-    repeats: usize,
+    pub(crate) threads: usize,
+    pub(crate) repeats: usize,
 }
 
 fn parse(args: Vec<OsString>) -> Result<Args> {
@@ -23,6 +36,7 @@ fn parse(args: Vec<OsString>) -> Result<Args> {
         .map(|n| n.get())
         .unwrap_or(1);
     let mut parsed = Args {
+        workloads: Workloads::All,
         runs: 1000,
         steps: 1000,
         threads: cores,
@@ -35,6 +49,14 @@ fn parse(args: Vec<OsString>) -> Result<Args> {
             Long("steps") => parsed.steps = parser.value()?.parse()?,
             Long("threads") => parsed.threads = parser.value()?.parse()?,
             Long("repeats") => parsed.repeats = parser.value()?.parse()?,
+            Value(name) => {
+                parsed.workloads = match name.to_str() {
+                    Some("all") => Workloads::All,
+                    Some("w1" | "W1") => Workloads::W1,
+                    Some("w2" | "W2") => Workloads::W2,
+                    _ => bail!("unknown workload {name:?}: expected w1, w2 or all"),
+                }
+            }
             _ => return Err(arg.unexpected().into()),
         }
     }
@@ -46,11 +68,20 @@ fn parse(args: Vec<OsString>) -> Result<Args> {
 
 pub fn main(args: Vec<OsString>) -> Result<()> {
     let args = parse(args)?;
-    w1_bench(&args)
+    if args.workloads != Workloads::W2 {
+        w1_bench(&args)?;
+    }
+    if args.workloads != Workloads::W1 {
+        if args.workloads == Workloads::All {
+            println!();
+        }
+        crate::bench_w2::w2_bench(&args)?;
+    }
+    Ok(())
 }
 
 /// Best wall time of `repeats` calls, and the last result.
-fn best_of<T>(repeats: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+pub(crate) fn best_of<T>(repeats: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
     let mut best = f64::INFINITY;
     let mut out = None;
     for _ in 0..repeats {

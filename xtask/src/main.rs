@@ -12,6 +12,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
+mod bench_w2;
 mod figures;
 mod figures2013;
 mod figures2014;
@@ -23,8 +24,8 @@ mod reproduce;
 use anyhow::{Result, bail};
 
 const USAGE: &str = "usage:
-  cargo xtask reproduce [--quick] [--out DIR] [--seed N] [--threads N]
-  cargo xtask bench [--runs N] [--steps N] [--threads N]";
+  cargo xtask reproduce [w1|000|001|002|003|004 ...] [--quick] [--out DIR] [--seed N] [--threads N]
+  cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]";
 
 fn main() -> Result<()> {
     let mut args = std::env::args_os().skip(1);
