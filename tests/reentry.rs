@@ -39,6 +39,15 @@ fn paper_000_table_i_within_0_02() {
     let spike = &paper.table[14];
     assert!(spike.j2_ekf.ours > paper.table[15].j2_ekf.ours);
     assert!(spike.max_j2k_ekf > 2.0);
+    // The report's claims say the same: all three reproduced.
+    let claims = report.claims();
+    assert_eq!(claims.len(), 3);
+    assert!(
+        claims
+            .iter()
+            .all(|c| c.verdict == kalibra::papers::claims::Verdict::Reproduced),
+        "{claims:?}"
+    );
 }
 
 /// Paper 003 with the paper reading: J1max, J2max and J at the crossover within 0.01, nq at
@@ -57,6 +66,15 @@ fn paper_003_metrics_and_p_ad() {
     for e in &report.p_ad_diagonal {
         assert!((e.ours / e.paper - 1.0).abs() <= 0.05, "{e:?}");
     }
+    // The report's claims (six J/nq claims and P_ad) are all reproduced.
+    let claims = report.claims();
+    assert_eq!(claims.len(), 7);
+    assert!(
+        claims
+            .iter()
+            .all(|c| c.verdict == kalibra::papers::claims::Verdict::Reproduced),
+        "{claims:?}"
+    );
     // The Monte Carlo ran at five settings, with a finite CRLB at every step.
     assert_eq!(report.monte_carlo.len(), 5);
     assert_eq!(report.crlb.len(), report.horizon + 1);
