@@ -277,23 +277,38 @@ where
         } = parts;
         symmetrize(&mut cov);
         if !(all_finite(&mean) && all_finite(&cov)) {
+            check_finite(&innovation, "innovation").map_err(|e| FilterError::at(k, e))?;
             return Err(FilterError::NonFinite {
                 what: "posterior estimate",
                 step: k,
             });
         }
+        Ok(self.store(UpdateParts {
+            zhat,
+            innovation,
+            h,
+            r,
+            s,
+            gain,
+            mean,
+            cov,
+        }))
+    }
+
+    /// Writes a checked update into the record and makes the posterior current.
+    fn store(&mut self, parts: UpdateParts<N, M>) -> &StepRecord<N, M> {
         let rec = &mut self.record;
-        rec.posterior.mean = mean;
-        rec.posterior.cov = cov;
-        rec.predicted_measurement = zhat;
-        rec.innovation = innovation;
-        rec.s = s;
-        rec.gain = gain;
-        rec.h = h;
-        rec.r = r;
+        rec.posterior.mean = parts.mean;
+        rec.posterior.cov = parts.cov;
+        rec.predicted_measurement = parts.zhat;
+        rec.innovation = parts.innovation;
+        rec.s = parts.s;
+        rec.gain = parts.gain;
+        rec.h = parts.h;
+        rec.r = parts.r;
         self.phase = Phase::Posterior;
         self.has_record = true;
-        Ok(&self.record)
+        &self.record
     }
 
     /// Updates at the current step with the predicted measurement, the innovation (residual),
@@ -338,18 +353,16 @@ where
                 step: k,
             });
         }
-        let rec = &mut self.record;
-        rec.posterior.mean = x_post;
-        rec.posterior.cov = p_post;
-        rec.predicted_measurement = zhat;
-        rec.innovation = innovation;
-        rec.s = s;
-        rec.gain = gain;
-        rec.h = h;
-        rec.r = r;
-        self.phase = Phase::Posterior;
-        self.has_record = true;
-        Ok(&self.record)
+        Ok(self.store(UpdateParts {
+            zhat,
+            innovation,
+            h,
+            r,
+            s,
+            gain,
+            mean: x_post,
+            cov: p_post,
+        }))
     }
 
     /// Checks the length and finiteness of a measurement handed in from outside.
