@@ -150,7 +150,8 @@ fn replays_the_independent_problem3_traces() {
 
 /// Problem III time averages (position RMSE, NCI in dB) per filter: the mean over the six
 /// seeds 2013..=2018 of the full-size study (1000 runs each), computed once with
-/// `cargo xtask reproduce 001` at revision 4cc3bdf and stored here. Seed-to-seed standard
+/// `cargo xtask reproduce 001` (study as committed in 4cc3bdf; the committed copy in
+/// docs/reproduction, made at ceb0c2c, gives the same values) and stored here. Seed-to-seed standard
 /// deviations of a single 1000-run average were 0.008-0.019 (RMSE) and 0.057-0.080 dB (NCI).
 const PROBLEM_III_REFERENCE: [(&str, f64, f64); 6] = [
     ("EKF", 1.155668894715969, 0.3812066774119187),

@@ -12,6 +12,7 @@
 //! normal approximation without continuity correction, the Kolmogorov-Smirnov test the exact
 //! null distribution (or the plain Kolmogorov limit for large samples).
 
+use kalibra_metrics::median;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 use statrs::function::gamma::gamma_ur;
 
@@ -86,20 +87,6 @@ pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f
         .chunks_exact(batch)
         .map(|chunk| chunk.iter().sum::<f64>() * scale)
         .collect())
-}
-
-/// Median with the even-length convention of numpy and most texts: the mean of the two
-/// middle values. `x` must be non-empty and finite.
-fn median(x: &[f64]) -> f64 {
-    let mut sorted = x.to_vec();
-    sorted.sort_unstable_by(f64::total_cmp);
-    let n = sorted.len();
-    if n % 2 == 1 {
-        sorted[n / 2]
-    } else {
-        // Halving each term cannot overflow, and equals halving the sum for normal numbers.
-        0.5 * sorted[n / 2 - 1] + 0.5 * sorted[n / 2]
-    }
 }
 
 /// Wald-Wolfowitz runs test for randomness about the median, two-sided.

@@ -3,7 +3,7 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, SqrtMethod,
-    check_finite, propagate, sigma_sqrt, symmetrize,
+    all_finite, check_finite, propagate, sigma_sqrt, symmetrize,
 };
 use kalibra_models::{Dynamics, Measurement};
 
@@ -591,7 +591,7 @@ where
     measurement.normalize(&mut zhat);
     let nu = measurement.residual(z, &zhat);
     let s = Covariance::from_symmetric(pz, "innovation covariance Pz").map_err(|e| {
-        let e = if all_ok(&dbar) {
+        let e = if all_finite(&dbar) {
             e
         } else {
             LinalgError::NonFinite {
@@ -612,13 +612,6 @@ where
         mean,
         cov,
     })
-}
-
-fn all_ok<M: Dim>(v: &OVector<f64, M>) -> bool
-where
-    DefaultAllocator: Alloc<M>,
-{
-    v.iter().all(|x| x.is_finite())
 }
 
 /// The value of `criterion` for one candidate (smaller is better); NaN when it cannot be

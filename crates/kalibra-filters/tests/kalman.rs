@@ -6,36 +6,14 @@ use kalibra_filters::{
     Ekf, Filter, FilterError, FilterOptions, InitialCheck, Kf, Start, UpdateForm,
 };
 use kalibra_linalg::{
-    DMatrix, DVector, Dyn, Matrix2, Matrix4, SMatrix, U2, U4, Vector2, Vector4, propagate,
+    DMatrix, DVector, Dyn, Matrix2, Matrix4, SMatrix, Vector2, Vector4, propagate,
 };
-use kalibra_models::{Kinematic, LinearGaussian, LinearObservation, ProcessNoise, Truth, simulate};
+use kalibra_models::{Kinematic, LinearGaussian, LinearObservation, ProcessNoise, simulate};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 
-fn w1() -> (LinearGaussian<U4>, LinearObservation<U4, U2>) {
-    let cv = Kinematic::constant_velocity(2, 1.0).unwrap();
-    (
-        cv.dynamics(U4).unwrap(),
-        cv.position_measurement(U4, U2, Matrix2::identity() * 100.0)
-            .unwrap(),
-    )
-}
-
-fn truth(seed: u64, steps: usize) -> Truth<U4, U2> {
-    let (f, h) = w1();
-    simulate(
-        &f,
-        &h,
-        Vector4::new(0.0, 0.0, 10.0, -5.0),
-        steps,
-        &mut ChaCha8Rng::seed_from_u64(seed),
-    )
-    .unwrap()
-}
-
-fn p0() -> Matrix4<f64> {
-    Matrix4::from_diagonal(&Vector4::new(100.0, 100.0, 25.0, 25.0))
-}
+mod common;
+use common::{p0, truth, w1};
 
 #[test]
 fn ekf_equals_kf_on_a_linear_model() {

@@ -6,39 +6,16 @@ use approx::assert_relative_eq;
 use kalibra_filters::{
     Filter, FilterError, KappaCriterion, KappaGrid, Kf, SigmaSet, Start, Ukf, UkfPrediction,
 };
-use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector1, Vector2, Vector4};
+use kalibra_linalg::{Matrix2, Matrix4, U4, Vector1, Vector2, Vector4};
 use kalibra_models::{
-    Bearing, BearingReference, Kinematic, LinearGaussian, LinearObservation, Stationary, Truth,
-    simulate, wrap_angle,
+    Bearing, BearingReference, Kinematic, LinearObservation, Stationary, simulate, wrap_angle,
 };
 use proptest::prelude::*;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 
-fn w1() -> (LinearGaussian<U4>, LinearObservation<U4, U2>) {
-    let cv = Kinematic::constant_velocity(2, 1.0).unwrap();
-    (
-        cv.dynamics(U4).unwrap(),
-        cv.position_measurement(U4, U2, Matrix2::identity() * 100.0)
-            .unwrap(),
-    )
-}
-
-fn truth(seed: u64, steps: usize) -> Truth<U4, U2> {
-    let (f, h) = w1();
-    simulate(
-        &f,
-        &h,
-        Vector4::new(0.0, 0.0, 10.0, -5.0),
-        steps,
-        &mut ChaCha8Rng::seed_from_u64(seed),
-    )
-    .unwrap()
-}
-
-fn p0() -> Matrix4<f64> {
-    Matrix4::from_diagonal(&Vector4::new(100.0, 100.0, 25.0, 25.0))
-}
+mod common;
+use common::{p0, truth, w1};
 
 /// Runs the UKF with `set` and the KF on the same W1 data; returns the largest relative
 /// difference of posterior means and covariances.

@@ -401,15 +401,25 @@ fn mse_matrix(errors: &[f64], dim: usize) -> DMatrix<f64> {
     sigma
 }
 
-/// The median of a non-empty slice (NaN for an empty one, which callers rule out).
-fn median(values: &[f64]) -> f64 {
+/// The median of a sample, with the even-length convention of numpy and most texts (the mean
+/// of the two middle values); NaN for an empty sample. Sorts a copy by `total_cmp`, so NaNs
+/// sort last rather than panicking.
+///
+/// ```
+/// use kalibra_metrics::median;
+/// assert_eq!(median(&[5.0, 1.0, 3.0]), 3.0);
+/// assert_eq!(median(&[5.0, 1.0, 3.0, 7.0]), 4.0);
+/// assert!(median(&[]).is_nan());
+/// ```
+pub fn median(values: &[f64]) -> f64 {
     let mut sorted = values.to_vec();
     sorted.sort_unstable_by(f64::total_cmp);
     let mid = sorted.len() / 2;
     match sorted.len() {
         0 => f64::NAN,
         len if len % 2 == 1 => sorted[mid],
-        _ => 0.5 * (sorted[mid - 1] + sorted[mid]),
+        // Halving each term cannot overflow, and equals halving the sum for normal numbers.
+        _ => 0.5 * sorted[mid - 1] + 0.5 * sorted[mid],
     }
 }
 

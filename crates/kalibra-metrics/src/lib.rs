@@ -60,7 +60,9 @@ mod window;
 
 pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
 pub use consistency::{ChiSquareBand, nees, nis};
-pub use credibility::{Credibility, CredibilityAverage, CredibilityStep, consistent_median_nees};
+pub use credibility::{
+    Credibility, CredibilityAverage, CredibilityStep, consistent_median_nees, median,
+};
 pub use error::MetricsError;
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
 pub use itse::itse;

@@ -69,6 +69,11 @@ pub(crate) fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) 
     (mean, var.sqrt())
 }
 
+/// Index of the smallest value (ties: the first; NaN never wins), 0 for an empty slice.
+pub(crate) fn argmin(values: &[f64]) -> usize {
+    (0..values.len()).fold(0, |best, i| if values[i] < values[best] { i } else { best })
+}
+
 impl From<kalibra_sim::SimError<PaperError>> for PaperError {
     fn from(e: kalibra_sim::SimError<PaperError>) -> Self {
         match e {

@@ -334,10 +334,6 @@ fn outcome(
     Ok(out)
 }
 
-fn argmin(v: &[f64; 3]) -> usize {
-    (0..3).fold(0, |best, i| if v[i] < v[best] { i } else { best })
-}
-
 fn ordering(v: &[f64; 3]) -> String {
     let mut idx = [0, 1, 2];
     idx.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
@@ -426,7 +422,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
                 mc_std_rmse_theta_phase: mc_phase_std,
                 mc_mean_rmse: std::array::from_fn(|s| state_stats[s].0),
                 mc_std_rmse: std::array::from_fn(|s| state_stats[s].1),
-                share_best: share(&outcomes, |o| argmin(&o.phase) == i),
+                share_best: share(&outcomes, |o| crate::argmin(&o.phase) == i),
                 noise_floor_theta: floor,
                 steady_gain: [gain[0], gain[1], gain[2]],
                 estimates: estimates.iter().map(|x| [x[0], x[1], x[2]]).collect(),
@@ -440,7 +436,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
             },
         );
     }
-    let fraction_q2_best = share(&outcomes, |o| argmin(&o.phase) == 1);
+    let fraction_q2_best = share(&outcomes, |o| crate::argmin(&o.phase) == 1);
     let fraction_ordering_holds = share(&outcomes, |o| ordering(&o.phase) == PAPER_ORDERING);
 
     // The amplitude sweep, on common random numbers.
@@ -456,8 +452,8 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
             scale,
             amplitude: 10.0 * scale,
             ordering: ordering(&mean),
-            share_q2_best: share(&outs, |o| argmin(&o.phase) == 1),
-            share_q3_best: share(&outs, |o| argmin(&o.phase) == 2),
+            share_q2_best: share(&outs, |o| crate::argmin(&o.phase) == 1),
+            share_q3_best: share(&outs, |o| crate::argmin(&o.phase) == 2),
             q3_over_q2: mean[2] / mean[1],
             mean_rmse_theta_phase: mean,
         });
@@ -863,6 +859,6 @@ mod tests {
     fn ordering_and_argmin() {
         assert_eq!(ordering(&[0.15, 0.1, 0.3]), PAPER_ORDERING);
         assert_eq!(ordering(&[0.2, 0.3, 0.1]), "Q3 < Q1 < Q2");
-        assert_eq!(argmin(&[0.2, 0.3, 0.1]), 2);
+        assert_eq!(crate::argmin(&[0.2, 0.3, 0.1]), 2);
     }
 }
