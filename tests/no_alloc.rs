@@ -62,7 +62,8 @@ fn fixed_size_steps_do_not_allocate() {
             ekf.predict().unwrap();
         }
         let rec = kf.update(&z).unwrap();
-        total += rec.nis() + nees(&(x - rec.posterior().mean), &rec.posterior().cov).unwrap();
+        let e = x - rec.posterior().mean;
+        total += rec.nis() + nees(&e, &rec.posterior().cov).unwrap() + rec.nees(&e).unwrap();
         total += rec.a()[(0, 0)] + rec.b()[(1, 1)];
         total += ekf.update(&z).unwrap().nis();
     }

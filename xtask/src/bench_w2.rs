@@ -17,7 +17,6 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use kalibra_filters::{Ekf, Filter, SigmaSet, Ukf, UkfPrediction};
 use kalibra_linalg::{U1, U2};
-use kalibra_metrics::nees;
 use kalibra_models::{BotRun, BotScenario};
 use kalibra_sim::{MAX_BLOCKS, MonteCarlo};
 use nalgebra::{Matrix2, RowVector2, Vector2};
@@ -272,8 +271,8 @@ fn lib_filter(mut filter: impl Filter<U2, U1>, run: &BotRun<U2>, sums: &mut [f64
         if k > 0 {
             filter.predict()?;
         }
-        let post = filter.update(z)?.posterior();
-        sums[k] += nees(&(x - post.mean), &post.cov)?;
+        let rec = filter.update(z)?;
+        sums[k] += rec.nees(&(x - rec.posterior().mean))?;
     }
     Ok(())
 }

@@ -1,8 +1,12 @@
 //! What one measurement update yields.
 
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, propagate, symmetrize,
+    Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, U1, propagate, quad_form_symmetric,
+    symmetrize,
 };
+use nalgebra::{Matrix, Storage, storage::IsContiguous};
+
+use crate::FilterError;
 
 /// A Gaussian estimate: mean and covariance.
 #[derive(Clone, Debug, PartialEq)]
@@ -117,6 +121,26 @@ where
     pub fn c(&self) -> OMatrix<f64, M, M> {
         projected(&self.h, &self.posterior.cov)
     }
+    /// The normalised estimation error squared `e^T (P+_k)^-1 e` of an error `e = x_k - x+_k`
+    /// (either sign) against the posterior covariance.
+    ///
+    /// The same value as `kalibra_metrics::nees(e, &rec.posterior().cov)`, without its
+    /// re-check that `P+_k` is finite and symmetric: the filter established both when it
+    /// stored the posterior (every update symmetrises it and rejects non-finite values).
+    ///
+    /// # Errors
+    /// [`FilterError::NonFinite`] for a non-finite `e`, [`FilterError::DimensionMismatch`]
+    /// for a wrong length (`Dyn`), [`FilterError::NotPositiveDefinite`] if `P+_k` is singular
+    /// (possible with a semi-definite `Q` or `P0`, or after the standard update off the
+    /// optimal gain).
+    pub fn nees<S>(&self, error: &Matrix<f64, N, U1, S>) -> Result<f64, FilterError>
+    where
+        S: Storage<f64, N, U1> + IsContiguous,
+    {
+        quad_form_symmetric(&self.posterior.cov, error, "posterior covariance P+")
+            .map_err(|e| FilterError::at(self.k, e))
+    }
+
     /// The normalised innovation squared `nu^T S^-1 nu`, from the stored factor of `S`.
     pub fn nis(&self) -> f64 {
         self.s

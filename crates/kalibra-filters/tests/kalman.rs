@@ -6,7 +6,7 @@ use kalibra_filters::{
     Ekf, Filter, FilterError, FilterOptions, InitialCheck, Kf, Start, UpdateForm,
 };
 use kalibra_linalg::{
-    DMatrix, DVector, Dyn, Matrix2, Matrix4, SMatrix, Vector2, Vector4, propagate,
+    DMatrix, DVector, Dyn, Matrix2, Matrix4, SMatrix, Vector2, Vector4, propagate, quad_form_once,
 };
 use kalibra_models::{Kinematic, LinearGaussian, LinearObservation, ProcessNoise, simulate};
 use rand_chacha::ChaCha8Rng;
@@ -264,6 +264,69 @@ fn bad_data_gives_typed_errors_and_leaves_the_filter_untouched() {
         ..Default::default()
     };
     assert!(Kf::with_options(&f, &h, Vector4::zeros(), indefinite, opts).is_ok());
+}
+
+/// The record's NEES is the checked quadratic form of `kalibra_linalg::quad_form_once` (what
+/// `kalibra_metrics::nees` computes), bit for bit, and reports bad errors and a singular
+/// posterior as typed errors.
+#[test]
+fn record_nees_equals_the_checked_quadratic_form() {
+    let (f, h) = w1();
+    let t = truth(5, 50);
+    let mut kf = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
+    for (k, (x, z)) in t.states.iter().zip(&t.measurements).enumerate() {
+        if k > 0 {
+            kf.predict().unwrap();
+        }
+        let rec = kf.update(z).unwrap();
+        let e = x - rec.posterior().mean;
+        let checked = quad_form_once(&rec.posterior().cov, &e, "P").unwrap();
+        assert_eq!(rec.nees(&e).unwrap().to_bits(), checked.to_bits());
+        assert!(matches!(
+            rec.nees(&Vector4::new(0.0, f64::NAN, 0.0, 0.0)),
+            Err(FilterError::NonFinite { step, .. }) if step == k
+        ));
+    }
+    // A semi-definite P0 with no process noise in between keeps the posterior singular.
+    let certain = Matrix4::from_diagonal(&Vector4::new(1.0, 1.0, 0.0, 0.0));
+    let mut kf = Kf::new(&f, &h, Vector4::zeros(), certain).unwrap();
+    let rec = kf.update(&Vector2::new(1.0, 1.0)).unwrap();
+    assert!(matches!(
+        rec.nees(&Vector4::new(1.0, 0.0, 0.0, 0.0)),
+        Err(FilterError::NotPositiveDefinite {
+            what: "posterior covariance P+",
+            step: 0
+        })
+    ));
+    // Dynamic sizes check the length.
+    let (fd, hd) = (
+        LinearGaussian::new(
+            DMatrix::from_column_slice(4, 4, f.f().as_slice()),
+            DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
+        )
+        .unwrap(),
+        LinearObservation::new(
+            DMatrix::from_column_slice(2, 4, h.h().as_slice()),
+            DMatrix::from_column_slice(2, 2, h.r().matrix().as_slice()),
+        )
+        .unwrap(),
+    );
+    let mut kf = Kf::new(
+        &fd,
+        &hd,
+        DVector::zeros(4),
+        DMatrix::from_column_slice(4, 4, p0().as_slice()),
+    )
+    .unwrap();
+    let rec = kf.update(&DVector::from_vec(vec![1.0, 1.0])).unwrap();
+    assert!(matches!(
+        rec.nees(&DVector::zeros(3)),
+        Err(FilterError::DimensionMismatch {
+            expected: 4,
+            found: 3,
+            ..
+        })
+    ));
 }
 
 #[test]

@@ -63,7 +63,9 @@ mod lyapunov;
 mod psd;
 
 pub use alloc::Alloc;
-pub use covariance::{Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once};
+pub use covariance::{
+    Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once, quad_form_symmetric,
+};
 pub use error::LinalgError;
 pub use kernels::{
     all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,

@@ -16,7 +16,7 @@
 
 use kalibra_filters::{Filter, Kf};
 use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector4};
-use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, nees, time_average};
+use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, time_average};
 use kalibra_models::{
     Kinematic, LinearGaussian, LinearObservation, ProcessNoise, Simulator, sample_with_factor,
 };
@@ -171,7 +171,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
                 }
                 let rec = kf.update(&z)?;
                 let e = x - rec.posterior().mean;
-                nees_acc.push(k, nees(&e, &rec.posterior().cov)? / 4.0)?;
+                nees_acc.push(k, rec.nees(&e)? / 4.0)?;
                 nis_acc.push(k, rec.nis() / 2.0)?;
                 err_acc.push(k, &e)?;
             }
