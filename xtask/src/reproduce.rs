@@ -472,8 +472,12 @@ mod tests {
 
     fn text_without_timing(text: &str) -> String {
         let body = text.split("## Table II").next().unwrap_or(text);
+        // Paper 001's summary row counts the timed Table II claim, whose verdict can flip when
+        // other tests load the machine (it did in a CI run: 17 reproduced instead of 18).
         body.lines()
-            .filter(|l| !l.contains("threads") && !l.contains("Table II"))
+            .filter(|l| {
+                !l.contains("threads") && !l.contains("Table II") && !l.starts_with("| 001: ")
+            })
             .collect::<Vec<_>>()
             .join("\n")
     }
