@@ -262,41 +262,27 @@ where
     /// returns its record. The posterior is symmetrised here and checked for finiteness.
     pub(crate) fn commit_update(
         &mut self,
+        mut parts: UpdateParts<N, M>,
+    ) -> Result<&StepRecord<N, M>, FilterError> {
+        symmetrize(&mut parts.cov);
+        self.check_and_store(parts)
+    }
+
+    /// Checks that an update's posterior is finite, then writes it into the record and makes it
+    /// current. Non-finite inputs always reach the posterior, so the hot path checks only the
+    /// outputs and names the culprit (a non-finite innovation) only when they fail.
+    fn check_and_store(
+        &mut self,
         parts: UpdateParts<N, M>,
     ) -> Result<&StepRecord<N, M>, FilterError> {
         let k = self.record.k;
-        let UpdateParts {
-            zhat,
-            innovation,
-            h,
-            r,
-            s,
-            gain,
-            mean,
-            mut cov,
-        } = parts;
-        symmetrize(&mut cov);
-        if !(all_finite(&mean) && all_finite(&cov)) {
-            check_finite(&innovation, "innovation").map_err(|e| FilterError::at(k, e))?;
+        if !(all_finite(&parts.mean) && all_finite(&parts.cov)) {
+            check_finite(&parts.innovation, "innovation").map_err(|e| FilterError::at(k, e))?;
             return Err(FilterError::NonFinite {
                 what: "posterior estimate",
                 step: k,
             });
         }
-        Ok(self.store(UpdateParts {
-            zhat,
-            innovation,
-            h,
-            r,
-            s,
-            gain,
-            mean,
-            cov,
-        }))
-    }
-
-    /// Writes a checked update into the record and makes the posterior current.
-    fn store(&mut self, parts: UpdateParts<N, M>) -> &StepRecord<N, M> {
         let rec = &mut self.record;
         rec.posterior.mean = parts.mean;
         rec.posterior.cov = parts.cov;
@@ -308,7 +294,7 @@ where
         rec.r = parts.r;
         self.phase = Phase::Posterior;
         self.has_record = true;
-        &self.record
+        Ok(&self.record)
     }
 
     /// Updates at the current step with the predicted measurement, the innovation (residual),
@@ -346,14 +332,7 @@ where
             UpdateForm::Joseph => joseph_update(&prior.cov, &gain, &h, &r),
             UpdateForm::Standard => standard_update(&prior.cov, &gain, &h),
         };
-        if !(all_finite(&x_post) && all_finite(&p_post)) {
-            check_finite(&innovation, "innovation").map_err(at)?;
-            return Err(FilterError::NonFinite {
-                what: "posterior estimate",
-                step: k,
-            });
-        }
-        Ok(self.store(UpdateParts {
+        self.check_and_store(UpdateParts {
             zhat,
             innovation,
             h,
@@ -362,7 +341,7 @@ where
             gain,
             mean: x_post,
             cov: p_post,
-        }))
+        })
     }
 
     /// Checks the length and finiteness of a measurement handed in from outside.

@@ -15,6 +15,23 @@ use rand_chacha::rand_core::SeedableRng;
 mod common;
 use common::{p0, truth, w1};
 
+/// W1's models with run-time (`Dyn`) sizes.
+fn w1_dynamic() -> (LinearGaussian<Dyn>, LinearObservation<Dyn, Dyn>) {
+    let (f, h) = w1();
+    (
+        LinearGaussian::new(
+            DMatrix::from_column_slice(4, 4, f.f().as_slice()),
+            DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
+        )
+        .unwrap(),
+        LinearObservation::new(
+            DMatrix::from_column_slice(2, 4, h.h().as_slice()),
+            DMatrix::from_column_slice(2, 2, h.r().matrix().as_slice()),
+        )
+        .unwrap(),
+    )
+}
+
 #[test]
 fn ekf_equals_kf_on_a_linear_model() {
     let (f, h) = w1();
@@ -75,16 +92,7 @@ fn kf_matches_a_textbook_recursion() {
 #[test]
 fn fixed_and_dynamic_sizes_agree() {
     let (f, h) = w1();
-    let fd = LinearGaussian::new(
-        DMatrix::from_column_slice(4, 4, f.f().as_slice()),
-        DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
-    )
-    .unwrap();
-    let hd = LinearObservation::new(
-        DMatrix::from_column_slice(2, 4, h.h().as_slice()),
-        DMatrix::from_column_slice(2, 2, h.r().matrix().as_slice()),
-    )
-    .unwrap();
+    let (fd, hd) = w1_dynamic();
     let t = truth(3, 50);
     let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
     let fixed = Kf::new(&f, &h, x0, p0())
@@ -299,18 +307,7 @@ fn record_nees_equals_the_checked_quadratic_form() {
         })
     ));
     // Dynamic sizes check the length.
-    let (fd, hd) = (
-        LinearGaussian::new(
-            DMatrix::from_column_slice(4, 4, f.f().as_slice()),
-            DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
-        )
-        .unwrap(),
-        LinearObservation::new(
-            DMatrix::from_column_slice(2, 4, h.h().as_slice()),
-            DMatrix::from_column_slice(2, 2, h.r().matrix().as_slice()),
-        )
-        .unwrap(),
-    );
+    let (fd, hd) = w1_dynamic();
     let mut kf = Kf::new(
         &fd,
         &hd,
@@ -463,16 +460,7 @@ fn constant_gain_kf_rejects_a_bad_gain_and_keeps_its_gain() {
         Err(FilterError::Initial(_))
     ));
     // Dyn sizes: a gain of the wrong shape is a typed error.
-    let fd = LinearGaussian::new(
-        DMatrix::from_column_slice(4, 4, f.f().as_slice()),
-        DMatrix::from_column_slice(4, 4, f.q().matrix().as_slice()),
-    )
-    .unwrap();
-    let hd = LinearObservation::new(
-        DMatrix::from_column_slice(2, 4, h.h().as_slice()),
-        DMatrix::identity(2, 2) * 100.0,
-    )
-    .unwrap();
+    let (fd, hd) = w1_dynamic();
     assert!(
         ConstantGainKf::new(
             &fd,
