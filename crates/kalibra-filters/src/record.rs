@@ -131,8 +131,8 @@ where
     /// # Errors
     /// [`FilterError::NonFinite`] for a non-finite `e`, [`FilterError::DimensionMismatch`]
     /// for a wrong length (`Dyn`), [`FilterError::NotPositiveDefinite`] if `P+_k` is singular
-    /// (possible with a semi-definite `Q` or `P0`, or after the standard update off the
-    /// optimal gain).
+    /// (possible from a semi-definite `P0` whose null space the process noise has not yet
+    /// filled).
     pub fn nees<S>(&self, error: &Matrix<f64, N, U1, S>) -> Result<f64, FilterError>
     where
         S: Storage<f64, N, U1> + IsContiguous,

@@ -4,9 +4,9 @@
 //! Every other kalibra crate speaks in the types and kernels defined here:
 //!
 //! * nalgebra matrices generic over their dimensions, fixed to `f64`. A dimension is a
-//!   [`Dim`]: [`Const<N>`](Const) (aliases [`U1`](type@U1) .. [`U9`](type@U9)) for sizes known at compile time,
-//!   which live on the stack and compile to straight-line code, or [`Dyn`] for sizes known only
-//!   at run time. One generic implementation serves both.
+//!   [`Dim`]: [`Const<N>`](Const) (aliases [`U1`](type@U1) .. [`U9`](type@U9)) for sizes
+//!   known at compile time, which live on the stack and compile to straight-line code, or
+//!   [`Dyn`] for sizes known only at run time. One generic implementation serves both.
 //! * [`Alloc`], one bound-alias trait that collects the allocator bounds a filter over a state
 //!   dimension `N` and a measurement dimension `M` needs, so each signature carries one line:
 //!   `where DefaultAllocator: Alloc<N, M>`.

@@ -155,8 +155,9 @@ where
 /// A symmetric positive semi-definite matrix with a square-root factor: the type for noise
 /// covariances, which are often rank-deficient (`Q = G G^T`), and for sampling.
 ///
-/// Checked once at construction: finite, symmetric to [`SYMMETRY_TOLERANCE`](crate::SYMMETRY_TOLERANCE) (then made exactly
-/// symmetric), and factorable by [`semidefinite_factor`].
+/// Checked once at construction: finite, symmetric to
+/// [`SYMMETRY_TOLERANCE`](crate::SYMMETRY_TOLERANCE) (then made exactly symmetric), and
+/// factorable by [`semidefinite_factor`].
 #[derive(Clone, Debug)]
 pub struct PsdMatrix<D: Dim>
 where
