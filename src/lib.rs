@@ -12,7 +12,6 @@
 //! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, RMSE accumulators, J1/J2/nq, ITSE |
 //! | [`bounds`] | `kalibra-bounds` | posterior Cramér-Rao bound, observability along a trajectory |
 //! | [`sim`] | `kalibra-sim` | seeded parallel Monte Carlo, identical for any thread count; Q sweeps, initial tuning |
-//! | [`papers`] | `kalibra-papers` | the reproduced studies, `run(config) -> Report` |
 //!
 //! # Example
 //! ```
@@ -35,7 +34,7 @@ pub use kalibra_filters as filters;
 pub use kalibra_linalg as linalg;
 pub use kalibra_metrics as metrics;
 pub use kalibra_models as models;
-pub use kalibra_papers as papers;
+
 pub use kalibra_sim as sim;
 
 /// The README's example, compiled and run as a doctest so that it stays true.

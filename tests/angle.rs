@@ -10,8 +10,8 @@ use kalibra::filters::{Ekf, Filter, FilterOptions, Kf, Start, UpdateForm};
 use kalibra::linalg::{Matrix3, Vector1, Vector3};
 use kalibra::metrics::{instantaneous_errors, rmse_per_state, sliding_window};
 use kalibra::models::{AngularTarget, ManoeuvreProfile, ManoeuvringTarget};
-use kalibra::papers::claims::Verdict;
-use kalibra::papers::minh2025::{self, Config, Q_SETS, R};
+use kalibra_studies::claims::Verdict;
+use kalibra_studies::minh2025::{self, Config, Q_SETS, R};
 use serde_json::Value;
 
 fn trace() -> Value {

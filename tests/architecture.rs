@@ -51,7 +51,7 @@ fn crate_dependencies_follow_the_design() {
             ],
         ),
         (
-            "kalibra-papers",
+            "kalibra-studies",
             &[
                 "kalibra-linalg",
                 "kalibra-models",

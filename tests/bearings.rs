@@ -14,8 +14,8 @@ use kalibra::filters::{
 };
 use kalibra::linalg::{Matrix2, U1, U2, U4, Vector1, Vector2};
 use kalibra::models::{Bearing, BearingReference, BotProblem, BotScenario, LinearGaussian, Moving};
-use kalibra::papers::bot::{self, Config, FILTERS};
-use kalibra::papers::claims::Verdict;
+use kalibra_studies::bot::{self, Config, FILTERS};
+use kalibra_studies::claims::Verdict;
 use kalibra::sim::MonteCarlo;
 use serde_json::Value;
 

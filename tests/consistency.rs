@@ -16,7 +16,7 @@ use kalibra::metrics::{ChiSquareBand, StepMean, nees};
 use kalibra::models::{
     Kinematic, LinearGaussian, LinearObservation, Simulator, sample_with_factor,
 };
-use kalibra::papers::PaperError;
+use kalibra_studies::StudyError;
 use kalibra::sim::MonteCarlo;
 
 const RUNS: usize = 100;
@@ -63,7 +63,7 @@ fn final_anees(study: usize, r_filter: f64) -> f64 {
                         )?;
                     }
                 }
-                Ok::<(), PaperError>(())
+                Ok::<(), StudyError>(())
             },
         )
         .unwrap();

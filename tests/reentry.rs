@@ -5,7 +5,7 @@
 
 use kalibra::filters::{Ekf, Filter, Start};
 use kalibra::models::RadarRates;
-use kalibra::papers::{reentry, saha2012, saha2014};
+use kalibra_studies::{reentry, saha2012, saha2014};
 
 /// Paper 000, Table I: with the paper reading every J1/J2 entry of the KF and the EKF is
 /// within 0.02 of the printed value, and the crossover lies in the claimed nq range.
@@ -45,7 +45,7 @@ fn paper_000_table_i_within_0_02() {
     assert!(
         claims
             .iter()
-            .all(|c| c.verdict == kalibra::papers::claims::Verdict::Reproduced),
+            .all(|c| c.verdict == kalibra_studies::claims::Verdict::Reproduced),
         "{claims:?}"
     );
 }
@@ -72,7 +72,7 @@ fn paper_003_metrics_and_p_ad() {
     assert!(
         claims
             .iter()
-            .all(|c| c.verdict == kalibra::papers::claims::Verdict::Reproduced),
+            .all(|c| c.verdict == kalibra_studies::claims::Verdict::Reproduced),
         "{claims:?}"
     );
     // The Monte Carlo ran at five settings, with a finite CRLB at every step.

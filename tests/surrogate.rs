@@ -10,8 +10,8 @@ use kalibra::models::{
     AccelAxis, Dynamics, LinearGaussian, LinearObservation, Measurement, Target3d, Target3dParams,
     standard_normal,
 };
-use kalibra::papers::claims::Verdict;
-use kalibra::papers::spall2023::{self, Config, READINGS};
+use kalibra_studies::claims::Verdict;
+use kalibra_studies::spall2023::{self, Config, READINGS};
 use kalibra::sim::MonteCarlo;
 
 type Vector9 = SVector<f64, 9>;

@@ -1,6 +1,6 @@
 //! A Monte Carlo study gives bit-identical results whatever the thread count.
 
-use kalibra::papers::w1;
+use kalibra_studies::w1;
 
 #[test]
 fn w1_is_bit_identical_for_1_2_and_8_threads() {

@@ -1,6 +1,6 @@
 //! The W1 consistency study at reduced size, as `cargo xtask reproduce` runs it at full size.
 
-use kalibra::papers::w1;
+use kalibra_studies::w1;
 
 #[test]
 fn w1_quick_study_is_consistent() {

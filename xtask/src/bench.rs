@@ -8,7 +8,7 @@ use std::ffi::OsString;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use kalibra_papers::w1;
+use kalibra_studies::w1;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;

@@ -2,8 +2,8 @@
 //! [`crate::plot`]. Each function returns `(file name, SVG document)` pairs; the caller writes
 //! them beside the study's `report.md`, whose links use these names.
 
-use kalibra_papers::reentry::{CrossoverRow, SweepRow};
-use kalibra_papers::saha2012::{CROSSOVER_NQ_RANGE, READINGS, Report, TABLE_I};
+use kalibra_studies::reentry::{CrossoverRow, SweepRow};
+use kalibra_studies::saha2012::{CROSSOVER_NQ_RANGE, READINGS, Report, TABLE_I};
 
 use crate::plot::{Annotation, Figure, Series};
 
@@ -149,7 +149,7 @@ fn crossover_point(c: &CrossoverRow) -> Annotation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kalibra_papers::saha2012::{Config, run};
+    use kalibra_studies::saha2012::{Config, run};
 
     /// Every figure is a complete SVG document with data and no NaN.
     #[test]

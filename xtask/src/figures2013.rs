@@ -2,7 +2,7 @@
 //! and velocity RMSE (Figs. 2, 5, 9), NCI and ANEES with its 95% band (Figs. 3, 6, 10), and the
 //! mean kappa of the adaptive filters (Fig. 7 for problem II; ours for I and III).
 
-use kalibra_papers::bot::{FILTERS, ProblemResult, Report};
+use kalibra_studies::bot::{FILTERS, ProblemResult, Report};
 
 use crate::plot::{Annotation, Figure, Series};
 
@@ -11,7 +11,7 @@ use crate::plot::{Annotation, Figure, Series};
 fn per_filter(
     p: &ProblemResult,
     mut fig: Figure,
-    pick: impl Fn(&kalibra_papers::bot::FilterResult) -> &[f64],
+    pick: impl Fn(&kalibra_studies::bot::FilterResult) -> &[f64],
 ) -> Figure {
     for name in FILTERS {
         let values = pick(&p.filters[name]);

@@ -2,8 +2,8 @@
 //! (Fig. 1), RMSE per state against the CRLB (Fig. 2), observability singular values
 //! (Fig. 3), altitude and density (Fig. 4) and ITSE (Fig. 5).
 
-use kalibra_papers::reentry::SweepRow;
-use kalibra_papers::saha2014::{self, Report, STATE_NAMES};
+use kalibra_studies::reentry::SweepRow;
+use kalibra_studies::saha2014::{self, Report, STATE_NAMES};
 
 use crate::plot::{Annotation, Figure, Series};
 
@@ -218,7 +218,7 @@ pub fn saha2014(report: &Report) -> Vec<(String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kalibra_papers::saha2014::{Config, run};
+    use kalibra_studies::saha2014::{Config, run};
 
     /// Every figure of the quick study is a non-empty SVG document without NaN.
     #[test]

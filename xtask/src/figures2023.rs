@@ -1,7 +1,7 @@
 //! The figures of paper 004 (Spall and Wei 2023): marginal densities of `e_1000`, empirical
 //! against the surrogate (the paper's Fig. 4), per reading and component.
 
-use kalibra_papers::spall2023::{COMPONENTS, Report};
+use kalibra_studies::spall2023::{COMPONENTS, Report};
 
 use crate::plot::{Figure, Series};
 

@@ -2,7 +2,7 @@
 //! (Fig. 1), errors (Fig. 2), sliding-window RMSE, bias and std of the angle (Fig. 3), and the
 //! manoeuvre-amplitude sweep (ours; not in the paper).
 
-use kalibra_papers::minh2025::{self, PHASE, Q_SETS, Report, STATE_NAMES, WINDOW};
+use kalibra_studies::minh2025::{self, PHASE, Q_SETS, Report, STATE_NAMES, WINDOW};
 
 use crate::plot::{Annotation, Figure, Series};
 

@@ -6,7 +6,7 @@
 //!   through the public API and through hand-written nalgebra loops in the same process, and
 //!   prints steps per second and their ratio.
 //!
-//! The logic lives in library crates (`kalibra-papers`); this binary parses arguments, times,
+//! The logic lives in library crates (`kalibra-studies`); this binary parses arguments, times,
 //! and writes files.
 
 #![allow(clippy::print_stdout, clippy::print_stderr)]

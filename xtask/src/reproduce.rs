@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use kalibra_papers::claims::{Claim, Verdict};
-use kalibra_papers::{bot, minh2025, saha2012, saha2014, spall2023, w1};
+use kalibra_studies::claims::{Claim, Verdict};
+use kalibra_studies::{bot, minh2025, saha2012, saha2014, spall2023, w1};
 
 /// The studies `reproduce` knows, in the order it runs them.
 const STUDIES: [&str; 6] = ["w1", "000", "001", "002", "003", "004"];
@@ -160,7 +160,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         let paper = report
             .reading("paper")
             .context("paper 000 has a 'paper' reading")?;
-        let cross = |c: Option<kalibra_papers::reentry::CrossoverRow>| {
+        let cross = |c: Option<kalibra_studies::reentry::CrossoverRow>| {
             c.map_or("none".to_string(), |c| format!("{:.2}", c.nq))
         };
         rows.push(format!(
@@ -202,13 +202,13 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
         )?;
         let table1: Vec<_> = report.claims.iter().filter(|c| c.id == "table1").collect();
         let count =
-            |v: kalibra_papers::claims::Verdict| table1.iter().filter(|c| c.verdict == v).count();
+            |v: kalibra_studies::claims::Verdict| table1.iter().filter(|c| c.verdict == v).count();
         rows.push(format!(
             "| 001 bearings-only tracking (EKF, UKF, UKF-ML, UKF-MPP, SRF) | Table I: {} of {} cells reproduced, {} not, {} noise-dominated; problem III RMSE ours/paper: {} | [001/report.md](001/report.md) |",
-            count(kalibra_papers::claims::Verdict::Reproduced),
+            count(kalibra_studies::claims::Verdict::Reproduced),
             table1.len(),
-            count(kalibra_papers::claims::Verdict::NotReproduced),
-            count(kalibra_papers::claims::Verdict::NotTestable),
+            count(kalibra_studies::claims::Verdict::NotReproduced),
+            count(kalibra_studies::claims::Verdict::NotTestable),
             bot::FILTERS[..bot::PAPER_FILTERS]
                 .iter()
                 .zip(bot::TABLE_I[2].1[2].unwrap_or([f64::NAN; 5]))
@@ -287,7 +287,7 @@ pub fn main(args: Vec<OsString>) -> Result<()> {
             &crate::figures2014::saha2014(&report),
         )?;
         let paper = &report.readings[0];
-        let fmt = |e: Option<kalibra_papers::saha2012::Entry>| {
+        let fmt = |e: Option<kalibra_studies::saha2012::Entry>| {
             e.map_or("none".to_string(), |e| {
                 format!("{:.3} ({:.2})", e.ours, e.paper)
             })

@@ -29,7 +29,7 @@
 use kalibra_linalg::{Matrix2, Matrix4, SMatrix, U2, U4, Vector2, Vector4};
 use serde::Serialize;
 
-use crate::PaperError;
+use crate::StudyError;
 use crate::reentry::{self, CrossoverRow, SweepRow};
 
 /// The printed initial estimate.
@@ -197,7 +197,7 @@ struct Setup {
 }
 
 impl Setup {
-    fn new() -> Result<Self, PaperError> {
+    fn new() -> Result<Self, StudyError> {
         let truth = reentry::noise_free_truth()?;
         Ok(Self {
             measurements: truth[1..]
@@ -241,7 +241,7 @@ pub struct ReplayStep {
 /// `first_step + 1 + i`.
 ///
 /// # Errors
-/// [`PaperError::Harness`] if `S` or `A + B` is singular.
+/// [`StudyError::Harness`] if `S` or `A + B` is singular.
 pub fn replay<D: kalibra_models::Dynamics<U4>>(
     dynamics: &D,
     r: &Matrix2<f64>,
@@ -249,11 +249,11 @@ pub fn replay<D: kalibra_models::Dynamics<U4>>(
     p0: Matrix4<f64>,
     first_step: usize,
     zs: &[Vector2<f64>],
-) -> Result<Vec<ReplayStep>, PaperError> {
+) -> Result<Vec<ReplayStep>, StudyError> {
     let h = h();
     let (mut x, mut p) = (x0, p0);
     let singular =
-        |what: &str, k: usize| PaperError::Harness(format!("{what} singular at step {k}"));
+        |what: &str, k: usize| StudyError::Harness(format!("{what} singular at step {k}"));
     let mut out = Vec::with_capacity(zs.len());
     for (i, z) in zs.iter().enumerate() {
         let k = first_step + i + 1;
@@ -304,7 +304,7 @@ fn point(
     reading: &Reading,
     kind: FilterKind,
     p: f64,
-) -> Result<SweepRow, PaperError> {
+) -> Result<SweepRow, StudyError> {
     let q = reentry::scaled(&q_nom(), p);
     let r = r_printed() * reading.r_scale;
     let p0 = match reading.p0 {
@@ -442,13 +442,13 @@ impl Report {
 /// KF and the EKF.
 ///
 /// # Errors
-/// [`PaperError`] if a filter run fails or `config.fine_step` is not positive.
-pub fn run(config: &Config) -> Result<Report, PaperError> {
+/// [`StudyError`] if a filter run fails or `config.fine_step` is not positive.
+pub fn run(config: &Config) -> Result<Report, StudyError> {
     let setup = Setup::new()?;
     let fine = kalibra_sim::grid(-13.0, 6.0, config.fine_step)?;
     let mut readings = Vec::new();
     for reading in &READINGS {
-        let sweep_of = |kind, grid: &[f64]| -> Result<Vec<SweepRow>, PaperError> {
+        let sweep_of = |kind, grid: &[f64]| -> Result<Vec<SweepRow>, StudyError> {
             Ok(kalibra_sim::sweep(grid, config.threads, |p| {
                 point(&setup, reading, kind, p)
             })?)

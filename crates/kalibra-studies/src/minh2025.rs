@@ -44,7 +44,7 @@ use kalibra_models::{AngularTarget, ManoeuvringTarget};
 use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
-use crate::PaperError;
+use crate::StudyError;
 use crate::claims::{Claim, Verdict, claims_table};
 
 /// One printed process-noise set (eq 19): the diagonal of `Q`, per step.
@@ -252,8 +252,8 @@ pub struct Report {
 /// measurements of samples `1 ..= K` and returns the estimates `x_hat_0 .. x_hat_K`.
 ///
 /// # Errors
-/// [`PaperError::Filter`] if a step fails.
-pub fn track(model: &AngularTarget, z: &[Vector1<f64>]) -> Result<Vec<Vector3<f64>>, PaperError> {
+/// [`StudyError::Filter`] if a step fails.
+pub fn track(model: &AngularTarget, z: &[Vector1<f64>]) -> Result<Vec<Vector3<f64>>, StudyError> {
     let options = FilterOptions {
         update: UpdateForm::Standard,
         ..FilterOptions::default()
@@ -271,8 +271,8 @@ pub fn track(model: &AngularTarget, z: &[Vector1<f64>]) -> Result<Vec<Vector3<f6
 /// The angle-error measurement-noise floor and the steady-state gain of one set at `dt`.
 ///
 /// # Errors
-/// [`PaperError`] if the Riccati or Lyapunov iteration fails (it does not for these models).
-pub fn noise_floor(dt: f64, q: [f64; 3]) -> Result<(f64, Vector3<f64>), PaperError> {
+/// [`StudyError`] if the Riccati or Lyapunov iteration fails (it does not for these models).
+pub fn noise_floor(dt: f64, q: [f64; 3]) -> Result<(f64, Vector3<f64>), StudyError> {
     let model = AngularTarget::diagonal(dt, q)?;
     let h = kalibra_linalg::nalgebra::Matrix1x3::new(1.0, 0.0, 0.0);
     let r = Matrix1::new(R);
@@ -287,7 +287,7 @@ fn in_phase(t: f64) -> bool {
 }
 
 /// Angle RMSE over the phase, from errors `e_0 .. e_K` at `times`.
-fn phase_rmse(times: &[f64], errors: &[Vector3<f64>]) -> Result<f64, PaperError> {
+fn phase_rmse(times: &[f64], errors: &[Vector3<f64>]) -> Result<f64, StudyError> {
     let phase: Vec<f64> = times
         .iter()
         .zip(errors)
@@ -306,7 +306,7 @@ struct Outcome {
     phase: [f64; 3],
 }
 
-fn models(dt: f64) -> Result<Vec<AngularTarget>, PaperError> {
+fn models(dt: f64) -> Result<Vec<AngularTarget>, StudyError> {
     Q_SETS
         .iter()
         .map(|s| Ok(AngularTarget::diagonal(dt, s.diag)?))
@@ -317,7 +317,7 @@ fn outcome(
     target: &ManoeuvringTarget,
     models: &[AngularTarget],
     rng: &mut kalibra_sim::ChaCha8Rng,
-) -> Result<Outcome, PaperError> {
+) -> Result<Outcome, StudyError> {
     let truth = target.truth(rng);
     let z = ManoeuvringTarget::measurements(&truth, R, rng)?;
     let times = target.times();
@@ -362,11 +362,11 @@ const PAPER_ORDERING: &str = "Q2 < Q1 < Q3";
 /// Runs the study.
 ///
 /// # Errors
-/// [`PaperError`] if a model, filter or metric fails, or `config` asks for fewer than two
+/// [`StudyError`] if a model, filter or metric fails, or `config` asks for fewer than two
 /// truths.
-pub fn run(config: &Config) -> Result<Report, PaperError> {
+pub fn run(config: &Config) -> Result<Report, StudyError> {
     if config.truths < 2 || config.sweep_truths < 1 {
-        return Err(PaperError::Harness(
+        return Err(StudyError::Harness(
             "need at least two truths and one per sweep point".into(),
         ));
     }
@@ -473,7 +473,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
             }
             Ok(FloorRow { dt, floor })
         })
-        .collect::<Result<Vec<_>, PaperError>>()?;
+        .collect::<Result<Vec<_>, StudyError>>()?;
 
     let mut report = Report {
         config: config.clone(),

@@ -23,13 +23,13 @@ use kalibra_models::{
 use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
-use crate::PaperError;
+use crate::StudyError;
 
 /// The W1 dynamics and sensor.
 ///
 /// # Errors
 /// Never for these constants; the `Result` carries the models' construction checks.
-pub fn models() -> Result<(LinearGaussian<U4>, LinearObservation<U4, U2>), PaperError> {
+pub fn models() -> Result<(LinearGaussian<U4>, LinearObservation<U4, U2>), StudyError> {
     let cv = Kinematic::constant_velocity(2, 1.0)?.noise(ProcessNoise::Discrete { q: 1.0 });
     Ok((
         cv.dynamics(U4)?,
@@ -133,11 +133,11 @@ pub struct Report {
 /// Runs the study.
 ///
 /// # Errors
-/// [`PaperError`] if a run fails (it should not: the models are valid and the filter
+/// [`StudyError`] if a run fails (it should not: the models are valid and the filter
 /// consistent) or `config` asks for zero runs or steps.
-pub fn run(config: &Config) -> Result<Report, PaperError> {
+pub fn run(config: &Config) -> Result<Report, StudyError> {
     if config.runs == 0 || config.steps == 0 {
-        return Err(PaperError::Metrics(
+        return Err(StudyError::Metrics(
             kalibra_metrics::MetricsError::InvalidParameter {
                 name: "runs or steps",
                 value: 0.0,
@@ -175,7 +175,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
                 nis_acc.push(k, rec.nis() / 2.0)?;
                 err_acc.push(k, &e)?;
             }
-            Ok::<(), PaperError>(())
+            Ok::<(), StudyError>(())
         },
     )?;
     let anees_band = ChiSquareBand::for_normalized_mean(4.0, config.runs, config.confidence)?;

@@ -2,7 +2,7 @@
 //!
 //! # What this crate is for
 //! One module per study. Each has a `Config` (with `paper()` for the published size and
-//! `quick()` for tests), `run(&Config) -> Result<Report, PaperError>`, and a `Report` that
+//! `quick()` for tests), `run(&Config) -> Result<Report, StudyError>`, and a `Report` that
 //! serialises to JSON (serde) and renders as Markdown. The crate computes and formats; it
 //! writes no files (xtask does).
 //!
@@ -29,7 +29,7 @@ use kalibra_models::ModelError;
 /// Why a study failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
-pub enum PaperError {
+pub enum StudyError {
     /// A model could not be built or simulated.
     #[error(transparent)]
     Model(#[from] ModelError),
@@ -74,14 +74,14 @@ pub(crate) fn argmin(values: &[f64]) -> usize {
     (0..values.len()).fold(0, |best, i| if values[i] < values[best] { i } else { best })
 }
 
-impl From<kalibra_sim::SimError<PaperError>> for PaperError {
-    fn from(e: kalibra_sim::SimError<PaperError>) -> Self {
+impl From<kalibra_sim::SimError<StudyError>> for StudyError {
+    fn from(e: kalibra_sim::SimError<StudyError>) -> Self {
         match e {
-            kalibra_sim::SimError::Run { run, source } => PaperError::Run {
+            kalibra_sim::SimError::Run { run, source } => StudyError::Run {
                 run,
                 message: source.to_string(),
             },
-            other => PaperError::Harness(other.to_string()),
+            other => StudyError::Harness(other.to_string()),
         }
     }
 }

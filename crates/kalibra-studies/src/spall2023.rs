@@ -43,7 +43,7 @@ use kalibra_models::{
 use kalibra_sim::{ChaCha8Rng, MonteCarlo};
 use serde::Serialize;
 
-use crate::PaperError;
+use crate::StudyError;
 use crate::claims::{Claim, Verdict, claims_table};
 use crate::saha2012::Entry;
 
@@ -311,7 +311,7 @@ fn run_axis<MA: DimName>(
     steps: usize,
     rng: &mut ChaCha8Rng,
     mut visit: impl FnMut(usize, &Vector3<f64>, &kalibra_filters::StepRecord<U3, MA>),
-) -> Result<(), PaperError>
+) -> Result<(), StudyError>
 where
     DefaultAllocator: Alloc<U3, MA>,
 {
@@ -336,7 +336,7 @@ fn trajectory_axis<MA: DimName>(
     axis: &AxisSetup<MA>,
     config: &Config,
     rng: &mut ChaCha8Rng,
-) -> Result<AxisTrajectory<MA>, PaperError>
+) -> Result<AxisTrajectory<MA>, StudyError>
 where
     DefaultAllocator: Alloc<U3, MA>,
 {
@@ -381,7 +381,7 @@ where
 }
 
 /// The three tests on the batch means of one error series, and the number of batch means.
-fn tests(series: &[f64], config: &Config) -> Result<([TestResult; 3], usize), PaperError> {
+fn tests(series: &[f64], config: &Config) -> Result<([TestResult; 3], usize), StudyError> {
     let means = batch_means(series, config.batch, config.burn_in)?;
     let half = means.len() / 2;
     Ok((
@@ -408,7 +408,7 @@ fn trajectory<MA: DimName, M9: DimName>(
     target: &Target3d,
     config: &Config,
     rng: &mut ChaCha8Rng,
-) -> Result<TrajectoryOutcome, PaperError>
+) -> Result<TrajectoryOutcome, StudyError>
 where
     DefaultAllocator: Alloc<U3, MA> + Alloc<U9, M9>,
 {
@@ -461,7 +461,7 @@ fn replicate<MA: DimName>(
     axes: &[AxisSetup<MA>; 3],
     steps: usize,
     rng: &mut ChaCha8Rng,
-) -> Result<([f64; 9], [f64; 9]), PaperError>
+) -> Result<([f64; 9], [f64; 9]), StudyError>
 where
     DefaultAllocator: Alloc<U3, MA>,
 {
@@ -516,10 +516,10 @@ fn density(values: &[f64], sd: f64, bins: usize) -> Density {
 /// functions (they are cheap), so no nalgebra buffer of a generic size has to be `Sync`.
 fn study<MA: DimName, M9: DimName>(
     reading: &Reading,
-    make_axes: impl Fn() -> Result<[AxisSetup<MA>; 3], PaperError> + Sync,
-    make_full: impl Fn() -> Result<LinearObservation<U9, M9>, PaperError> + Sync,
+    make_axes: impl Fn() -> Result<[AxisSetup<MA>; 3], StudyError> + Sync,
+    make_full: impl Fn() -> Result<LinearObservation<U9, M9>, StudyError> + Sync,
     config: &Config,
-) -> Result<ReadingReport, PaperError>
+) -> Result<ReadingReport, StudyError>
 where
     DefaultAllocator: Alloc<U3, MA> + Alloc<U9, M9>,
 {
@@ -611,9 +611,9 @@ where
     })
 }
 
-fn axes_positions(reading: &Reading) -> Result<[AxisSetup<kalibra_linalg::U1>; 3], PaperError> {
+fn axes_positions(reading: &Reading) -> Result<[AxisSetup<kalibra_linalg::U1>; 3], StudyError> {
     let params = reading.params();
-    let make = |a| -> Result<_, PaperError> {
+    let make = |a| -> Result<_, StudyError> {
         Ok(AxisSetup {
             dynamics: AccelAxis::new(params, a)?,
             measurement: AccelAxis::position_measurement(reading.r)?,
@@ -624,9 +624,9 @@ fn axes_positions(reading: &Reading) -> Result<[AxisSetup<kalibra_linalg::U1>; 3
 
 fn axes_positions_velocities(
     reading: &Reading,
-) -> Result<[AxisSetup<kalibra_linalg::U2>; 3], PaperError> {
+) -> Result<[AxisSetup<kalibra_linalg::U2>; 3], StudyError> {
     let params = reading.params();
-    let make = |a| -> Result<_, PaperError> {
+    let make = |a| -> Result<_, StudyError> {
         Ok(AxisSetup {
             dynamics: AccelAxis::new(params, a)?,
             measurement: AccelAxis::position_velocity_measurement(reading.r)?,
@@ -638,8 +638,8 @@ fn axes_positions_velocities(
 /// Runs one reading.
 ///
 /// # Errors
-/// [`PaperError`] if a model, filter, test or the surrogate fails.
-pub fn run_reading(reading: &Reading, config: &Config) -> Result<ReadingReport, PaperError> {
+/// [`StudyError`] if a model, filter, test or the surrogate fails.
+pub fn run_reading(reading: &Reading, config: &Config) -> Result<ReadingReport, StudyError> {
     if reading.observe_velocity {
         study(
             reading,
@@ -660,10 +660,10 @@ pub fn run_reading(reading: &Reading, config: &Config) -> Result<ReadingReport, 
 /// Runs the study over every reading.
 ///
 /// # Errors
-/// [`PaperError`] if a reading fails or `config` is degenerate.
-pub fn run(config: &Config) -> Result<Report, PaperError> {
+/// [`StudyError`] if a reading fails or `config` is degenerate.
+pub fn run(config: &Config) -> Result<Report, StudyError> {
     if config.replicates < 2 || config.trajectory <= config.burn_in + 2 * config.batch {
-        return Err(PaperError::Harness(
+        return Err(StudyError::Harness(
             "need two replicates and at least two batches after the burn-in".into(),
         ));
     }

@@ -38,7 +38,7 @@ use kalibra_models::{Dynamics, Measurement, RadarRates, Simulator};
 use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
-use crate::PaperError;
+use crate::StudyError;
 use crate::reentry::{self, CrossoverRow, SweepRow};
 use crate::saha2012::Entry;
 
@@ -170,7 +170,7 @@ struct Setup {
 }
 
 impl Setup {
-    fn new() -> Result<Self, PaperError> {
+    fn new() -> Result<Self, StudyError> {
         let truth = reentry::noise_free_truth()?;
         let radar = RadarRates::new(r())?;
         let measurements = truth[1..].iter().map(|x| radar.measure(0, x)).collect();
@@ -183,7 +183,7 @@ impl Setup {
 }
 
 /// J1, J2, nq of the EKF at one `p`, for one divisor.
-fn point(setup: &Setup, divisor: usize, p: f64) -> Result<SweepRow, PaperError> {
+fn point(setup: &Setup, divisor: usize, p: f64) -> Result<SweepRow, StudyError> {
     let dynamics = reentry::dynamics(reentry::scaled(&q_nom(), p))?;
     let mut ekf = Ekf::new(&dynamics, &setup.radar, x0_table(), p0_table())?;
     let mut acc = JHorizon::new();
@@ -298,10 +298,10 @@ fn sweep_reading(
     setup: &Setup,
     reading: &Reading,
     config: &Config,
-) -> Result<ReadingReport, PaperError> {
+) -> Result<ReadingReport, StudyError> {
     let integer: Vec<f64> = (-10..=10).map(f64::from).collect();
     let fine = kalibra_sim::grid(-10.0, 10.0, config.fine_step)?;
-    let run = |grid: &[f64]| -> Result<Vec<SweepRow>, PaperError> {
+    let run = |grid: &[f64]| -> Result<Vec<SweepRow>, StudyError> {
         Ok(kalibra_sim::sweep(grid, config.threads, |p| {
             point(setup, reading.divisor, p)
         })?)
@@ -314,11 +314,11 @@ fn sweep_reading(
         .iter()
         .take_while(|r| r.j1 >= j1max - PLATEAU_TOLERANCE)
         .last()
-        .ok_or_else(|| PaperError::Harness("no J1 plateau".into()))?;
+        .ok_or_else(|| StudyError::Harness("no J1 plateau".into()))?;
     let j2_edge = table
         .iter()
         .find(|r| r.j2 >= j2max - PLATEAU_TOLERANCE)
-        .ok_or_else(|| PaperError::Harness("no J2 plateau".into()))?;
+        .ok_or_else(|| StudyError::Harness("no J2 plateau".into()))?;
     let crossover = reentry::crossover_of(&sweep)?;
     Ok(ReadingReport {
         reading: *reading,
@@ -343,11 +343,11 @@ struct McTruth {
 /// Runs the study.
 ///
 /// # Errors
-/// [`PaperError`] if a filter or model fails, the sweep has no crossover, or `config` asks for
+/// [`StudyError`] if a filter or model fails, the sweep has no crossover, or `config` asks for
 /// zero runs.
-pub fn run(config: &Config) -> Result<Report, PaperError> {
+pub fn run(config: &Config) -> Result<Report, StudyError> {
     if config.runs == 0 {
-        return Err(PaperError::Harness("zero Monte Carlo runs".into()));
+        return Err(StudyError::Harness("zero Monte Carlo runs".into()));
     }
     let setup = Setup::new()?;
     let horizon = setup.measurements.len();
@@ -387,7 +387,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
                 measurements.push(z);
             }
         }
-        Ok::<_, PaperError>(McTruth {
+        Ok::<_, StudyError>(McTruth {
             states,
             measurements,
         })
@@ -398,7 +398,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
     let p_c = paper
         .crossover
         .ekf
-        .ok_or_else(|| PaperError::Harness("no J1/J2 crossover".into()))?
+        .ok_or_else(|| StudyError::Harness("no J1/J2 crossover".into()))?
         .p;
     let (p_s3, p_r3) = (paper.j1_edge.1, paper.j2_edge.1);
     let settings = [
@@ -431,7 +431,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
                     },
                 )?;
                 match failure {
-                    Some(e) => Err(PaperError::from(e)),
+                    Some(e) => Err(StudyError::from(e)),
                     None => Ok(()),
                 }
             },
@@ -455,7 +455,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
 
     // Posterior CRLB over the Monte Carlo truths.
     let mut bound = Pcrlb::new(&p0_table())?;
-    let sd = |b: &Pcrlb<kalibra_linalg::U4>| -> Result<[f64; 4], PaperError> {
+    let sd = |b: &Pcrlb<kalibra_linalg::U4>| -> Result<[f64; 4], StudyError> {
         let m = b.bound()?;
         Ok(std::array::from_fn(|i| m[(i, i)].sqrt()))
     };
@@ -497,7 +497,7 @@ pub fn run(config: &Config) -> Result<Report, PaperError> {
         .map(|k| {
             kalibra_bounds::observability_singular_values(&fs, &hs, k, 4)
                 .map(|sv| std::array::from_fn(|i| sv[i]))
-                .map_err(PaperError::from)
+                .map_err(StudyError::from)
         })
         .collect::<Result<Vec<[f64; 4]>, _>>()?;
     let altitude_density = setup

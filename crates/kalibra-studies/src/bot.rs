@@ -49,7 +49,7 @@ use kalibra_models::{BotProblem, BotRun, BotScenario, BotStart, Dynamics};
 use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
-use crate::PaperError;
+use crate::StudyError;
 use crate::claims::{Claim, Verdict, claims_table};
 
 /// The filters, in the paper's column order, then our extra pure-MAP variant.
@@ -363,7 +363,7 @@ fn study<N: Dim>(
     runs: usize,
     seed: u64,
     threads: usize,
-) -> Result<Acc, PaperError>
+) -> Result<Acc, StudyError>
 where
     DefaultAllocator: Alloc<N, U1> + Alloc<N, U2>,
     BotScenario<N>: Sync,
@@ -373,7 +373,7 @@ where
     let mc = MonteCarlo::new(runs, seed).threads(threads);
     Ok(mc.accumulate(
         || Acc::new(steps, n),
-        |_, rng, acc| -> Result<(), PaperError> {
+        |_, rng, acc| -> Result<(), StudyError> {
             let run = scenario.simulate(rng)?;
             for which in 0..FILTERS.len() {
                 push_track(acc, which, run_filter(scenario, &run, which));
@@ -388,7 +388,7 @@ fn averages<N: Dim>(
     scenario: &BotScenario<N>,
     acc: &Acc,
     which: usize,
-) -> Result<BTreeMap<&'static str, f64>, PaperError>
+) -> Result<BTreeMap<&'static str, f64>, StudyError>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -411,7 +411,7 @@ where
 }
 
 /// Runs one problem: the main seed in full, the extra seeds for the spread.
-fn problem<N: Dim>(scenario: &BotScenario<N>, config: &Config) -> Result<ProblemResult, PaperError>
+fn problem<N: Dim>(scenario: &BotScenario<N>, config: &Config) -> Result<ProblemResult, StudyError>
 where
     DefaultAllocator: Alloc<N, U1> + Alloc<N, U2>,
     BotScenario<N>: Sync,
@@ -501,7 +501,7 @@ fn measure_costs(
     scenario: &BotScenario<U4>,
     runs: usize,
     seed: u64,
-) -> Result<BTreeMap<&'static str, f64>, PaperError> {
+) -> Result<BTreeMap<&'static str, f64>, StudyError> {
     let mc = MonteCarlo::new(runs, seed);
     let truths = (0..runs)
         .map(|i| scenario.simulate(&mut mc.rng(i)))
@@ -535,9 +535,9 @@ fn measure_costs(
 ///
 /// # Errors
 /// As [`run`].
-pub fn run_problem(problem: BotProblem, config: &Config) -> Result<ProblemResult, PaperError> {
+pub fn run_problem(problem: BotProblem, config: &Config) -> Result<ProblemResult, StudyError> {
     if config.runs < 2 {
-        return Err(PaperError::Harness("need at least two runs".into()));
+        return Err(StudyError::Harness("need at least two runs".into()));
     }
     match problem {
         BotProblem::I => self::problem(&BotScenario::problem_i()?, config),
@@ -549,11 +549,11 @@ pub fn run_problem(problem: BotProblem, config: &Config) -> Result<ProblemResult
 /// Runs the study.
 ///
 /// # Errors
-/// [`PaperError`] if a scenario cannot be built or simulated, or the harness fails. Filter
+/// [`StudyError`] if a scenario cannot be built or simulated, or the harness fails. Filter
 /// failures inside runs are counted, not errors.
-pub fn run(config: &Config) -> Result<Report, PaperError> {
+pub fn run(config: &Config) -> Result<Report, StudyError> {
     if config.runs < 2 {
-        return Err(PaperError::Harness("need at least two runs".into()));
+        return Err(StudyError::Harness("need at least two runs".into()));
     }
     let s1 = BotScenario::problem_i()?;
     let s2 = BotScenario::problem_ii()?;
