@@ -14,9 +14,9 @@ use kalibra::filters::{
 };
 use kalibra::linalg::{Matrix2, U1, U2, U4, Vector1, Vector2};
 use kalibra::models::{Bearing, BearingReference, BotProblem, BotScenario, LinearGaussian, Moving};
-use kalibra_studies::bot::{self, Config, FILTERS};
-use kalibra_studies::claims::Verdict;
 use kalibra::sim::MonteCarlo;
+use kalibra_studies::claims::Verdict;
+use kalibra_studies::paper001::{self, Config, FILTERS};
 use serde_json::Value;
 
 fn trace() -> Value {
@@ -163,14 +163,14 @@ const PROBLEM_III_REFERENCE: [(&str, f64, f64); 6] = [
 ];
 
 /// A full-size run (1000 runs) of one problem at a seed none of the references used.
-fn full_size(problem: BotProblem) -> bot::ProblemResult {
+fn full_size(problem: BotProblem) -> paper001::ProblemResult {
     let config = Config {
         seed: 1,
         extra_seeds: 0,
         cost_runs: 0,
         ..Config::paper()
     };
-    bot::run_problem(problem, &config).unwrap()
+    paper001::run_problem(problem, &config).unwrap()
 }
 
 /// Within 5% (RMSE) and 0.3 dB (NCI) of the stored references, at a fresh seed: about 3
@@ -307,7 +307,7 @@ fn quick_study_reproduces_what_the_spec_says_reproduces() {
         cost_runs: 0,
         ..Config::quick()
     };
-    let report = bot::run(&config).unwrap();
+    let report = paper001::run(&config).unwrap();
     let cell = |problem: &str, metric: &str, filter: &str| {
         report
             .claims
@@ -371,7 +371,7 @@ fn study_output_does_not_depend_on_the_thread_count() {
             cost_runs: 0,
             ..Config::quick()
         };
-        let report = bot::run(&config).unwrap();
+        let report = paper001::run(&config).unwrap();
         (
             serde_json::to_string(&report.problems).unwrap(),
             serde_json::to_string(&report.claims).unwrap(),

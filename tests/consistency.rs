@@ -16,8 +16,8 @@ use kalibra::metrics::{ChiSquareBand, StepMean, nees};
 use kalibra::models::{
     Kinematic, LinearGaussian, LinearObservation, Simulator, sample_with_factor,
 };
-use kalibra_studies::StudyError;
 use kalibra::sim::MonteCarlo;
+use kalibra_studies::StudyError;
 
 const RUNS: usize = 100;
 const STEPS: usize = 30;

@@ -5,15 +5,15 @@
 
 use kalibra::filters::{Ekf, Filter, Start};
 use kalibra::models::RadarRates;
-use kalibra_studies::{reentry, saha2012, saha2014};
+use kalibra_studies::{paper000, paper003, reentry};
 
 /// Paper 000, Table I: with the paper reading every J1/J2 entry of the KF and the EKF is
 /// within 0.02 of the printed value, and the crossover lies in the claimed nq range.
 #[test]
 fn paper_000_table_i_within_0_02() {
-    let report = saha2012::run(&saha2012::Config::quick()).unwrap();
+    let report = paper000::run(&paper000::Config::quick()).unwrap();
     let paper = report.reading("paper").unwrap();
-    assert_eq!(paper.table.len(), saha2012::TABLE_I.len());
+    assert_eq!(paper.table.len(), paper000::TABLE_I.len());
     for row in &paper.table {
         for (what, e) in [
             ("J1 KF", row.j1_kf),
@@ -30,7 +30,7 @@ fn paper_000_table_i_within_0_02() {
             );
         }
     }
-    let (lo, hi) = saha2012::CROSSOVER_NQ_RANGE;
+    let (lo, hi) = paper000::CROSSOVER_NQ_RANGE;
     for c in [paper.crossover.kf, paper.crossover.ekf] {
         let c = c.expect("J1 and J2 cross");
         assert!(lo <= c.nq && c.nq <= hi, "crossover nq {}", c.nq);
@@ -54,7 +54,7 @@ fn paper_000_table_i_within_0_02() {
 /// the crossover within 0.03, and P_ad's diagonal within 5% of Table II.
 #[test]
 fn paper_003_metrics_and_p_ad() {
-    let report = saha2014::run(&saha2014::Config::quick()).unwrap();
+    let report = paper003::run(&paper003::Config::quick()).unwrap();
     let paper = &report.readings[0];
     assert_eq!(paper.reading.name, "paper");
     assert!(paper.j1max.gap.abs() <= 0.01, "{:?}", paper.j1max);
@@ -92,19 +92,19 @@ fn paper_003_metrics_and_p_ad() {
 #[test]
 fn j_identity_and_bounds_along_the_003_ekf() {
     let truth = reentry::noise_free_truth().unwrap();
-    let radar = RadarRates::new(saha2014::r()).unwrap();
+    let radar = RadarRates::new(paper003::r()).unwrap();
     let zs: Vec<_> = truth[1..]
         .iter()
         .map(|x| kalibra::models::Measurement::measure(&radar, 0, x))
         .collect();
     let m = 3.0;
     for p in [-4.0, 1.3, 6.0] {
-        let dynamics = reentry::dynamics(reentry::scaled(&saha2014::q_nom(), p)).unwrap();
+        let dynamics = reentry::dynamics(reentry::scaled(&paper003::q_nom(), p)).unwrap();
         let mut ekf = Ekf::new(
             &dynamics,
             &radar,
-            saha2014::x0_table(),
-            saha2014::p0_table(),
+            paper003::x0_table(),
+            paper003::p0_table(),
         )
         .unwrap();
         let records = ekf
@@ -131,14 +131,14 @@ fn j_identity_and_bounds_along_the_003_ekf() {
 /// (and bit-identical for any thread count, since each grid point is one sequential run).
 #[test]
 fn sweeps_do_not_depend_on_threads() {
-    let one = saha2012::run(&saha2012::Config {
+    let one = paper000::run(&paper000::Config {
         threads: 1,
-        ..saha2012::Config::quick()
+        ..paper000::Config::quick()
     })
     .unwrap();
-    let two = saha2012::run(&saha2012::Config {
+    let two = paper000::run(&paper000::Config {
         threads: 2,
-        ..saha2012::Config::quick()
+        ..paper000::Config::quick()
     })
     .unwrap();
     // The reports differ only in the thread count they record.

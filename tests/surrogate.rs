@@ -10,9 +10,9 @@ use kalibra::models::{
     AccelAxis, Dynamics, LinearGaussian, LinearObservation, Measurement, Target3d, Target3dParams,
     standard_normal,
 };
-use kalibra_studies::claims::Verdict;
-use kalibra_studies::spall2023::{self, Config, READINGS};
 use kalibra::sim::MonteCarlo;
+use kalibra_studies::claims::Verdict;
+use kalibra_studies::paper004::{self, Config, READINGS};
 
 type Vector9 = SVector<f64, 9>;
 
@@ -132,7 +132,7 @@ fn surrogate_half_widths_match_the_truth_where_the_surrogate_is_exact() {
 
 #[test]
 fn the_quick_reproduction_holds_the_claims_that_reproduce() {
-    let report = spall2023::run(&Config::quick()).unwrap();
+    let report = paper004::run(&Config::quick()).unwrap();
     assert_eq!(report.readings.len(), READINGS.len());
     let fitted = report.reading("fitted").unwrap();
     // The fitted reading reproduces the printed surrogate half-widths (0.2% at full size; the
@@ -182,8 +182,8 @@ fn the_reproduction_does_not_depend_on_the_thread_count() {
     config.replicates = 64;
     config.trajectories = 3;
     config.threads = 1;
-    let one = spall2023::run(&config).unwrap();
+    let one = paper004::run(&config).unwrap();
     config.threads = 2;
-    let two = spall2023::run(&config).unwrap();
+    let two = paper004::run(&config).unwrap();
     assert_eq!(one.readings, two.readings);
 }

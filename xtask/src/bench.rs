@@ -4,7 +4,6 @@
 //! `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF, `--runs` x 51 steps,
 //! in `bench_w2`) by default, or only the one named. `--steps` applies to W1 only.
 
-use std::ffi::OsString;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -15,67 +14,62 @@ use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
 /// Which workloads to run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum Workloads {
+    /// W1 then W2.
     All,
+    /// W1: 2-D constant-velocity KF with per-step NEES and NIS.
+    #[value(alias = "W1")]
     W1,
+    /// W2: paper 001's problem III, EKF and UKF, 51 steps.
+    #[value(alias = "W2")]
     W2,
 }
 
+/// `cargo xtask bench` arguments.
+#[derive(Debug, clap::Args)]
 pub(crate) struct Args {
+    /// Which workload to run.
+    #[arg(value_enum, default_value = "all")]
     workloads: Workloads,
+    /// Monte Carlo runs per workload.
+    #[arg(long, default_value_t = 1000, value_parser = positive)]
     pub(crate) runs: usize,
+    /// Steps per run (W1 only; W2 has 51).
+    #[arg(long, default_value_t = 1000, value_parser = positive)]
     steps: usize,
+    /// Threads for the multi-thread comparison (default: every core).
+    #[arg(long, default_value_t = cores())]
     pub(crate) threads: usize,
+    /// Timed repeats; the best is reported.
+    #[arg(long, default_value_t = 3, value_parser = positive)]
     pub(crate) repeats: usize,
 }
 
-fn parse(args: Vec<OsString>) -> Result<Args> {
-    use lexopt::prelude::*;
-    let cores = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1);
-    let mut parsed = Args {
-        workloads: Workloads::All,
-        runs: 1000,
-        steps: 1000,
-        threads: cores,
-        repeats: 3,
-    };
-    let mut parser = lexopt::Parser::from_args(args);
-    while let Some(arg) = parser.next()? {
-        match arg {
-            Long("runs") => parsed.runs = parser.value()?.parse()?,
-            Long("steps") => parsed.steps = parser.value()?.parse()?,
-            Long("threads") => parsed.threads = parser.value()?.parse()?,
-            Long("repeats") => parsed.repeats = parser.value()?.parse()?,
-            Value(name) => {
-                parsed.workloads = match name.to_str() {
-                    Some("all") => Workloads::All,
-                    Some("w1" | "W1") => Workloads::W1,
-                    Some("w2" | "W2") => Workloads::W2,
-                    _ => bail!("unknown workload {name:?}: expected w1, w2 or all"),
-                }
-            }
-            _ => return Err(arg.unexpected().into()),
-        }
+/// A count of at least one.
+fn positive(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
     }
-    if parsed.runs == 0 || parsed.steps == 0 || parsed.repeats == 0 {
-        bail!("--runs, --steps and --repeats must be positive");
-    }
-    Ok(parsed)
 }
 
-pub fn main(args: Vec<OsString>) -> Result<()> {
-    let args = parse(args)?;
+fn cores() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+}
+
+pub fn main(args: &Args) -> Result<()> {
     if args.workloads != Workloads::W2 {
-        w1_bench(&args)?;
+        w1_bench(args)?;
     }
     if args.workloads != Workloads::W1 {
         if args.workloads == Workloads::All {
             println!();
         }
-        crate::bench_w2::w2_bench(&args)?;
+        crate::bench_w2::w2_bench(args)?;
     }
     Ok(())
 }

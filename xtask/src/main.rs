@@ -1,46 +1,44 @@
 //! `cargo xtask`: the project's task runner.
 //!
-//! * `cargo xtask reproduce [--quick] [--out DIR] [--seed N] [--threads N]`: runs every
-//!   reproduction the workspace has and writes Markdown and JSON under `target/reproduce/`.
-//! * `cargo xtask bench [--runs N] [--steps N] [--threads N]`: runs the benchmark workloads
-//!   through the public API and through hand-written nalgebra loops in the same process, and
-//!   prints steps per second and their ratio.
+//! * `cargo xtask reproduce [STUDY ...] [--quick] [--out DIR] [--seed N] [--threads N]`: runs
+//!   the studies of `kalibra_studies::REGISTRY` (all, or those named) and writes each one's
+//!   Markdown report, `results.json` and SVG figures, and `index.md`, under `target/reproduce/`.
+//! * `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs
+//!   the benchmark workloads through the public API and through hand-written nalgebra loops in
+//!   the same process, and prints steps per second and their ratio.
 //!
-//! The logic lives in library crates (`kalibra-studies`); this binary parses arguments, times,
-//! and writes files.
+//! The studies live in `kalibra-studies`; this binary parses arguments, loops over the
+//! registry, renders figure data to SVG, writes files and times.
 
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
 mod bench_w2;
-mod figures;
-mod figures2013;
-mod figures2014;
-mod figures2023;
-mod figures2025;
 mod plot;
 mod reproduce;
 
-use anyhow::{Result, bail};
+use clap::{Parser, Subcommand};
 
-const USAGE: &str = "usage:
-  cargo xtask reproduce [w1|000|001|002|003|004 ...] [--quick] [--out DIR] [--seed N] [--threads N]
-  cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]";
+/// The project's task runner: reproductions and benchmarks.
+#[derive(Debug, Parser)]
+#[command(name = "cargo xtask", bin_name = "cargo xtask")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
 
-fn main() -> Result<()> {
-    let mut args = std::env::args_os().skip(1);
-    let Some(command) = args.next() else {
-        bail!("{USAGE}");
-    };
-    let rest: Vec<_> = args.collect();
-    match command.to_str() {
-        Some("reproduce") => reproduce::main(rest),
-        Some("bench") => bench::main(rest),
-        Some("help" | "--help" | "-h") => {
-            println!("{USAGE}");
-            Ok(())
-        }
-        _ => bail!("unknown command {command:?}\n{USAGE}"),
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Re-run the published studies and write reports beside the published numbers.
+    Reproduce(reproduce::Args),
+    /// Time the library against hand-written nalgebra loops on the benchmark workloads.
+    Bench(bench::Args),
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::Reproduce(args) => reproduce::main(&args),
+        Command::Bench(args) => bench::main(&args),
     }
 }
 

@@ -17,15 +17,10 @@
 //!     .to_svg();
 //! ```
 
-// Callers arrive with the paper reports; until then only the tests below use this module.
-#![allow(dead_code)]
-
 use std::fmt::Write as _;
 
-/// Default figure width in pixels.
-pub const DEFAULT_WIDTH: u32 = 640;
-/// Default figure height in pixels.
-pub const DEFAULT_HEIGHT: u32 = 400;
+pub use kalibra_studies::figure::{Annotation, Figure, Series};
+
 /// Smallest width actually drawn; below it the margins would leave no plot area.
 const MIN_WIDTH: u32 = 160;
 /// Smallest height actually drawn, for the same reason.
@@ -55,175 +50,33 @@ const CLIP_ID: &str = "kalibra-plot-area";
 /// Average glyph advance of the 11 px sans-serif text, for sizing boxes around labels.
 const TEXT_ADVANCE: f64 = 6.2;
 
-/// How a series is drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Style {
-    /// A polyline through the points, broken at invalid points.
-    #[default]
-    Line,
-    /// One marker per point, no line.
-    Markers,
-    /// A polyline and a marker at every point.
-    LineMarkers,
-}
-
-impl Style {
-    fn has_line(self) -> bool {
-        matches!(self, Style::Line | Style::LineMarkers)
-    }
-
-    fn has_markers(self) -> bool {
-        matches!(self, Style::Markers | Style::LineMarkers)
-    }
-}
-
-/// One data series: `(x, y)` points drawn in order (they are not sorted).
-///
-/// Points with a non-finite coordinate, or with `y <= 0` on a log axis, are skipped and break
-/// the line, so a gap in the data shows as a gap in the plot.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Series {
-    /// Text shown in the legend.
-    pub label: String,
-    /// The data, in drawing order.
-    pub points: Vec<(f64, f64)>,
-    /// Line, markers, or both.
-    pub style: Style,
-    /// Draw the line dashed (no effect on markers).
-    pub dashed: bool,
-}
-
-impl Series {
-    /// A solid line through `points`.
-    pub fn line(label: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
-        Self::styled(label, points, Style::Line)
-    }
-
-    /// A marker at each of `points`, no line.
-    pub fn markers(label: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
-        Self::styled(label, points, Style::Markers)
-    }
-
-    /// A solid line through `points` with a marker at each.
-    pub fn line_markers(label: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
-        Self::styled(label, points, Style::LineMarkers)
-    }
-
-    /// The same series with a dashed line.
-    pub fn dashed(mut self) -> Self {
-        self.dashed = true;
-        self
-    }
-
-    fn styled(label: impl Into<String>, points: Vec<(f64, f64)>, style: Style) -> Self {
-        Self {
-            label: label.into(),
-            points,
-            style,
-            dashed: false,
-        }
-    }
-}
-
-/// A reference mark drawn over the data. Its coordinates are included in the axis ranges so
-/// it is always visible; annotations with invalid coordinates are not drawn.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Annotation {
-    /// A dashed vertical line at `x` across the plot area, labelled near the top.
-    VLine {
-        /// Position on the x axis.
-        x: f64,
-        /// Text next to the line (may be empty).
-        label: String,
-    },
-    /// A dashed horizontal line at `y` across the plot area, labelled at the left.
-    HLine {
-        /// Position on the y axis.
-        y: f64,
-        /// Text next to the line (may be empty).
-        label: String,
-    },
-    /// A circled point with a label beside it.
-    Point {
-        /// Position on the x axis.
-        x: f64,
-        /// Position on the y axis.
-        y: f64,
-        /// Text next to the circle (may be empty).
-        label: String,
-    },
-}
-
-/// A line plot: axes with ticks, title, axis labels, legend, series and annotations.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Figure {
-    /// Title above the plot area (omitted when empty).
-    pub title: String,
-    /// Label under the x axis (omitted when empty).
-    pub x_label: String,
-    /// Label left of the y axis, rotated (omitted when empty).
-    pub y_label: String,
-    /// Logarithmic y axis: data mapped by `log10`, ticks at powers of ten.
-    pub log_y: bool,
-    /// The data, drawn in order; colours follow the palette by index.
-    pub series: Vec<Series>,
-    /// Reference marks drawn over the data.
-    pub annotations: Vec<Annotation>,
-    /// Width in pixels (drawn at least 160).
-    pub width: u32,
-    /// Height in pixels (drawn at least 120).
-    pub height: u32,
-}
-
-impl Figure {
-    /// An empty 640x400 figure with a linear y axis.
-    pub fn new(
-        title: impl Into<String>,
-        x_label: impl Into<String>,
-        y_label: impl Into<String>,
-    ) -> Self {
-        Self {
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: y_label.into(),
-            log_y: false,
-            series: Vec::new(),
-            annotations: Vec::new(),
-            width: DEFAULT_WIDTH,
-            height: DEFAULT_HEIGHT,
-        }
-    }
-
-    /// The same figure with a logarithmic y axis.
-    pub fn log_y(mut self) -> Self {
-        self.log_y = true;
-        self
-    }
-
-    /// The same figure with another size in pixels.
-    pub fn size(mut self, width: u32, height: u32) -> Self {
-        self.width = width;
-        self.height = height;
-        self
-    }
-
-    /// The same figure with `s` added after the existing series.
-    pub fn series(mut self, s: Series) -> Self {
-        self.series.push(s);
-        self
-    }
-
-    /// The same figure with `a` added after the existing annotations.
-    pub fn annotate(mut self, a: Annotation) -> Self {
-        self.annotations.push(a);
-        self
-    }
-
+/// Renders a [`Figure`] as SVG.
+pub trait ToSvg {
     /// The figure as a complete standalone SVG document.
     ///
     /// Deterministic: the same figure always gives the same bytes. A figure without any
     /// drawable point still gives a valid document, with a "no data" note in the plot area.
-    pub fn to_svg(&self) -> String {
+    fn to_svg(&self) -> String;
+}
+
+impl ToSvg for Figure {
+    fn to_svg(&self) -> String {
+        Plot(self).render()
+    }
+}
+
+/// The renderer's view of a figure (the figure itself is data owned by the studies crate).
+struct Plot<'a>(&'a Figure);
+
+impl std::ops::Deref for Plot<'_> {
+    type Target = Figure;
+    fn deref(&self) -> &Figure {
+        self.0
+    }
+}
+
+impl Plot<'_> {
+    fn render(&self) -> String {
         let width = self.width.max(MIN_WIDTH);
         let height = self.height.max(MIN_HEIGHT);
         let (w, h) = (f64::from(width), f64::from(height));
@@ -576,20 +429,8 @@ impl Figure {
     }
 }
 
-/// Ticks at "nice" values (1, 2 or 5 times a power of ten apart) covering `[lo, hi]`: the
-/// first tick is at or below `lo`, the last at or above `hi`, and there are about `target`
-/// intervals (never more than `target + 3` ticks).
-///
-/// The bounds may come in either order. Returns `[lo]` when they are equal, and an empty
-/// vector when either is not finite or their difference overflows. `target` is clamped to
-/// `1..=1000` so a careless caller cannot ask for millions of ticks.
-pub fn nice_ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
-    nice_step_ticks(lo, hi, target)
-        .map(|(_, ticks)| ticks)
-        .unwrap_or_default()
-}
-
-/// [`nice_ticks`] together with the step, which the label formatting needs.
+/// Ticks at "nice" values covering `[lo, hi]` together with their step, which the label
+/// formatting needs (see the tests' `nice_ticks` for the contract).
 fn nice_step_ticks(lo: f64, hi: f64, target: usize) -> Option<(f64, Vec<f64>)> {
     if !lo.is_finite() || !hi.is_finite() {
         return None;
@@ -1064,6 +905,19 @@ fn escape(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Ticks at "nice" values (1, 2 or 5 times a power of ten apart) covering `[lo, hi]`: the
+    /// first tick is at or below `lo`, the last at or above `hi`, and there are about `target`
+    /// intervals (never more than `target + 3` ticks).
+    ///
+    /// The bounds may come in either order. Returns `[lo]` when they are equal, and an empty
+    /// vector when either is not finite or their difference overflows. `target` is clamped to
+    /// `1..=1000` so a careless caller cannot ask for millions of ticks.
+    fn nice_ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
+        nice_step_ticks(lo, hi, target)
+            .map(|(_, ticks)| ticks)
+            .unwrap_or_default()
+    }
 
     /// Checks that every element is closed in order (a tiny XML well-formedness check that
     /// works because all text and attribute values are escaped).

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 /// Whether a published claim holds in our computation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
     /// Ours is within the stated tolerance of the published value, or the claimed property
@@ -55,19 +55,36 @@ pub struct Claim {
     pub section: &'static str,
 }
 
+/// The header of the claims table.
+pub(crate) const CLAIMS_HEADER: &str =
+    "| claim | published | ours | tolerance | verdict |\n|---|---|---|---|---|\n";
+
+/// One row of the claims table, linking the verdict to the section that explains it.
+pub(crate) fn claims_row(
+    claim: &str,
+    published: &str,
+    ours: &str,
+    tolerance: &str,
+    verdict: Verdict,
+    section: &str,
+) -> String {
+    format!(
+        "| {claim} | {published} | {ours} | {tolerance} | {} ([why](#{section})) |\n",
+        verdict.label()
+    )
+}
+
 /// Renders claims as a Markdown table (claim, published, ours, tolerance, verdict).
 pub fn claims_table(claims: &[Claim]) -> String {
-    let mut out =
-        String::from("| claim | published | ours | tolerance | verdict |\n|---|---|---|---|---|\n");
+    let mut out = String::from(CLAIMS_HEADER);
     for c in claims {
-        out.push_str(&format!(
-            "| {} | {} | {} | {} | {} ([why](#{})) |\n",
-            c.claim,
-            c.published,
-            c.ours,
-            c.tolerance,
-            c.verdict.label(),
-            c.section
+        out.push_str(&claims_row(
+            &c.claim,
+            &c.published,
+            &c.ours,
+            &c.tolerance,
+            c.verdict,
+            c.section,
         ));
     }
     out

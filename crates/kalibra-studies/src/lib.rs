@@ -13,18 +13,53 @@
 //! Every module documents the decisions its paper leaves open, and every report records its
 //! seed, run count and thread-independent results.
 
-pub mod bot;
 pub mod claims;
-pub mod minh2025;
+pub mod figure;
+pub mod paper000;
+pub mod paper001;
+pub mod paper002;
+pub mod paper003;
+pub mod paper004;
 pub mod reentry;
-pub mod saha2012;
-pub mod saha2014;
-pub mod spall2023;
+pub mod study;
+pub mod template;
 pub mod w1;
 
 use kalibra_filters::FilterError;
 use kalibra_metrics::MetricsError;
 use kalibra_models::ModelError;
+
+use crate::study::Reproduce;
+
+/// Every study, in the order `cargo xtask reproduce` runs them. Adding a study is its folder
+/// and one line here.
+pub static REGISTRY: &[&dyn Reproduce] = &[
+    &w1::W1,
+    &paper000::Paper000,
+    &paper001::Paper001,
+    &paper002::Paper002,
+    &paper003::Paper003,
+    &paper004::Paper004,
+];
+
+/// The registered study with identifier `id`.
+///
+/// # Errors
+/// [`StudyError::UnknownStudy`], listing the known identifiers, when none matches.
+pub fn find(id: &str) -> Result<&'static dyn Reproduce, StudyError> {
+    REGISTRY
+        .iter()
+        .copied()
+        .find(|s| s.id() == id)
+        .ok_or_else(|| StudyError::UnknownStudy {
+            id: id.to_string(),
+            known: REGISTRY
+                .iter()
+                .map(|s| s.id())
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+}
 
 /// Why a study failed.
 #[derive(Debug, thiserror::Error)]
@@ -59,6 +94,20 @@ pub enum StudyError {
     /// The Monte Carlo harness failed.
     #[error("Monte Carlo harness: {0}")]
     Harness(String),
+    /// A report template did not render (names the template and line).
+    #[error("report template {0}")]
+    Template(String),
+    /// A report lacks a part its summary needs, or does not serialise.
+    #[error("report: {0}")]
+    Report(String),
+    /// No study has this identifier.
+    #[error("unknown study {id:?}; the studies are: {known}")]
+    UnknownStudy {
+        /// The identifier asked for.
+        id: String,
+        /// The registered identifiers, comma-separated.
+        known: String,
+    },
 }
 
 /// Mean and sample standard deviation (divisor `n - 1`, at least 1) of a Monte Carlo sample.

@@ -1,5 +1,5 @@
-//! The ballistic re-entry scenario shared by papers 000 ([`crate::saha2012`]) and 003
-//! ([`crate::saha2014`]), and the J1/J2 bookkeeping both use.
+//! The ballistic re-entry scenario shared by papers 000 ([`crate::paper000`]) and 003
+//! ([`crate::paper003`]), and the J1/J2 bookkeeping both use.
 //!
 //! # Truth
 //! Farina, Ristic and Benvenuti (2002) as both papers use it: `T = 2 s` (003 states it; 000's

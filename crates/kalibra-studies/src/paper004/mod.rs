@@ -30,6 +30,9 @@
 //! * Test p-values of one trajectory are random; the rejection rate over
 //!   `trajectories` further trajectories at level 0.05 is what can be checked.
 
+mod figures;
+
+use crate::study::{NamedFigure, Options, Size, Study};
 use kalibra_bounds::{
     ErgodicAverage, Surrogate, TestResult, batch_means, gaussian_half_widths, ks_two_sample,
     paired_t_test, runs_test,
@@ -45,7 +48,7 @@ use serde::Serialize;
 
 use crate::StudyError;
 use crate::claims::{Claim, Verdict, claims_table};
-use crate::saha2012::Entry;
+use crate::paper000::Entry;
 
 /// Component names in the paper's order.
 pub const COMPONENTS: [&str; 9] = [
@@ -897,5 +900,87 @@ mod tests {
             assert_eq!(r.r, r.model.r());
             assert_eq!(r.accel_coefficient, r.model.params().accel_coefficient);
         }
+    }
+}
+
+/// The study, as the registry lists it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Paper004;
+
+impl Study for Paper004 {
+    type Config = Config;
+    type Report = Report;
+
+    fn id(&self) -> &'static str {
+        "004"
+    }
+
+    fn title(&self) -> &'static str {
+        "Spall and Wei 2023: surrogate uncertainty bounds for the EKF"
+    }
+
+    fn paper(&self) -> Option<&'static str> {
+        Some(
+            "Spall and Wei, \"Uncertainty bounds for state estimates with applications in target tracking\", AIAA Defense Forum 2023",
+        )
+    }
+
+    fn config(&self, options: &Options) -> Config {
+        let mut config = match options.size {
+            Size::Paper => Config::paper(),
+            Size::Quick => Config::quick(),
+        };
+        if let Some(seed) = options.seed {
+            config.seed = seed;
+        }
+        config.threads = options.threads;
+        config
+    }
+
+    fn seed(&self, config: &Config) -> Option<u64> {
+        Some(config.seed)
+    }
+
+    fn describe(&self, config: &Config) -> String {
+        format!(
+            "surrogate bounds, 3 readings x ({} replicates x {} steps + {} trajectories x {} steps)",
+            config.replicates,
+            config.steps,
+            config.trajectories + 1,
+            config.trajectory
+        )
+    }
+
+    fn run(&self, config: &Config) -> Result<Report, StudyError> {
+        run(config)
+    }
+
+    fn claims(&self, report: &Report) -> Vec<Claim> {
+        report.claims.clone()
+    }
+
+    fn highlight(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        let gap = |name: &str| {
+            report.reading(name).map_or(f64::NAN, |r| {
+                r.surrogate_vs_paper
+                    .iter()
+                    .map(|e| (e.gap / e.paper).abs())
+                    .fold(0.0, f64::max)
+            })
+        };
+        Ok(format!(
+            "largest relative gap of the 9 surrogate half-widths: positions {:.1}%, positions-velocities {:.1}%, fitted {:.1}%",
+            100.0 * gap("positions"),
+            100.0 * gap("positions-velocities"),
+            100.0 * gap("fitted"),
+        ))
+    }
+
+    fn markdown(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        Ok(report.to_markdown())
+    }
+
+    fn figures(&self, report: &Report) -> Vec<NamedFigure> {
+        NamedFigure::from_pairs(figures::figures(report))
     }
 }

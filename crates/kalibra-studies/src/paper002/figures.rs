@@ -2,9 +2,9 @@
 //! (Fig. 1), errors (Fig. 2), sliding-window RMSE, bias and std of the angle (Fig. 3), and the
 //! manoeuvre-amplitude sweep (ours; not in the paper).
 
-use kalibra_studies::minh2025::{self, PHASE, Q_SETS, Report, STATE_NAMES, WINDOW};
+use crate::paper002::{self as minh2025, PHASE, Q_SETS, Report, STATE_NAMES, WINDOW};
 
-use crate::plot::{Annotation, Figure, Series};
+use crate::figure::{Annotation, Figure, Series};
 
 /// Units of the three states.
 const UNITS: [&str; 3] = ["deg", "deg/s", "deg/s^2"];
@@ -43,7 +43,7 @@ fn per_set(
     fig
 }
 
-fn states(report: &Report, state: usize) -> String {
+fn states(report: &Report, state: usize) -> Figure {
     let fig = Figure::new(
         format!("{} and its estimates (default truth)", STATE_NAMES[state]),
         "t (s)",
@@ -58,10 +58,10 @@ fn states(report: &Report, state: usize) -> String {
             .map(|(t, x)| (*t, x[state]))
             .collect(),
     ));
-    per_set(report, fig, state, |r| &r.estimates).to_svg()
+    per_set(report, fig, state, |r| &r.estimates)
 }
 
-fn errors(report: &Report, state: usize) -> String {
+fn errors(report: &Report, state: usize) -> Figure {
     let fig = Figure::new(
         format!(
             "{} error e = estimate - truth (default truth)",
@@ -70,10 +70,10 @@ fn errors(report: &Report, state: usize) -> String {
         "t (s)",
         UNITS[state],
     );
-    phase_marks(per_set(report, fig, state, |r| &r.errors)).to_svg()
+    phase_marks(per_set(report, fig, state, |r| &r.errors))
 }
 
-fn windows(report: &Report, what: &str, pick: impl Fn(&minh2025::Windows) -> &[f64]) -> String {
+fn windows(report: &Report, what: &str, pick: impl Fn(&minh2025::Windows) -> &[f64]) -> Figure {
     let mut fig = Figure::new(
         format!("angle: sliding-window {what}, W = {WINDOW} (at the window's first sample)"),
         "t (s)",
@@ -90,10 +90,10 @@ fn windows(report: &Report, what: &str, pick: impl Fn(&minh2025::Windows) -> &[f
                 .collect(),
         ));
     }
-    phase_marks(fig).to_svg()
+    phase_marks(fig)
 }
 
-fn sweep(report: &Report) -> String {
+fn sweep(report: &Report) -> Figure {
     let mut fig = Figure::new(
         "mean angle RMSE in the 6-14 s phase against manoeuvre amplitude (default: 10)",
         "oscillation amplitude (deg/s^2)",
@@ -115,11 +115,11 @@ fn sweep(report: &Report) -> String {
             label: "ordering changes".into(),
         });
     }
-    fig.to_svg()
+    fig
 }
 
 /// Every figure of the study as `(file name, SVG)`.
-pub fn minh2025(report: &Report) -> Vec<(String, String)> {
+pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
     let mut out = Vec::new();
     for (state, name) in STATE_NAMES.iter().enumerate() {
         out.push((format!("fig1_{name}.svg"), states(report, state)));

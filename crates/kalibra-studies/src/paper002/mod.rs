@@ -35,6 +35,9 @@
 //!   the steady-state filter would have from measurement noise alone: `Sigma = A Sigma A^T +
 //!   K R K^T` with `A = (I - K H) F` and `K` the steady-state gain. Any manoeuvre adds to it.
 
+mod figures;
+
+use crate::study::{NamedFigure, Options, Size, Study};
 use std::collections::BTreeMap;
 
 use kalibra_filters::{Ekf, Filter, FilterOptions, Start, UpdateForm, steady_state};
@@ -860,5 +863,91 @@ mod tests {
         assert_eq!(ordering(&[0.15, 0.1, 0.3]), PAPER_ORDERING);
         assert_eq!(ordering(&[0.2, 0.3, 0.1]), "Q3 < Q1 < Q2");
         assert_eq!(crate::argmin(&[0.2, 0.3, 0.1]), 2);
+    }
+}
+
+/// The study, as the registry lists it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Paper002;
+
+impl Study for Paper002 {
+    type Config = Config;
+    type Report = Report;
+
+    fn id(&self) -> &'static str {
+        "002"
+    }
+
+    fn title(&self) -> &'static str {
+        "Minh et al.: EKF angle tracking of a manoeuvring target"
+    }
+
+    fn paper(&self) -> Option<&'static str> {
+        Some(
+            "Minh, Luong, Bang, Toan, \"Simulation and performance evaluation of EKF in angular coordinate tracking of highly maneuvering targets\"",
+        )
+    }
+
+    fn config(&self, options: &Options) -> Config {
+        let mut config = match options.size {
+            Size::Paper => Config::paper(),
+            Size::Quick => Config::quick(),
+        };
+        if let Some(seed) = options.seed {
+            config.seed = seed;
+        }
+        config.threads = options.threads;
+        config
+    }
+
+    fn seed(&self, config: &Config) -> Option<u64> {
+        Some(config.seed)
+    }
+
+    fn describe(&self, config: &Config) -> String {
+        format!(
+            "angle tracking, 3 Q sets, {} truths, amplitude sweep {} points x {} truths",
+            config.truths,
+            config.sweep_scales.len(),
+            config.sweep_truths
+        )
+    }
+
+    fn run(&self, config: &Config) -> Result<Report, StudyError> {
+        run(config)
+    }
+
+    fn claims(&self, report: &Report) -> Vec<Claim> {
+        report.claims.clone()
+    }
+
+    fn highlight(&self, config: &Config, report: &Report) -> Result<String, StudyError> {
+        let phase = |n: &str| {
+            report
+                .q_sets
+                .get(n)
+                .map_or(f64::NAN, |r| r.rmse_theta_phase)
+        };
+        Ok(format!(
+            "phase angle RMSE Q1 {:.3}, Q2 {:.3}, Q3 {:.3} deg (paper ~0.15, ~0.10, >0.25); Q2 < Q1 < Q3 in {:.1}% of {} truths; ordering first changes at amplitude {}",
+            phase("Q1"),
+            phase("Q2"),
+            phase("Q3"),
+            100.0 * report.fraction_ordering_holds,
+            config.truths,
+            report
+                .first_reversal_amplitude
+                .map_or("never (swept range)".to_string(), |a| format!(
+                    "{a:.1} deg/s^2"
+                )),
+        ))
+    }
+
+    fn markdown(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        Ok(report.to_markdown())
+    }
+
+    fn figures(&self, report: &Report) -> Vec<NamedFigure> {
+        NamedFigure::from_pairs(figures::figures(report))
     }
 }

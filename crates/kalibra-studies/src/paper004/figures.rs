@@ -1,12 +1,12 @@
 //! The figures of paper 004 (Spall and Wei 2023): marginal densities of `e_1000`, empirical
 //! against the surrogate (the paper's Fig. 4), per reading and component.
 
-use kalibra_studies::spall2023::{COMPONENTS, Report};
+use crate::paper004::{COMPONENTS, Report};
 
-use crate::plot::{Figure, Series};
+use crate::figure::{Figure, Series};
 
 /// Every figure of the study as `(file name, SVG)`.
-pub fn spall2023(report: &Report) -> Vec<(String, String)> {
+pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
     let mut out = Vec::new();
     for r in &report.readings {
         for (i, d) in r.densities.iter().enumerate() {
@@ -37,7 +37,7 @@ pub fn spall2023(report: &Report) -> Vec<(String, String)> {
             );
             out.push((
                 format!("fig4_{}_{}.svg", r.reading.name, COMPONENTS[i]),
-                fig.to_svg(),
+                fig,
             ));
         }
     }

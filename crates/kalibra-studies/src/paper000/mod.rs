@@ -26,6 +26,10 @@
 //! makes `nq` step by exactly 1.00 per decade of `Q`, as the table does). The printed `p`
 //! column skips -2: the rows printed `-1 .. 6` are `p = -2 .. 5` (their `nq` values say so).
 
+mod figures;
+
+use crate::claims::Claim;
+use crate::study::{NamedFigure, Options, Size, Study};
 use kalibra_linalg::{Matrix2, Matrix4, SMatrix, U2, U4, Vector2, Vector4};
 use serde::Serialize;
 
@@ -1023,5 +1027,76 @@ mod tests {
         assert!(md.contains("largest |gap| = "));
         assert!(md.contains("(j1j2_kf.svg)") && md.contains("(j1j2_ekf.svg)"));
         assert!(!md.contains("NaN"));
+    }
+}
+
+/// The study, as the registry lists it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Paper000;
+
+impl Study for Paper000 {
+    type Config = Config;
+    type Report = Report;
+
+    fn id(&self) -> &'static str {
+        "000"
+    }
+
+    fn title(&self) -> &'static str {
+        "Saha, Goswami, Ghosh 2012: J1/J2 tuning metrics (KF, EKF)"
+    }
+
+    fn paper(&self) -> Option<&'static str> {
+        Some(
+            "Saha, Goswami, Ghosh, \"Two novel metrics for determining the tuning parameters of the Kalman filter\", ACODS 2012",
+        )
+    }
+
+    fn config(&self, options: &Options) -> Config {
+        let mut config = match options.size {
+            Size::Paper => Config::paper(),
+            Size::Quick => Config::quick(),
+        };
+        config.threads = options.threads;
+        config
+    }
+
+    fn seed(&self, _config: &Config) -> Option<u64> {
+        None
+    }
+
+    fn describe(&self, _config: &Config) -> String {
+        "J1/J2 sweeps of the KF and EKF (4 readings)".to_string()
+    }
+
+    fn run(&self, config: &Config) -> Result<Report, StudyError> {
+        run(config)
+    }
+
+    fn claims(&self, report: &Report) -> Vec<Claim> {
+        report.claims()
+    }
+
+    fn highlight(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        let paper = report
+            .reading("paper")
+            .ok_or_else(|| StudyError::Report("paper 000 has no 'paper' reading".into()))?;
+        let cross = |c: Option<crate::reentry::CrossoverRow>| {
+            c.map_or("none".to_string(), |c| format!("{:.2}", c.nq))
+        };
+        Ok(format!(
+            "largest gap {:.3} over 76 entries (paper reading); crossover nq KF {}, EKF {} (claimed 0.21..1.21)",
+            paper.max_abs_gap,
+            cross(paper.crossover.kf),
+            cross(paper.crossover.ekf),
+        ))
+    }
+
+    fn markdown(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        Ok(report.to_markdown())
+    }
+
+    fn figures(&self, report: &Report) -> Vec<NamedFigure> {
+        NamedFigure::from_pairs(figures::figures(report))
     }
 }

@@ -2,10 +2,10 @@
 //! [`crate::plot`]. Each function returns `(file name, SVG document)` pairs; the caller writes
 //! them beside the study's `report.md`, whose links use these names.
 
-use kalibra_studies::reentry::{CrossoverRow, SweepRow};
-use kalibra_studies::saha2012::{CROSSOVER_NQ_RANGE, READINGS, Report, TABLE_I};
+use crate::paper000::{CROSSOVER_NQ_RANGE, READINGS, Report, TABLE_I};
+use crate::reentry::{CrossoverRow, SweepRow};
 
-use crate::plot::{Annotation, Figure, Series};
+use crate::figure::{Annotation, Figure, Series};
 
 /// Curves closer than this everywhere are drawn on top of each other (about 2 px on these
 /// figures); the title says so, since the one drawn first is hidden.
@@ -19,7 +19,7 @@ const NQ_LABEL: &str = "nq = mean log10 tr(B_k)";
 ///   reading (lines), Table I's printed values (markers), the crossover (circled) and the
 ///   paper's claimed crossover range (two dashed vertical lines);
 /// * `j1j2_readings.svg`: the EKF's J1 (solid) and J2 (dashed) against `nq` for every reading.
-pub fn saha2012(report: &Report) -> Vec<(String, String)> {
+pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
     let paper = report
         .reading(READINGS[0].name)
         .or_else(|| report.readings.first());
@@ -58,7 +58,7 @@ pub fn saha2012(report: &Report) -> Vec<(String, String)> {
                 Some(c) => figure.annotate(crossover_point(&c)),
                 None => figure,
             };
-            out.push((file.to_string(), figure.to_svg()));
+            out.push((file.to_string(), figure));
         }
     }
 
@@ -93,10 +93,7 @@ pub fn saha2012(report: &Report) -> Vec<(String, String)> {
             .series(Series::line(format!("{name} J1"), curve(&r.sweep.ekf, j1)))
             .series(Series::line(format!("{name} J2"), curve(&r.sweep.ekf, j2)).dashed());
     }
-    out.push((
-        "j1j2_readings.svg".to_string(),
-        range_lines(readings).to_svg(),
-    ));
+    out.push(("j1j2_readings.svg".to_string(), range_lines(readings)));
     out
 }
 
@@ -149,25 +146,27 @@ fn crossover_point(c: &CrossoverRow) -> Annotation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kalibra_studies::saha2012::{Config, run};
+    use crate::paper000::{Config, run};
 
-    /// Every figure is a complete SVG document with data and no NaN.
+    /// Every figure has data; the crossover is marked; the readings figure names each reading.
     #[test]
-    fn saha2012_figures_are_complete_svg() {
+    fn saha2012_figures_have_data() {
         let report = run(&Config::quick()).unwrap();
-        let figures = saha2012(&report);
+        let figures = figures(&report);
         let names: Vec<&str> = figures.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(names, ["j1j2_kf.svg", "j1j2_ekf.svg", "j1j2_readings.svg"]);
-        for (name, svg) in &figures {
-            assert!(!svg.is_empty(), "{name} is empty");
-            assert!(svg.contains("<svg"), "{name} is not SVG");
-            assert!(svg.trim_end().ends_with("</svg>"), "{name} is truncated");
-            assert!(!svg.contains("NaN"), "{name} holds NaN");
-            assert!(!svg.contains("no data"), "{name} has no data");
-        }
-        assert!(figures[0].1.contains("crossover nq="));
+        crate::figure::assert_drawable(&figures);
+        assert!(figures[0].1.annotations.iter().any(
+            |a| matches!(a, Annotation::Point { label, .. } if label.contains("crossover nq="))
+        ));
         for r in &report.readings {
-            assert!(figures[2].1.contains(r.reading.name));
+            let fig = &figures[2].1;
+            assert!(
+                fig.title.contains(r.reading.name)
+                    || fig.series.iter().any(|s| s.label.contains(r.reading.name)),
+                "{}",
+                r.reading.name
+            );
         }
     }
 }

@@ -30,6 +30,10 @@
 //! * Observability (Fig. 3, not defined in the paper): singular values of
 //!   `O_k = [H_k; H_{k+1} F_k; H_{k+2} F_{k+1} F_k; H_{k+3} ...]` along the noise-free truth.
 
+mod figures;
+
+use crate::claims::Claim;
+use crate::study::{NamedFigure, Options, Size, Study};
 use kalibra_bounds::Pcrlb;
 use kalibra_filters::{Ekf, Filter, Start};
 use kalibra_linalg::{Matrix3, Matrix4, Vector3, Vector4};
@@ -39,8 +43,8 @@ use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
 use crate::StudyError;
+use crate::paper000::Entry;
 use crate::reentry::{self, CrossoverRow, SweepRow};
-use crate::saha2012::Entry;
 
 /// Number of measurements `m`.
 pub const M: usize = 3;
@@ -1172,5 +1176,88 @@ mod tests {
         assert_eq!(bold, 2 * 4, "one minimum per state");
         assert!(md.contains("(j1j2.svg)") && md.contains("(itse.svg)"));
         assert!(!md.contains("NaN"));
+    }
+}
+
+/// The study, as the registry lists it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Paper003;
+
+impl Study for Paper003 {
+    type Config = Config;
+    type Report = Report;
+
+    fn id(&self) -> &'static str {
+        "003"
+    }
+
+    fn title(&self) -> &'static str {
+        "Saha, Ghosh, Goswami 2014: J1/J2 for the EKF, Q_comp, initial tuning"
+    }
+
+    fn paper(&self) -> Option<&'static str> {
+        Some(
+            "Saha, Ghosh, Goswami, \"Robustness and sensitivity metrics for tuning the extended Kalman filter\", IEEE TIM 2014",
+        )
+    }
+
+    fn config(&self, options: &Options) -> Config {
+        let mut config = match options.size {
+            Size::Paper => Config::paper(),
+            Size::Quick => Config::quick(),
+        };
+        if let Some(seed) = options.seed {
+            config.seed = seed;
+        }
+        config.threads = options.threads;
+        config
+    }
+
+    fn seed(&self, config: &Config) -> Option<u64> {
+        Some(config.seed)
+    }
+
+    fn describe(&self, config: &Config) -> String {
+        format!(
+            "J1/J2 sweep, P_ad, Q_ad, Monte Carlo {} runs x 5 settings, CRLB",
+            config.runs
+        )
+    }
+
+    fn run(&self, config: &Config) -> Result<Report, StudyError> {
+        run(config)
+    }
+
+    fn claims(&self, report: &Report) -> Vec<Claim> {
+        report.claims()
+    }
+
+    fn highlight(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        let paper = report
+            .readings
+            .first()
+            .ok_or_else(|| StudyError::Report("paper 003 has no reading".into()))?;
+        let fmt = |e: Option<Entry>| {
+            e.map_or("none".to_string(), |e| {
+                format!("{:.3} ({:.2})", e.ours, e.paper)
+            })
+        };
+        Ok(format!(
+            "J1max {:.3} ({:.2}), J2max {:.3} ({:.2}), crossover nq {}, J {} (ours (paper))",
+            paper.j1max.ours,
+            paper.j1max.paper,
+            paper.j2max.ours,
+            paper.j2max.paper,
+            fmt(paper.crossover_nq),
+            fmt(paper.crossover_j),
+        ))
+    }
+
+    fn markdown(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        Ok(report.to_markdown())
+    }
+
+    fn figures(&self, report: &Report) -> Vec<NamedFigure> {
+        NamedFigure::from_pairs(figures::figures(report))
     }
 }

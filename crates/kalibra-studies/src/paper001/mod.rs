@@ -35,6 +35,9 @@
 //! * Tolerances, fixed before looking at the results: RMSE within 10%, ANEES within 15%, NCI
 //!   within 0.5 dB.
 
+mod figures;
+
+use crate::study::{NamedFigure, Options, Size, Study};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -842,5 +845,93 @@ impl Report {
             md.push_str("\nWall times on this machine, one thread, best of three passes; they vary between runs.\n");
         }
         md
+    }
+}
+
+/// The study, as the registry lists it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Paper001;
+
+impl Study for Paper001 {
+    type Config = Config;
+    type Report = Report;
+
+    fn id(&self) -> &'static str {
+        "001"
+    }
+
+    fn title(&self) -> &'static str {
+        "Local filters in bearings-only tracking (EKF, UKF, adaptive UKF, SRF)"
+    }
+
+    fn paper(&self) -> Option<&'static str> {
+        Some("\"Performance analysis of local filters in bearings-only tracking\"")
+    }
+
+    fn config(&self, options: &Options) -> Config {
+        let mut config = match options.size {
+            Size::Paper => Config::paper(),
+            Size::Quick => Config::quick(),
+        };
+        if let Some(seed) = options.seed {
+            config.seed = seed;
+        }
+        config.threads = options.threads;
+        config
+    }
+
+    fn seed(&self, config: &Config) -> Option<u64> {
+        Some(config.seed)
+    }
+
+    fn describe(&self, config: &Config) -> String {
+        format!(
+            "bearings-only tracking, 3 problems x {} filters x {} runs, {} seeds; Table II from {} runs",
+            FILTERS.len(),
+            config.runs,
+            1 + config.extra_seeds,
+            config.cost_runs
+        )
+    }
+
+    fn run(&self, config: &Config) -> Result<Report, StudyError> {
+        run(config)
+    }
+
+    fn claims(&self, report: &Report) -> Vec<Claim> {
+        report.claims.clone()
+    }
+
+    fn highlight(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        let table1: Vec<_> = report.claims.iter().filter(|c| c.id == "table1").collect();
+        let count = |v: Verdict| table1.iter().filter(|c| c.verdict == v).count();
+        let problem = report
+            .problems
+            .get("III")
+            .ok_or_else(|| StudyError::Report("paper 001 has no problem III".into()))?;
+        let rmse = FILTERS[..PAPER_FILTERS]
+            .iter()
+            .zip(TABLE_I[2].1[2].unwrap_or([f64::NAN; 5]))
+            .map(|(n, p)| {
+                let ours = problem.filters.get(*n).map_or(f64::NAN, |f| f.rmse_pos);
+                format!("{n} {ours:.2}/{p}")
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        Ok(format!(
+            "Table I: {} of {} cells reproduced, {} not, {} noise-dominated; problem III RMSE ours/paper: {rmse}",
+            count(Verdict::Reproduced),
+            table1.len(),
+            count(Verdict::NotReproduced),
+            count(Verdict::NotTestable),
+        ))
+    }
+
+    fn markdown(&self, _config: &Config, report: &Report) -> Result<String, StudyError> {
+        Ok(report.to_markdown())
+    }
+
+    fn figures(&self, report: &Report) -> Vec<NamedFigure> {
+        NamedFigure::from_pairs(figures::figures(report))
     }
 }

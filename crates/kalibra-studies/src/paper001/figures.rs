@@ -2,16 +2,16 @@
 //! and velocity RMSE (Figs. 2, 5, 9), NCI and ANEES with its 95% band (Figs. 3, 6, 10), and the
 //! mean kappa of the adaptive filters (Fig. 7 for problem II; ours for I and III).
 
-use kalibra_studies::bot::{FILTERS, ProblemResult, Report};
+use crate::paper001::{FILTERS, ProblemResult, Report};
 
-use crate::plot::{Annotation, Figure, Series};
+use crate::figure::{Annotation, Figure, Series};
 
 /// One line per filter: `pick(filter)` against the problem's labels; filters with an empty
 /// series are skipped.
 fn per_filter(
     p: &ProblemResult,
     mut fig: Figure,
-    pick: impl Fn(&kalibra_studies::bot::FilterResult) -> &[f64],
+    pick: impl Fn(&crate::paper001::FilterResult) -> &[f64],
 ) -> Figure {
     for name in FILTERS {
         let values = pick(&p.filters[name]);
@@ -35,7 +35,7 @@ fn per_filter(
 }
 
 /// The SVG figures, as (file name, contents).
-pub fn bot(report: &Report) -> Vec<(String, String)> {
+pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
     let mut out = Vec::new();
     for (problem, p) in &report.problems {
         let unit = match *problem {
@@ -52,13 +52,13 @@ pub fn bot(report: &Report) -> Vec<(String, String)> {
         .log_y();
         out.push((
             format!("rmse_pos_{tag}.svg"),
-            per_filter(p, fig, |f| &f.rmse_pos_steps).to_svg(),
+            per_filter(p, fig, |f| &f.rmse_pos_steps),
         ));
         if p.filters["EKF"].rmse_vel.is_some() {
             let fig = Figure::new(format!("problem {problem}: velocity RMSE"), "k", unit.1).log_y();
             out.push((
                 format!("rmse_vel_{tag}.svg"),
-                per_filter(p, fig, |f| &f.rmse_vel_steps).to_svg(),
+                per_filter(p, fig, |f| &f.rmse_vel_steps),
             ));
         }
         let fig = Figure::new(
@@ -72,7 +72,7 @@ pub fn bot(report: &Report) -> Vec<(String, String)> {
         });
         out.push((
             format!("nci_{tag}.svg"),
-            per_filter(p, fig, |f| &f.nci_steps).to_svg(),
+            per_filter(p, fig, |f| &f.nci_steps),
         ));
         let fig = Figure::new(
             format!("problem {problem}: ANEES with its 95% band"),
@@ -90,7 +90,7 @@ pub fn bot(report: &Report) -> Vec<(String, String)> {
         });
         out.push((
             format!("anees_{tag}.svg"),
-            per_filter(p, fig, |f| &f.anees_steps).to_svg(),
+            per_filter(p, fig, |f| &f.anees_steps),
         ));
         let fig = Figure::new(
             format!("problem {problem}: mean kappa of the unscented filters"),
@@ -99,7 +99,7 @@ pub fn bot(report: &Report) -> Vec<(String, String)> {
         );
         out.push((
             format!("kappa_{tag}.svg"),
-            per_filter(p, fig, |f| &f.mean_kappa_steps).to_svg(),
+            per_filter(p, fig, |f| &f.mean_kappa_steps),
         ));
     }
     out

@@ -1,0 +1,221 @@
+//! The [`Study`] trait every reproduced study implements, and [`Reproduce`], its type-erased
+//! form that the [registry](crate::REGISTRY) lists.
+//!
+//! A study is a configuration (published size or a quick size for tests), a run that turns the
+//! configuration into a serialisable report, the published claims judged on that report, a
+//! one-line highlight, a Markdown report rendered from a template over the structured report,
+//! and figures as data. Tests assert on the structured report and the claims; the Markdown is
+//! only a view of them.
+
+use serde::Serialize;
+
+use crate::StudyError;
+use crate::claims::Claim;
+use crate::figure::Figure;
+
+/// Which configuration a study runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Size {
+    /// The size the paper reports (or the full benchmark size).
+    Paper,
+    /// A reduced size that keeps every stage, for tests and a quick look.
+    Quick,
+}
+
+impl Size {
+    /// `"full"` or `"quick"`, as the reports print it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Size::Paper => "full",
+            Size::Quick => "quick",
+        }
+    }
+}
+
+/// What a caller may set on any study: its size, a seed overriding the study's own, and the
+/// thread count (which never changes the results).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Options {
+    /// Published or quick size.
+    pub size: Size,
+    /// Replaces the study's default seed (studies without randomness ignore it).
+    pub seed: Option<u64>,
+    /// Worker threads; 0 uses every core.
+    pub threads: usize,
+}
+
+impl Options {
+    /// The published size with the study's own seed, on every core.
+    pub fn paper() -> Self {
+        Self {
+            size: Size::Paper,
+            seed: None,
+            threads: 0,
+        }
+    }
+
+    /// The quick size with the study's own seed, on every core.
+    pub fn quick() -> Self {
+        Self {
+            size: Size::Quick,
+            ..Self::paper()
+        }
+    }
+}
+
+/// A figure with the file name its report links to.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NamedFigure {
+    /// File name (for instance `anees.svg`), unique within the study.
+    pub file: String,
+    /// What to draw.
+    pub figure: Figure,
+}
+
+impl NamedFigure {
+    /// Names each figure of `(file, figure)` pairs.
+    pub fn from_pairs(pairs: Vec<(String, Figure)>) -> Vec<Self> {
+        pairs
+            .into_iter()
+            .map(|(file, figure)| Self { file, figure })
+            .collect()
+    }
+
+    /// Names `figure` as `file`.
+    pub fn new(file: impl Into<String>, figure: Figure) -> Self {
+        Self {
+            file: file.into(),
+            figure,
+        }
+    }
+}
+
+/// One reproduced study, with its own configuration and report types.
+///
+/// Implement this for a study and add one line to [`crate::REGISTRY`]; `cargo xtask reproduce`
+/// and the tests find it there.
+pub trait Study: Sync {
+    /// Size, seed and parameters of a run.
+    type Config: Serialize;
+    /// Everything the run computed, serialised to `results.json`.
+    type Report: Serialize;
+
+    /// Stable identifier: the paper number (`"000"` ... `"004"`) or the workload name
+    /// (`"w1"`). It names the output directory and the report's links.
+    fn id(&self) -> &'static str;
+
+    /// A one-line title for the summary.
+    fn title(&self) -> &'static str;
+
+    /// The paper's citation, `None` for a study that reproduces no paper.
+    fn paper(&self) -> Option<&'static str>;
+
+    /// The configuration for `options` (the published or quick size, with the seed and thread
+    /// count applied).
+    fn config(&self, options: &Options) -> Self::Config;
+
+    /// The seed `config` runs with, `None` when the study draws nothing at random.
+    fn seed(&self, config: &Self::Config) -> Option<u64>;
+
+    /// What a run of `config` is about to do, in one line (printed before a long run).
+    fn describe(&self, config: &Self::Config) -> String;
+
+    /// Runs the study.
+    ///
+    /// # Errors
+    /// [`StudyError`] when a model, filter, metric or bound fails.
+    fn run(&self, config: &Self::Config) -> Result<Self::Report, StudyError>;
+
+    /// The published claims, each with ours and a verdict (empty for a study without a paper).
+    fn claims(&self, report: &Self::Report) -> Vec<Claim>;
+
+    /// The one-line summary of what the run shows, for the reproduction index.
+    ///
+    /// # Errors
+    /// [`StudyError::Report`] when the report lacks a part the summary needs.
+    fn highlight(&self, config: &Self::Config, report: &Self::Report)
+    -> Result<String, StudyError>;
+
+    /// The report as Markdown, rendered from the study's template.
+    ///
+    /// # Errors
+    /// [`StudyError::Template`] when the template does not render.
+    fn markdown(&self, config: &Self::Config, report: &Self::Report) -> Result<String, StudyError>;
+
+    /// The figures the report links to, as data.
+    fn figures(&self, report: &Self::Report) -> Vec<NamedFigure>;
+}
+
+/// Everything one study run produced, type-erased for the registry loop.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    /// The seed the run used, if any.
+    pub seed: Option<u64>,
+    /// The configuration, serialised.
+    pub config: serde_json::Value,
+    /// The report, serialised.
+    pub results: serde_json::Value,
+    /// The published claims with verdicts.
+    pub claims: Vec<Claim>,
+    /// One-line summary for the index.
+    pub highlight: String,
+    /// The Markdown report.
+    pub markdown: String,
+    /// The figures the report links to.
+    pub figures: Vec<NamedFigure>,
+}
+
+/// A [`Study`] with its types erased, as the registry lists it. Implemented for every
+/// [`Study`]; implement [`Study`], not this.
+pub trait Reproduce: Sync {
+    /// See [`Study::id`].
+    fn id(&self) -> &'static str;
+    /// See [`Study::title`].
+    fn title(&self) -> &'static str;
+    /// See [`Study::paper`].
+    fn paper(&self) -> Option<&'static str>;
+    /// [`Study::describe`] of the configuration `options` selects.
+    fn describe(&self, options: &Options) -> String;
+    /// Runs the configuration `options` selects and collects everything it produces.
+    ///
+    /// # Errors
+    /// Whatever the run, the highlight or the report template return, and
+    /// [`StudyError::Report`] if the report does not serialise.
+    fn reproduce(&self, options: &Options) -> Result<Outcome, StudyError>;
+}
+
+impl<S: Study> Reproduce for S {
+    fn id(&self) -> &'static str {
+        Study::id(self)
+    }
+
+    fn title(&self) -> &'static str {
+        Study::title(self)
+    }
+
+    fn paper(&self) -> Option<&'static str> {
+        Study::paper(self)
+    }
+
+    fn describe(&self, options: &Options) -> String {
+        Study::describe(self, &self.config(options))
+    }
+
+    fn reproduce(&self, options: &Options) -> Result<Outcome, StudyError> {
+        let config = self.config(options);
+        let report = self.run(&config)?;
+        let json = |what: &str, value: Result<serde_json::Value, serde_json::Error>| {
+            value.map_err(|e| StudyError::Report(format!("{what} does not serialise: {e}")))
+        };
+        Ok(Outcome {
+            seed: self.seed(&config),
+            config: json("the configuration", serde_json::to_value(&config))?,
+            results: json("the report", serde_json::to_value(&report))?,
+            claims: self.claims(&report),
+            highlight: self.highlight(&config, &report)?,
+            markdown: self.markdown(&config, &report)?,
+            figures: self.figures(&report),
+        })
+    }
+}
