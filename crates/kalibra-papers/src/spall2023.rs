@@ -30,13 +30,13 @@
 //! * Test p-values of one trajectory are random; the rejection rate over
 //!   `trajectories` further trajectories at level 0.05 is what can be checked.
 
-use kalibra_bounds::{
-    ErgodicAverage, Surrogate, TestResult, batch_means, gaussian_half_widths, ks_two_sample,
-    paired_t_test, runs_test,
-};
+use kalibra_bounds::{ErgodicAverage, Surrogate, gaussian_half_widths};
 use kalibra_filters::{Ekf, Filter};
 use kalibra_linalg::nalgebra::SMatrix;
 use kalibra_linalg::{Alloc, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
+use kalibra_metrics::hypothesis::{
+    TestResult, batch_means, ks_two_sample, paired_t_test, runs_test,
+};
 use kalibra_models::{
     AccelAxis, Dynamics, LinearObservation, Measurement, Target3d, Target3dParams, Target3dReading,
 };
