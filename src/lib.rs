@@ -9,7 +9,7 @@
 //! | [`linalg`] | `kalibra-linalg` | dimension-generic matrices, checked covariances, filter kernels |
 //! | [`models`] | `kalibra-models` | dynamics and measurement traits, CV/CA, ballistic and bearing models, truth simulation |
 //! | [`filters`] | `kalibra-filters` | the `Filter` trait, KF and EKF, step records |
-//! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, RMSE accumulators, J1/J2/nq, ITSE |
+//! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, RMSE accumulators, J1/J2/nq, ITSE, hypothesis tests |
 //! | [`bounds`] | `kalibra-bounds` | posterior Cramér-Rao bound, observability along a trajectory |
 //! | [`sim`] | `kalibra-sim` | seeded parallel Monte Carlo, identical for any thread count; Q sweeps, initial tuning |
 //!

@@ -40,7 +40,7 @@ fn crate_dependencies_follow_the_design() {
         ("kalibra-models", &["kalibra-linalg"]),
         ("kalibra-filters", &["kalibra-linalg", "kalibra-models"]),
         ("kalibra-metrics", &["kalibra-linalg"]),
-        ("kalibra-bounds", &["kalibra-linalg", "kalibra-metrics"]),
+        ("kalibra-bounds", &["kalibra-linalg"]),
         (
             "kalibra-sim",
             &[

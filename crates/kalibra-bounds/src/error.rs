@@ -22,7 +22,8 @@ pub enum BoundsError {
         /// Steps available.
         got: usize,
     },
-    /// A statistical test or summary got fewer samples than it is defined for.
+    /// An average over steps (the surrogate's ergodic averages) got fewer samples than it is
+    /// defined for.
     #[error("{what}: needs at least {needed} samples, got {got}")]
     TooFewSamples {
         /// What was computed.
@@ -32,39 +33,12 @@ pub enum BoundsError {
         /// Samples given.
         got: usize,
     },
-    /// A NaN or an infinity in the input series; a statistic of it would be meaningless.
-    #[error("{what}: sample {index} is not finite")]
-    NonFinite {
-        /// What was computed.
-        what: &'static str,
-        /// Index of the first offending sample.
-        index: usize,
-    },
-    /// Two samples that must pair up element by element differ in length.
-    #[error("{what}: the samples differ in length ({left} and {right})")]
-    LengthMismatch {
-        /// What was computed.
-        what: &'static str,
-        /// Length of the first sample.
-        left: usize,
-        /// Length of the second sample.
-        right: usize,
-    },
-    /// A parameter outside its valid range (e.g. a batch size of zero).
+    /// A parameter outside its valid range (e.g. a confidence level outside (0, 1)).
     #[error("{what}: {reason}")]
     InvalidParameter {
         /// What was computed.
         what: &'static str,
         /// Which parameter and why it is invalid.
-        reason: &'static str,
-    },
-    /// Valid input on which a test statistic is undefined (zero variance, all samples on one
-    /// side of the median); reported rather than returned as a NaN p-value.
-    #[error("{what}: {reason}")]
-    Degenerate {
-        /// What was computed.
-        what: &'static str,
-        /// Why the statistic is undefined.
         reason: &'static str,
     },
     /// The surrogate's coefficient matrix `C = (I - K* H) J*` has spectral radius 1 or more

@@ -9,11 +9,12 @@
 //!   evaluated at the true state).
 //! * [`observability_singular_values`]: the singular values of the local observability matrix
 //!   `O_k = [H_k; H_{k+1} F_k; H_{k+2} F_{k+1} F_k; ...]` along a trajectory.
-//! * [`batch_means`], [`runs_test`], [`paired_t_test`], [`ks_two_sample`]: checks that an
-//!   error settles into a stationary distribution along one long trajectory (Spall and Wei
-//!   2023): batch means after a burn-in, then the Wald-Wolfowitz runs test about the median,
-//!   the matched-pair t-test and the two-sample Kolmogorov-Smirnov test (exact p-value) of the
-//!   first half against the second.
+//! * [`Surrogate`] and [`ErgodicAverage`]: the surrogate uncertainty bound of Spall and Wei
+//!   (2023) from the averaged gain and Jacobian along one long trajectory, with
+//!   [`gaussian_half_widths`] and [`Ellipsoid`]. Whether that trajectory's error has settled
+//!   into a stationary distribution is a hypothesis test, not a bound: batch means, the runs
+//!   test, the paired t-test and the two-sample Kolmogorov-Smirnov test live in
+//!   `kalibra_metrics::hypothesis`.
 //!
 //! Like the metrics, bounds take data (Jacobians, noise covariances), not models or filters.
 //!
@@ -46,14 +47,9 @@
 mod crlb;
 mod error;
 mod observability;
-mod stats;
 mod surrogate;
 
 pub use crlb::{MeasurementSample, Pcrlb};
 pub use error::BoundsError;
 pub use observability::observability_singular_values;
-pub use stats::{
-    KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
-    ks_two_sample_exact_p, paired_t_test, runs_test,
-};
 pub use surrogate::{Ellipsoid, ErgodicAverage, Surrogate, gaussian_half_widths};

@@ -62,6 +62,35 @@ pub enum MetricsError {
         /// What is wrong with it.
         reason: &'static str,
     },
+    /// A hypothesis test or a batch-means summary got fewer samples than it is defined for.
+    #[error("{what}: needs at least {needed} samples, got {got}")]
+    TooFewSamples {
+        /// What was computed.
+        what: &'static str,
+        /// Samples needed.
+        needed: usize,
+        /// Samples given.
+        got: usize,
+    },
+    /// A NaN or an infinity in a sample series given to a hypothesis test; a statistic of it
+    /// would be meaningless. (Vector and matrix inputs of the other metrics report through
+    /// [`MetricsError::Linalg`]; a series has a position worth reporting.)
+    #[error("{what}: sample {index} is not finite")]
+    NonFiniteSample {
+        /// What was computed.
+        what: &'static str,
+        /// Index of the first offending sample.
+        index: usize,
+    },
+    /// Valid input on which a test statistic is undefined (zero variance, all samples on one
+    /// side of the median); reported rather than returned as a NaN p-value.
+    #[error("{what}: {reason}")]
+    Degenerate {
+        /// What was computed.
+        what: &'static str,
+        /// Why the statistic is undefined.
+        reason: &'static str,
+    },
     /// A covariance failed its check (not positive definite, not finite).
     #[error(transparent)]
     Linalg(#[from] LinalgError),

@@ -24,6 +24,13 @@
 //!   estimate minus the truth, eq. 14), [`rmse`] and [`rmse_per_state`] over time (eq. 15), and
 //!   [`sliding_window`]: the RMSE, bias and local standard deviation of every forward window of
 //!   `W` samples ([`WindowStats`], eqs. 16-18), in `O(N)` and robust to large offsets.
+//! * Hypothesis tests on a series ([`hypothesis`], re-exported here): [`batch_means`] after a
+//!   burn-in, the Wald-Wolfowitz [`runs_test`] about the median, the matched-pair
+//!   [`paired_t_test`] and the two-sample Kolmogorov-Smirnov test [`ks_two_sample`] (exact
+//!   p-value, [`ks_two_sample_exact_p`], or the Kolmogorov limit [`ks_asymptotic_p`] beyond
+//!   [`KS_EXACT_MAX_CELLS`]), each giving a [`TestResult`]. Paper 004 applies them to the batch
+//!   means of one long trajectory to check that its error settles into a stationary
+//!   distribution.
 //!
 //! # Notation
 //! `e_k = x_k - x+_k` the estimation error of one run at step `k`, `P+_k` the filter's
@@ -36,7 +43,9 @@
 //! Quadratic forms go through a Cholesky factor, never an inverse. Accumulators keep plain
 //! sums in `f64` (the sums of at most millions of non-negative terms lose no meaningful
 //! precision), which makes merging exact in a fixed order. Chi-square quantiles come from
-//! statrs.
+//! statrs. Two-sided p-values are survival functions computed directly, never `1 - cdf`, so
+//! small p-values keep their digits (which is why the t and Kolmogorov-Smirnov tests are not
+//! statrs' own; see [`hypothesis`]).
 //!
 //! # Example
 //! ```
@@ -54,6 +63,7 @@ mod accumulate;
 mod consistency;
 mod credibility;
 mod error;
+pub mod hypothesis;
 mod innovation;
 mod itse;
 mod window;
@@ -64,6 +74,10 @@ pub use credibility::{
     Credibility, CredibilityAverage, CredibilityStep, consistent_median_nees, median,
 };
 pub use error::MetricsError;
+pub use hypothesis::{
+    KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
+    ks_two_sample_exact_p, paired_t_test, runs_test,
+};
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
 pub use itse::itse;
 pub use window::{WindowStats, instantaneous_errors, rmse, rmse_per_state, sliding_window};

@@ -33,13 +33,13 @@
 mod figures;
 
 use crate::study::{NamedFigure, Options, Size, Study};
-use kalibra_bounds::{
-    ErgodicAverage, Surrogate, TestResult, batch_means, gaussian_half_widths, ks_two_sample,
-    paired_t_test, runs_test,
-};
+use kalibra_bounds::{ErgodicAverage, Surrogate, gaussian_half_widths};
 use kalibra_filters::{Ekf, Filter};
 use kalibra_linalg::nalgebra::SMatrix;
 use kalibra_linalg::{Alloc, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
+use kalibra_metrics::hypothesis::{
+    TestResult, batch_means, ks_two_sample, paired_t_test, runs_test,
+};
 use kalibra_models::{
     AccelAxis, Dynamics, LinearObservation, Measurement, Target3d, Target3dParams, Target3dReading,
 };

@@ -1,5 +1,7 @@
 //! Batch means and the three stationarity tests: hand-worked cases, reference values from
-//! scipy / statsmodels, typed errors, and the rejection rate under the null.
+//! scipy / statsmodels, typed errors, the rejection rate under the null, and the comparison
+//! with statrs' own t-test and two-sample Kolmogorov-Smirnov test (kept out of use for the
+//! reasons in `kalibra_metrics::hypothesis`).
 //!
 //! Reference values were computed once with Python (numpy 2.4.6, scipy 1.17.1, statsmodels
 //! 0.15.0) on exactly the literal arrays below (generated with
@@ -7,13 +9,17 @@
 //! function and arguments it was checked against.
 
 use approx::assert_relative_eq;
-use kalibra_bounds::{
-    BoundsError, KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
+use kalibra_metrics::MetricsError;
+use kalibra_metrics::hypothesis::{
+    KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
     ks_two_sample_exact_p, paired_t_test, runs_test,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
+use statrs::stats_tests::ks_test::{KSTestError, KSTwoSampleAlternativeMethod, ks_twosample};
+use statrs::stats_tests::ttest_onesample::ttest_onesample;
+use statrs::stats_tests::{Alternative, NaNPolicy};
 
 // ---------------------------------------------------------------------------------------------
 // Batch means
@@ -49,11 +55,11 @@ fn batch_means_errors() {
     let series = [1.0, 2.0, 3.0, 4.0, 5.0];
     assert!(matches!(
         batch_means(&series, 0, 0),
-        Err(BoundsError::InvalidParameter { .. })
+        Err(MetricsError::InvalidParameter { name: "batch", .. })
     ));
     assert_eq!(
         batch_means(&series, 3, 3),
-        Err(BoundsError::TooShort {
+        Err(MetricsError::TooFewSamples {
             what: "batch_means",
             needed: 6,
             got: 5
@@ -61,23 +67,23 @@ fn batch_means_errors() {
     );
     assert!(matches!(
         batch_means(&series, 1, usize::MAX),
-        Err(BoundsError::TooShort { .. })
+        Err(MetricsError::TooFewSamples { .. })
     ));
     assert!(matches!(
         batch_means(&[], 1, 0),
-        Err(BoundsError::TooShort { .. })
+        Err(MetricsError::TooFewSamples { .. })
     ));
     // A NaN in the burn-in still fails: the run that produced the series broke.
     assert_eq!(
         batch_means(&[f64::NAN, 1.0, 2.0], 1, 1),
-        Err(BoundsError::NonFinite {
+        Err(MetricsError::NonFiniteSample {
             what: "batch_means",
             index: 0
         })
     );
     assert!(matches!(
         batch_means(&[1.0, f64::INFINITY], 2, 0),
-        Err(BoundsError::NonFinite { index: 1, .. })
+        Err(MetricsError::NonFiniteSample { index: 1, .. })
     ));
 }
 
@@ -184,7 +190,7 @@ fn runs_test_drops_the_median_and_attains_p_one() {
 fn runs_test_errors() {
     assert!(matches!(
         runs_test(&[1.0, 2.0, 3.0]),
-        Err(BoundsError::TooFewSamples {
+        Err(MetricsError::TooFewSamples {
             needed: 4,
             got: 3,
             ..
@@ -192,22 +198,22 @@ fn runs_test_errors() {
     ));
     assert!(matches!(
         runs_test(&[1.0, 2.0, f64::NAN, 3.0]),
-        Err(BoundsError::NonFinite { index: 2, .. })
+        Err(MetricsError::NonFiniteSample { index: 2, .. })
     ));
     // All equal: everything sits on the median.
     assert!(matches!(
         runs_test(&[1.0; 6]),
-        Err(BoundsError::Degenerate { .. })
+        Err(MetricsError::Degenerate { .. })
     ));
     // Median 1: one sample above, none below.
     assert!(matches!(
         runs_test(&[1.0, 1.0, 1.0, 2.0]),
-        Err(BoundsError::Degenerate { .. })
+        Err(MetricsError::Degenerate { .. })
     ));
     // Median 2: one sample above, one below, Var[R] = 0.
     assert!(matches!(
         runs_test(&[1.0, 2.0, 2.0, 3.0]),
-        Err(BoundsError::Degenerate { .. })
+        Err(MetricsError::Degenerate { .. })
     ));
 }
 
@@ -247,15 +253,15 @@ fn paired_t_test_matches_scipy() {
 fn paired_t_test_errors() {
     assert_eq!(
         paired_t_test(&[1.0, 2.0], &[1.0]),
-        Err(BoundsError::LengthMismatch {
-            what: "paired_t_test",
-            left: 2,
-            right: 1
+        Err(MetricsError::DimensionMismatch {
+            what: "paired_t_test: second sample length",
+            expected: 2,
+            found: 1
         })
     );
     assert!(matches!(
         paired_t_test(&[1.0], &[2.0]),
-        Err(BoundsError::TooFewSamples {
+        Err(MetricsError::TooFewSamples {
             needed: 2,
             got: 1,
             ..
@@ -263,7 +269,7 @@ fn paired_t_test_errors() {
     ));
     assert!(matches!(
         paired_t_test(&[1.0, 2.0], &[1.0, f64::NAN]),
-        Err(BoundsError::NonFinite { index: 1, .. })
+        Err(MetricsError::NonFiniteSample { index: 1, .. })
     ));
     // Constant difference (here 0.1, not exactly representable): zero variance, not a huge t.
     let a = [0.3, 1.3, 2.3, 5.3];
@@ -272,17 +278,17 @@ fn paired_t_test_errors() {
     if constant {
         assert!(matches!(
             paired_t_test(&a, &b),
-            Err(BoundsError::Degenerate { .. })
+            Err(MetricsError::Degenerate { .. })
         ));
     }
     assert!(matches!(
         paired_t_test(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0]),
-        Err(BoundsError::Degenerate { .. })
+        Err(MetricsError::Degenerate { .. })
     ));
     // Finite inputs whose difference overflows.
     assert!(matches!(
         paired_t_test(&[f64::MAX, 0.0], &[-f64::MAX, 1.0]),
-        Err(BoundsError::NonFinite { index: 0, .. })
+        Err(MetricsError::NonFiniteSample { index: 0, .. })
     ));
 }
 
@@ -505,7 +511,7 @@ fn ks_two_sample_switches_to_asymptotic_for_large_samples() {
 fn ks_errors() {
     assert!(matches!(
         ks_two_sample(&[], &[1.0]),
-        Err(BoundsError::TooFewSamples {
+        Err(MetricsError::TooFewSamples {
             needed: 1,
             got: 0,
             ..
@@ -513,12 +519,193 @@ fn ks_errors() {
     ));
     assert!(matches!(
         ks_two_sample(&[1.0], &[]),
-        Err(BoundsError::TooFewSamples { .. })
+        Err(MetricsError::TooFewSamples { .. })
     ));
     assert!(matches!(
         ks_two_sample(&[1.0], &[2.0, f64::NEG_INFINITY]),
-        Err(BoundsError::NonFinite { index: 1, .. })
+        Err(MetricsError::NonFiniteSample { index: 1, .. })
     ));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Against statrs 0.19
+// ---------------------------------------------------------------------------------------------
+
+/// statrs' one-sample t-test of the differences `a - b` against 0: the paired test.
+fn statrs_paired_t(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    ttest_onesample(d, 0.0, Alternative::TwoSided, NaNPolicy::Error).unwrap()
+}
+
+/// Pairs of samples both t-tests accept: the fixtures above and seeded normal samples of
+/// several sizes, with mean differences from none to large.
+fn t_test_inputs() -> Vec<(Vec<f64>, Vec<f64>)> {
+    let mut inputs = vec![
+        (vec![5.0, 7.0, 6.0, 9.0, 8.0], vec![4.0, 5.0, 6.0, 6.0, 5.0]),
+        (TA.to_vec(), TB.to_vec()),
+        (TA.to_vec(), TB.iter().map(|v| v - 0.6).collect()),
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(0x57A7_0019);
+    for n in [2_usize, 3, 5, 10, 30, 180, 1000] {
+        for shift in [0.0, 0.3, 1.0] {
+            let a: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+            let b: Vec<f64> = (0..n)
+                .map(|_| StandardNormal.sample(&mut rng))
+                .map(|v: f64| v - shift)
+                .collect();
+            inputs.push((a, b));
+        }
+    }
+    inputs
+}
+
+#[test]
+fn paired_t_test_agrees_with_statrs_ttest_onesample() {
+    // The same t by the same formula (today equal bit for bit; the tolerance leaves room for a
+    // reordering). statrs' p-value is 2 (1 - cdf(|t|)), a multiple of 2^-52 (as 2 times a
+    // multiple of 2^-53), so it can only agree to that absolute accuracy: the largest
+    // difference over these inputs is 1.1e-16.
+    for (a, b) in t_test_inputs() {
+        let ours = paired_t_test(&a, &b).unwrap();
+        let (t, p) = statrs_paired_t(&a, &b);
+        assert_relative_eq!(ours.statistic, t, max_relative = 1e-15);
+        assert!(
+            (ours.p_value - p).abs() <= 5e-16,
+            "n = {}: ours {} vs statrs {p}",
+            a.len(),
+            ours.p_value
+        );
+    }
+}
+
+#[test]
+fn paired_t_test_keeps_the_tail_statrs_rounds_away() {
+    // The documented difference. With two pairs there is one degree of freedom, Student's t is
+    // the Cauchy distribution and the two-sided p-value is 2 atan(1 / |t|) / pi in closed form.
+    // At t ~ 2e7 (p ~ 3.2e-8) ours matches it to rounding; statrs' 1 - cdf is good only to
+    // ~1e-16 absolute, which here is a relative error of about 3e-9.
+    for a in [[1.0, 1.001], [1.0, 1.000_000_1]] {
+        let b = [0.0, 0.0];
+        let ours = paired_t_test(&a, &b).unwrap();
+        let exact = 2.0 * (1.0 / ours.statistic).atan() / std::f64::consts::PI;
+        assert_relative_eq!(ours.p_value, exact, max_relative = 1e-13);
+        let (_, p) = statrs_paired_t(&a, &b);
+        assert!((p - exact).abs() <= 1e-15, "statrs {p} vs {exact}");
+    }
+    // A drift of about 14 standard errors over 180 pairs: p below 1e-20 is still a number
+    // here; statrs' 1 - cdf cannot represent it (it gives 0 or a multiple of 2^-52).
+    let mut rng = ChaCha8Rng::seed_from_u64(0x57A7_0020);
+    let a: Vec<f64> = (0..180).map(|_| StandardNormal.sample(&mut rng)).collect();
+    let b: Vec<f64> = (0..180)
+        .map(|_| StandardNormal.sample(&mut rng))
+        .map(|v: f64| v - 1.5)
+        .collect();
+    let ours = paired_t_test(&a, &b).unwrap();
+    assert!(
+        ours.p_value > 0.0 && ours.p_value < 1e-20,
+        "p = {}",
+        ours.p_value
+    );
+    let (_, p) = statrs_paired_t(&a, &b);
+    assert!((p - ours.p_value).abs() <= 5e-16, "statrs {p}");
+}
+
+/// Pairs of samples statrs' exact two-sample test accepts (`n m <= 10_000`).
+fn ks_inputs() -> Vec<(Vec<f64>, Vec<f64>)> {
+    let mut inputs = vec![
+        (vec![3.0, 1.0, 2.0], vec![6.0, 2.5, 5.0, 4.0]),
+        (vec![1.0, 2.0, 2.0, 3.0], vec![2.0, 2.0, 4.0]),
+        (KC.to_vec(), KD.to_vec()),
+        // 100 x 100 = 10_000 cells, statrs' largest.
+        (F180[..100].to_vec(), G180[..100].to_vec()),
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(0x57A7_0021);
+    for (n, m) in [
+        (10_usize, 10_usize),
+        (25, 40),
+        (50, 50),
+        (60, 150),
+        (7, 1000),
+    ] {
+        for shift in [0.0, 0.5, 1.0] {
+            let a: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+            let b: Vec<f64> = (0..m)
+                .map(|_| StandardNormal.sample(&mut rng))
+                .map(|v: f64| v + shift)
+                .collect();
+            inputs.push((a, b));
+        }
+    }
+    inputs
+}
+
+#[test]
+fn ks_two_sample_agrees_with_statrs_ks_twosample() {
+    // D: statrs sums 1/n steps, so it is off by a few ulps (up to 1.3e-15 relative here).
+    // Exact p: statrs returns 1 - inside / total, good to ~1e-13 absolute (the largest
+    // difference over these inputs is 8e-14, at 7 x 1000). Asymptotic p: the same Kolmogorov
+    // series at the same lambda, summed to a different stopping rule (within 1e-13 relative).
+    for (a, b) in ks_inputs() {
+        let (n, m) = (a.len(), b.len());
+        let ours = ks_two_sample(&a, &b).unwrap();
+        let (d, p) = ks_twosample(
+            a.clone(),
+            b.clone(),
+            KSTwoSampleAlternativeMethod::TwoSidedExact,
+            NaNPolicy::Error,
+        )
+        .unwrap();
+        assert_relative_eq!(ours.statistic, d, max_relative = 1e-14);
+        assert!(
+            (ours.p_value - p).abs() <= 2e-13,
+            "{n} x {m}: ours {} vs statrs {p}",
+            ours.p_value
+        );
+        let (_, p) = ks_twosample(
+            a,
+            b,
+            KSTwoSampleAlternativeMethod::TwoSidedAsymptotic,
+            NaNPolicy::Error,
+        )
+        .unwrap();
+        let limit = ks_asymptotic_p(n, m, ours.statistic);
+        assert!(
+            (limit - p).abs() <= 1e-13 * limit + 1e-13,
+            "{n} x {m}: ours {limit} vs statrs {p}"
+        );
+    }
+}
+
+#[test]
+fn ks_two_sample_where_statrs_differs() {
+    // The documented differences. 1: paper 004's halves of 180 batch means are beyond statrs'
+    // exact limit of 10_000 cells; ours gives scipy's exact value (ks_two_sample_matches_scipy_180_180).
+    assert_eq!(
+        ks_twosample(
+            F180.to_vec(),
+            G180.to_vec(),
+            KSTwoSampleAlternativeMethod::TwoSidedExact,
+            NaNPolicy::Error,
+        ),
+        Err(KSTestError::ExactAndTooLarge)
+    );
+    // 2: disjoint samples of 50 and 50. Only the two paths "all a, then all b" and the reverse
+    // reach D = 1, so p = 2 / C(100, 50) = 1.98e-29. Ours has it to rounding; statrs'
+    // 1 - inside / total only to its ~1e-13 absolute accuracy.
+    let a: Vec<f64> = (0..50).map(f64::from).collect();
+    let b: Vec<f64> = (100..150).map(f64::from).collect();
+    let exact = 2.0 / statrs::function::factorial::binomial(100, 50);
+    let ours = ks_two_sample(&a, &b).unwrap();
+    assert_eq!(ours.statistic, 1.0);
+    assert_relative_eq!(ours.p_value, exact, max_relative = 1e-12);
+    let (_, p) = ks_twosample(
+        a,
+        b,
+        KSTwoSampleAlternativeMethod::TwoSidedExact,
+        NaNPolicy::Error,
+    )
+    .unwrap();
+    assert!((p - exact).abs() <= 2e-13, "statrs {p}");
 }
 
 // ---------------------------------------------------------------------------------------------

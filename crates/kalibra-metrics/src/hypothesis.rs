@@ -1,4 +1,5 @@
-//! Stationarity checks along one long trajectory: batch means and three classical tests.
+//! Hypothesis tests on a series: batch means and three classical tests of a stationary
+//! distribution along one long trajectory.
 //!
 //! Successive filter errors along one trajectory are strongly correlated, so no textbook test
 //! applies to them directly. Batch means (averages over long non-overlapping windows) are
@@ -11,17 +12,27 @@
 //! The p-value conventions follow what reproduces published tables: the runs test uses the
 //! normal approximation without continuity correction, the Kolmogorov-Smirnov test the exact
 //! null distribution (or the plain Kolmogorov limit for large samples).
+//!
+//! # Against statrs
+//! statrs 0.19 has neither batch means nor a runs test. It has a one-sample t-test
+//! (`statrs::stats_tests::ttest_onesample`, which on the differences is the paired test) and a
+//! two-sample Kolmogorov-Smirnov test (`statrs::stats_tests::ks_test::ks_twosample`); both are
+//! kept here rather than called, for the reasons given in [`paired_t_test`] and
+//! [`ks_two_sample`]: in short, statrs forms its two-sided p-values as `1 - (something)`, good to
+//! about `1e-16` (t) and `1e-13` (KS) absolute but with no relative accuracy below that, and its
+//! exact KS p-value refuses more than 10^4 cells, which excludes paper 004's 180 against 180.
+//! `tests/hypothesis.rs` compares both with statrs on inputs both accept.
 
-use kalibra_metrics::median;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 use statrs::function::gamma::gamma_ur;
 
-use crate::BoundsError;
+use crate::{MetricsError, median};
 
 /// Largest `n * m` for which [`ks_two_sample`] computes the exact p-value.
 ///
 /// The exact computation walks the `(n + 1) x (m + 1)` lattice once, `O(n m)` time and
-/// `O(m)` memory, so 10^7 cells stay cheap. Beyond that the asymptotic Kolmogorov p-value
+/// `O(m)` memory, so 10^7 cells stay cheap (about 26 ms for 3162 against 3162 samples in the
+/// workspace's test profile, against 0.12 ms for 180 against 180). Beyond that the asymptotic Kolmogorov p-value
 /// ([`ks_asymptotic_p`]) is used, whose error decays like `1 / sqrt(n m / (n + m))` and is
 /// small at such sizes.
 pub const KS_EXACT_MAX_CELLS: usize = 10_000_000;
@@ -38,9 +49,9 @@ pub struct TestResult {
 }
 
 /// Reports the first non-finite sample, if any.
-fn check_finite(what: &'static str, x: &[f64]) -> Result<(), BoundsError> {
+fn check_finite(what: &'static str, x: &[f64]) -> Result<(), MetricsError> {
     match x.iter().position(|v| !v.is_finite()) {
-        Some(index) => Err(BoundsError::NonFinite { what, index }),
+        Some(index) => Err(MetricsError::NonFiniteSample { what, index }),
         None => Ok(()),
     }
 }
@@ -53,29 +64,30 @@ fn check_finite(what: &'static str, x: &[f64]) -> Result<(), BoundsError> {
 /// burn-in included, must be finite: a NaN anywhere means the run itself failed.
 ///
 /// # Errors
-/// [`BoundsError::InvalidParameter`] if `batch` is zero, [`BoundsError::TooShort`] if fewer
-/// than `batch` samples remain after the burn-in, [`BoundsError::NonFinite`] for a NaN or
+/// [`MetricsError::InvalidParameter`] named `"batch"` if `batch` is zero,
+/// [`MetricsError::TooFewSamples`] (`needed = burn_in + batch`) if fewer than `batch` samples
+/// remain after the burn-in, [`MetricsError::NonFiniteSample`] for a NaN or
 /// infinite sample.
 ///
 /// # Example
 /// ```
-/// use kalibra_bounds::batch_means;
+/// use kalibra_metrics::batch_means;
 /// let series: Vec<f64> = (0..10).map(f64::from).collect();
 /// // Drop 0; batches [1, 2, 3], [4, 5, 6], [7, 8, 9].
 /// assert_eq!(batch_means(&series, 3, 1)?, vec![2.0, 5.0, 8.0]);
-/// # Ok::<(), kalibra_bounds::BoundsError>(())
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
-pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f64>, BoundsError> {
+pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f64>, MetricsError> {
     const WHAT: &str = "batch_means";
     if batch == 0 {
-        return Err(BoundsError::InvalidParameter {
-            what: WHAT,
-            reason: "the batch size must be positive",
+        return Err(MetricsError::InvalidParameter {
+            name: "batch",
+            value: 0.0,
         });
     }
     let needed = burn_in.saturating_add(batch);
     if series.len() < needed {
-        return Err(BoundsError::TooShort {
+        return Err(MetricsError::TooFewSamples {
             what: WHAT,
             needed,
             got: series.len(),
@@ -102,14 +114,14 @@ pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f
 /// Too few runs indicate positive correlation or a trend, too many an oscillation.
 ///
 /// # Errors
-/// [`BoundsError::TooFewSamples`] for fewer than 4 samples (with 3 or fewer the run count
-/// cannot vary), [`BoundsError::NonFinite`] for a NaN or infinite sample,
-/// [`BoundsError::Degenerate`] if every sample off the median lies on one side of it, or if
+/// [`MetricsError::TooFewSamples`] for fewer than 4 samples (with 3 or fewer the run count
+/// cannot vary), [`MetricsError::NonFiniteSample`] for a NaN or infinite sample,
+/// [`MetricsError::Degenerate`] if every sample off the median lies on one side of it, or if
 /// exactly one lies on each side (then `Var[R] = 0`).
-pub fn runs_test(x: &[f64]) -> Result<TestResult, BoundsError> {
+pub fn runs_test(x: &[f64]) -> Result<TestResult, MetricsError> {
     const WHAT: &str = "runs_test";
     if x.len() < 4 {
-        return Err(BoundsError::TooFewSamples {
+        return Err(MetricsError::TooFewSamples {
             what: WHAT,
             needed: 4,
             got: x.len(),
@@ -132,7 +144,7 @@ pub fn runs_test(x: &[f64]) -> Result<TestResult, BoundsError> {
         previous = Some(side);
     }
     if above == 0 || below == 0 {
-        return Err(BoundsError::Degenerate {
+        return Err(MetricsError::Degenerate {
             what: WHAT,
             reason: "all samples off the median lie on one side of it",
         });
@@ -143,7 +155,7 @@ pub fn runs_test(x: &[f64]) -> Result<TestResult, BoundsError> {
     let mean = two_n1_n2 / n + 1.0;
     let var = two_n1_n2 * (two_n1_n2 - n) / (n * n * (n - 1.0));
     if var <= 0.0 {
-        return Err(BoundsError::Degenerate {
+        return Err(MetricsError::Degenerate {
             what: WHAT,
             reason: "one sample above and one below the median: the run count cannot vary",
         });
@@ -180,21 +192,33 @@ fn two_sided_normal_p(z: f64) -> f64 {
 /// batch means, `a` is the first half and `b` the second, so a drift of the mean shows up as a
 /// non-zero mean difference.
 ///
+/// # Why not statrs' `ttest_onesample`
+/// On the differences with `popmean = 0`, statrs 0.19's `ttest_onesample` computes the same
+/// `t` by the same formula in the same order (equal bit for bit on every input tried), but its
+/// two-sided p-value is `2 (1 - cdf(|t|))`: `1 - cdf` is a multiple of `2^-53 = 1.1e-16`, so a
+/// p-value of `1e-13` keeps only three or four correct digits and one below about `1e-16` comes
+/// out as 0 (it does for `t = 9.4` with 179 degrees of freedom, where the p-value is
+/// `3.5e-17`). Here the p-value is `2 sf(|t|)`, the survival function computed
+/// directly, which keeps its relative accuracy in the tail (checked against the closed form of
+/// one degree of freedom). statrs also accepts infinite samples and a zero variance (returning
+/// an infinite or NaN `t`), where this function returns a typed error.
+///
 /// # Errors
-/// [`BoundsError::LengthMismatch`] if the lengths differ, [`BoundsError::TooFewSamples`] for
-/// fewer than 2 pairs, [`BoundsError::NonFinite`] for a NaN or infinite sample or difference,
-/// [`BoundsError::Degenerate`] if all differences are equal (zero variance: `t` undefined).
-pub fn paired_t_test(a: &[f64], b: &[f64]) -> Result<TestResult, BoundsError> {
+/// [`MetricsError::DimensionMismatch`] if the lengths differ (`expected` the length of `a`,
+/// `found` that of `b`), [`MetricsError::TooFewSamples`] for
+/// fewer than 2 pairs, [`MetricsError::NonFiniteSample`] for a NaN or infinite sample or difference,
+/// [`MetricsError::Degenerate`] if all differences are equal (zero variance: `t` undefined).
+pub fn paired_t_test(a: &[f64], b: &[f64]) -> Result<TestResult, MetricsError> {
     const WHAT: &str = "paired_t_test";
     if a.len() != b.len() {
-        return Err(BoundsError::LengthMismatch {
-            what: WHAT,
-            left: a.len(),
-            right: b.len(),
+        return Err(MetricsError::DimensionMismatch {
+            what: "paired_t_test: second sample length",
+            expected: a.len(),
+            found: b.len(),
         });
     }
     if a.len() < 2 {
-        return Err(BoundsError::TooFewSamples {
+        return Err(MetricsError::TooFewSamples {
             what: WHAT,
             needed: 2,
             got: a.len(),
@@ -208,7 +232,7 @@ pub fn paired_t_test(a: &[f64], b: &[f64]) -> Result<TestResult, BoundsError> {
     // Checked on the data, not on the computed variance: the rounded mean of equal values
     // need not equal them, which would leave a spurious tiny variance and a huge `t`.
     if d.iter().all(|&v| v == d[0]) {
-        return Err(BoundsError::Degenerate {
+        return Err(MetricsError::Degenerate {
             what: WHAT,
             reason: "all differences are equal: zero variance",
         });
@@ -218,13 +242,13 @@ pub fn paired_t_test(a: &[f64], b: &[f64]) -> Result<TestResult, BoundsError> {
     // Two passes: the sum of squared deviations does not cancel like sum(d^2) - n mean^2.
     let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
     if !(var > 0.0 && var.is_finite()) {
-        return Err(BoundsError::Degenerate {
+        return Err(MetricsError::Degenerate {
             what: WHAT,
             reason: "the variance of the differences underflows or overflows",
         });
     }
     let t = mean / (var / n).sqrt();
-    let student = StudentsT::new(0.0, 1.0, n - 1.0).map_err(|_| BoundsError::Degenerate {
+    let student = StudentsT::new(0.0, 1.0, n - 1.0).map_err(|_| MetricsError::Degenerate {
         what: WHAT,
         reason: "invalid degrees of freedom",
     })?;
@@ -244,14 +268,33 @@ pub fn paired_t_test(a: &[f64], b: &[f64]) -> Result<TestResult, BoundsError> {
 /// The p-value is exact ([`ks_two_sample_exact_p`]) when `n m <= KS_EXACT_MAX_CELLS`, and the
 /// plain Kolmogorov limit ([`ks_asymptotic_p`]) otherwise.
 ///
+/// # Why not statrs' `ks_twosample`
+/// statrs 0.19's `ks_twosample(.., TwoSidedExact, ..)` uses the same null distribution and the
+/// same convention (`P(D >= D_obs)`), but:
+/// * it refuses `n m > 10_000` (`ExactAndTooLarge`), so paper 004's two halves of 180 batch
+///   means (32 400 cells) would fall back to an approximation; here the exact p-value goes to
+///   [`KS_EXACT_MAX_CELLS`] = 10^7 cells;
+/// * it fills the whole `(n + 1) x (m + 1)` table of path counts, `O(n m)` memory (it would
+///   take 80 MB at 10^7 cells), where one row of probabilities, `O(m)`, suffices (25 KB at 3162 x 3162);
+/// * it returns `1 - inside / total`, good to about `1e-13` absolute: below that its p-values
+///   are rounding noise, and can be negative (for disjoint samples of 50 and 50 it gives
+///   `2.8e-15` where the exact value is `2 / C(100, 50) = 2.0e-29`); summing the mass that
+///   leaves the region keeps the relative accuracy of small p-values;
+/// * it accumulates the empirical distribution functions by adding `1 / n` repeatedly, so `D`
+///   is off by a few ulps (1.0000000000000002 for disjoint samples); here `D n m` is an
+///   integer, and `D` is one division.
+///
+/// Its `TwoSidedAsymptotic` method is the same Kolmogorov limit as [`ks_asymptotic_p`] at the
+/// same `lambda`; the two agree to about `1e-13` relative.
+///
 /// # Errors
-/// [`BoundsError::TooFewSamples`] if either sample is empty, [`BoundsError::NonFinite`] for a
+/// [`MetricsError::TooFewSamples`] if either sample is empty, [`MetricsError::NonFiniteSample`] for a
 /// NaN or infinite sample.
-pub fn ks_two_sample(a: &[f64], b: &[f64]) -> Result<TestResult, BoundsError> {
+pub fn ks_two_sample(a: &[f64], b: &[f64]) -> Result<TestResult, MetricsError> {
     const WHAT: &str = "ks_two_sample";
     for sample in [a, b] {
         if sample.is_empty() {
-            return Err(BoundsError::TooFewSamples {
+            return Err(MetricsError::TooFewSamples {
                 what: WHAT,
                 needed: 1,
                 got: 0,
