@@ -300,7 +300,7 @@ fn sweep_reading(
     config: &Config,
 ) -> Result<ReadingReport, PaperError> {
     let integer: Vec<f64> = (-10..=10).map(f64::from).collect();
-    let fine = kalibra_sim::grid(-10.0, 10.0, config.fine_step)?;
+    let fine = kalibra_sim::grid(-10.0..=10.0, config.fine_step)?;
     let run = |grid: &[f64]| -> Result<Vec<SweepRow>, PaperError> {
         Ok(kalibra_sim::sweep(grid, config.threads, |p| {
             point(setup, reading.divisor, p)
