@@ -9,7 +9,9 @@
 use kalibra::filters::{Ekf, Filter, FilterOptions, Kf, Start, UpdateForm};
 use kalibra::linalg::{Matrix3, Vector1, Vector3};
 use kalibra::metrics::{instantaneous_errors, rmse_per_state, sliding_window};
-use kalibra::models::{AngularTarget, ManoeuvreProfile, ManoeuvringTarget};
+use kalibra::models::{
+    AngularTarget, ManoeuvreProfile, ManoeuvringTarget, ManoeuvringTargetParams,
+};
 use kalibra_studies::claims::Verdict;
 use kalibra_studies::paper002::{self, Config, Q_SETS, R};
 use serde_json::Value;
@@ -54,13 +56,13 @@ fn replays_the_independent_trace() {
     let cfg = &data["truth_config"];
     assert_eq!(cfg["step"].as_f64(), Some(3.0));
     assert_eq!(cfg["osc_amp"].as_f64(), Some(10.0));
-    let target = ManoeuvringTarget::new(
+    let target = ManoeuvringTarget::new(ManoeuvringTargetParams {
         dt,
-        (n - 1) as f64 * dt,
-        ManoeuvreProfile::paper002(),
-        data["sigma_input"].as_f64().unwrap(),
-        Vector3::zeros(),
-    )
+        duration: (n - 1) as f64 * dt,
+        profile: ManoeuvreProfile::paper002(),
+        sigma_input: data["sigma_input"].as_f64().unwrap(),
+        x0: Vector3::zeros(),
+    })
     .unwrap();
     let truth = target
         .truth_from_noise(&floats(&data["accel_noise"]))

@@ -130,12 +130,32 @@ where
     /// The surrogate of a filter with limiting gain `gain` (`K*`) and Jacobian `jacobian`
     /// (`J*`) on a model with measurement matrix `h` and noise covariances `q`, `r`.
     ///
+    /// Every input is borrowed, as in [`Surrogate::from_averages`]; the surrogate keeps copies
+    /// of `K*` and `J*` for [`Surrogate::gain`] and [`Surrogate::jacobian`].
+    ///
+    /// ```
+    /// use kalibra_bounds::Surrogate;
+    /// use kalibra_linalg::nalgebra::{Matrix1x2, Matrix2x1};
+    /// use kalibra_linalg::{Matrix1, Matrix2};
+    ///
+    /// // A constant-velocity filter with a position measurement and a fixed gain.
+    /// let j = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+    /// let h = Matrix1x2::new(1.0, 0.0);
+    /// let k = Matrix2x1::new(0.5, 0.2);
+    /// let q = Matrix2::new(0.25, 0.5, 0.5, 1.0) * 0.01;
+    /// let r = Matrix1::new(1.0);
+    /// let s = Surrogate::new(&k, &j, &h, &q, &r)?;
+    /// assert!(s.spectral_radius() < 1.0);
+    /// assert_eq!(s.gain(), &k);
+    /// # Ok::<(), kalibra_bounds::BoundsError>(())
+    /// ```
+    ///
     /// # Errors
     /// [`BoundsError::Linalg`] for wrongly sized (`Dyn`), non-finite or asymmetric input;
     /// [`BoundsError::Unstable`] if the spectral radius of `C` is not below 1.
     pub fn new(
-        gain: OMatrix<f64, N, M>,
-        jacobian: OMatrix<f64, N, N>,
+        gain: &OMatrix<f64, N, M>,
+        jacobian: &OMatrix<f64, N, N>,
         h: &OMatrix<f64, M, N>,
         q: &OMatrix<f64, N, N>,
         r: &OMatrix<f64, M, M>,
@@ -147,18 +167,18 @@ where
         check_dim(n, h.ncols(), "measurement matrix columns")?;
         check_dim(n, q.nrows(), "process noise Q")?;
         check_dim(h.nrows(), r.nrows(), "measurement noise R")?;
-        for (m, what) in [(&jacobian, "Jacobian"), (q, "process noise Q")] {
+        for (m, what) in [(jacobian, "Jacobian"), (q, "process noise Q")] {
             check_finite(m, what)?;
         }
-        check_finite(&gain, "gain")?;
+        check_finite(gain, "gain")?;
         check_finite(h, "measurement matrix H")?;
         check_finite(r, "measurement noise R")?;
-        let mut i_kh = -(&gain * h);
+        let mut i_kh = -(gain * h);
         for i in 0..n {
             i_kh[(i, i)] += 1.0;
         }
-        let c = &i_kh * &jacobian;
-        let mut eta_cov = propagate(&i_kh, q) + propagate(&gain, r);
+        let c = &i_kh * jacobian;
+        let mut eta_cov = propagate(&i_kh, q) + propagate(gain, r);
         symmetrize(&mut eta_cov);
         let rho = spectral_radius(&c)?;
         if rho >= 1.0 {
@@ -168,8 +188,8 @@ where
         }
         let limit = discrete_lyapunov(&c, &eta_cov)?;
         Ok(Self {
-            gain,
-            jacobian,
+            gain: gain.clone(),
+            jacobian: jacobian.clone(),
             c,
             eta_cov,
             limit,
@@ -187,7 +207,7 @@ where
         q: &OMatrix<f64, N, N>,
         r: &OMatrix<f64, M, M>,
     ) -> Result<Self, BoundsError> {
-        Self::new(averages.gain()?, averages.jacobian()?, h, q, r)
+        Self::new(&averages.gain()?, &averages.jacobian()?, h, q, r)
     }
 
     /// `K*`.
@@ -386,7 +406,7 @@ mod tests {
         let q = Matrix2::new(0.02, 0.03, 0.03, 0.1);
         let r = Matrix1::new(0.5);
         let k = Matrix2x1::new(0.4, 0.2);
-        let s = Surrogate::new(k, f, &h, &q, &r).unwrap();
+        let s = Surrogate::new(&k, &f, &h, &q, &r).unwrap();
         let direct = direct_lyapunov(s.c(), s.eta_cov());
         assert!((s.limit_cov() - direct).amax() <= 1e-12 * direct.amax());
         // The recursion converges to the same limit.
@@ -405,7 +425,7 @@ mod tests {
         let k = Matrix2x1::new(0.0, 0.3);
         let r = Matrix1::new(1.0);
         assert!(matches!(
-            Surrogate::new(k, f, &h, &Matrix2::identity(), &r),
+            Surrogate::new(&k, &f, &h, &Matrix2::identity(), &r),
             Err(BoundsError::Unstable { .. })
         ));
     }

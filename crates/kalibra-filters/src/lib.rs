@@ -45,7 +45,9 @@
 //! let mut ekf = Ekf::new(cv, sensor, Vector4::new(100.0, 10.0, -1.0, 0.0), Matrix4::identity() * 10.0)?;
 //! ekf.predict()?;
 //! let record = ekf.update(&Vector1::new(0.11))?;
-//! assert!(record.nis() >= 0.0);
+//! // NIS = nu^2 / S for a scalar measurement, from the record's innovation and S.
+//! let direct = record.innovation()[0].powi(2) / record.s().matrix()[(0, 0)];
+//! assert!((record.nis() - direct).abs() <= 1e-12 * direct);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 

@@ -271,7 +271,9 @@ impl KappaGrid {
 /// let mut ukf = Ukf::new(cv, sensor, x0, Matrix4::identity() * 10.0, SigmaSet::recommended(4))?;
 /// ukf.predict()?;
 /// let record = ukf.update(&Vector1::new(0.11))?;
-/// assert!(record.nis() >= 0.0);
+/// // NIS = nu^2 / S for a scalar measurement, from the record's innovation and S.
+/// let direct = record.innovation()[0].powi(2) / record.s().matrix()[(0, 0)];
+/// assert!((record.nis() - direct).abs() <= 1e-12 * direct);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Clone, Debug)]

@@ -12,6 +12,8 @@
 //!   `where DefaultAllocator: Alloc<N, M>`.
 //! * [`Covariance`], a checked symmetric positive definite matrix that keeps its Cholesky
 //!   factor, so solves, quadratic forms and log-determinants never refactorise.
+//! * [`Gaussian`], a mean and a covariance by name, returned by every function that computes
+//!   both.
 //! * [`PsdMatrix`], a checked symmetric positive *semi*-definite matrix with a square-root
 //!   factor, for process noise that is often rank-deficient (`Q = G G^T`).
 //! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`joseph_update`],
@@ -58,6 +60,7 @@
 mod alloc;
 mod covariance;
 mod error;
+mod gaussian;
 mod kernels;
 mod lyapunov;
 mod psd;
@@ -67,6 +70,7 @@ pub use covariance::{
     Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once, quad_form_symmetric,
 };
 pub use error::LinalgError;
+pub use gaussian::Gaussian;
 pub use kernels::{
     all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
 };

@@ -319,6 +319,53 @@ pub struct ManoeuvringTarget {
 }
 
 impl Default for ManoeuvringTarget {
+    /// The target of [`ManoeuvringTargetParams::default`].
+    fn default() -> Self {
+        let ManoeuvringTargetParams {
+            dt,
+            duration,
+            profile,
+            sigma_input,
+            x0,
+        } = ManoeuvringTargetParams::default();
+        Self {
+            dt,
+            duration,
+            profile,
+            sigma_input,
+            x0,
+        }
+    }
+}
+
+/// The parameters of a [`ManoeuvringTarget`], by name so that the three scalars (time step,
+/// duration, input noise) cannot be swapped silently.
+///
+/// ```
+/// use kalibra_models::{ManoeuvreProfile, ManoeuvringTarget, ManoeuvringTargetParams};
+/// let target = ManoeuvringTarget::new(ManoeuvringTargetParams {
+///     duration: 5.0,
+///     profile: ManoeuvreProfile::none(),
+///     ..ManoeuvringTargetParams::default()
+/// })?;
+/// assert_eq!(target.steps(), 500);
+/// # Ok::<(), kalibra_models::ModelError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct ManoeuvringTargetParams {
+    /// The time step `dt` (s), finite and positive.
+    pub dt: f64,
+    /// The duration (s), finite and at least `dt`.
+    pub duration: f64,
+    /// The deterministic acceleration profile.
+    pub profile: ManoeuvreProfile,
+    /// The standard deviation of the white acceleration input noise, finite and non-negative.
+    pub sigma_input: f64,
+    /// The initial state `[theta_0, theta'_0, a_bias]`, finite.
+    pub x0: Vector3<f64>,
+}
+
+impl Default for ManoeuvringTargetParams {
     /// The spec's choice for paper 002: `dt = 0.01` s, 20 s, [`ManoeuvreProfile::paper002`],
     /// input noise `0.8` deg/s^2 (printed), `x0 = 0`.
     fn default() -> Self {
@@ -333,19 +380,20 @@ impl Default for ManoeuvringTarget {
 }
 
 impl ManoeuvringTarget {
-    /// A target with every parameter given; `x0 = [theta_0, theta'_0, a_bias]`.
+    /// A target with every parameter given by name.
     ///
     /// # Errors
     /// [`ModelError::InvalidParameter`] unless `dt` and `duration` are finite and positive
     /// with `duration >= dt`, and `sigma_input` is finite and non-negative;
     /// [`ModelError::NonFinite`] for a non-finite `x0`.
-    pub fn new(
-        dt: f64,
-        duration: f64,
-        profile: ManoeuvreProfile,
-        sigma_input: f64,
-        x0: Vector3<f64>,
-    ) -> Result<Self, ModelError> {
+    pub fn new(params: ManoeuvringTargetParams) -> Result<Self, ModelError> {
+        let ManoeuvringTargetParams {
+            dt,
+            duration,
+            profile,
+            sigma_input,
+            x0,
+        } = params;
         if !(dt.is_finite() && dt > 0.0) {
             return Err(ModelError::InvalidParameter {
                 name: "dt",
@@ -560,8 +608,14 @@ mod tests {
             acceleration: 2.0,
         }])
         .unwrap();
-        let target =
-            ManoeuvringTarget::new(0.1, 3.0, profile, 0.0, Vector3::new(1.0, 0.5, 0.0)).unwrap();
+        let target = ManoeuvringTarget::new(ManoeuvringTargetParams {
+            dt: 0.1,
+            duration: 3.0,
+            profile,
+            sigma_input: 0.0,
+            x0: Vector3::new(1.0, 0.5, 0.0),
+        })
+        .unwrap();
         assert_eq!(target.steps(), 30);
         let truth = target.truth_from_noise(&[0.0; 31]).unwrap();
         for (k, x) in truth.iter().enumerate() {
@@ -587,13 +641,31 @@ mod tests {
 
     #[test]
     fn bad_parameters_are_typed_errors() {
-        let p = ManoeuvreProfile::none();
+        let with = |dt, duration, sigma_input, x0| ManoeuvringTargetParams {
+            dt,
+            duration,
+            profile: ManoeuvreProfile::none(),
+            sigma_input,
+            x0,
+        };
         let x0 = Vector3::zeros();
-        assert!(ManoeuvringTarget::new(0.0, 1.0, p.clone(), 0.1, x0).is_err());
-        assert!(ManoeuvringTarget::new(0.1, 0.01, p.clone(), 0.1, x0).is_err());
-        assert!(ManoeuvringTarget::new(0.1, 1.0, p.clone(), -1.0, x0).is_err());
-        assert!(
-            ManoeuvringTarget::new(0.1, 1.0, p, 0.1, Vector3::new(f64::NAN, 0.0, 0.0)).is_err()
+        let invalid = |p: ManoeuvringTargetParams, name: &str| {
+            matches!(
+                ManoeuvringTarget::new(p),
+                Err(ModelError::InvalidParameter { name: n, .. }) if n == name
+            )
+        };
+        assert!(invalid(with(0.0, 1.0, 0.1, x0), "dt"));
+        assert!(invalid(with(0.1, 0.01, 0.1, x0), "duration"));
+        assert!(invalid(with(0.1, 1.0, -1.0, x0), "sigma_input"));
+        assert!(matches!(
+            ManoeuvringTarget::new(with(0.1, 1.0, 0.1, Vector3::new(f64::NAN, 0.0, 0.0))),
+            Err(ModelError::NonFinite { .. })
+        ));
+        // The default target is the default parameters, checked or not.
+        assert_eq!(
+            ManoeuvringTarget::new(ManoeuvringTargetParams::default()).unwrap(),
+            ManoeuvringTarget::default()
         );
         assert!(
             ManoeuvreProfile::new(vec![Manoeuvre::Step {

@@ -149,12 +149,33 @@ fn positive(name: &'static str, value: f64) -> Result<(), ModelError> {
     }
 }
 
+/// The scalar parameters of [`Ballistic`], by name so that no two can be swapped silently.
+///
+/// ```
+/// use kalibra_models::{Ballistic, BallisticParams};
+/// use kalibra_linalg::Matrix4;
+/// let params = BallisticParams { period: 2.0, beta: 40_000.0, gravity: 9.81 };
+/// let model = Ballistic::new(params, Matrix4::identity())?;
+/// assert_eq!(model.params(), params);
+/// # Ok::<(), kalibra_models::ModelError>(())
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BallisticParams {
+    /// The sampling period `T` (s), positive.
+    pub period: f64,
+    /// The ballistic coefficient `beta` (kg m^-1 s^-2), positive.
+    pub beta: f64,
+    /// The gravitational acceleration `g` (m/s^2), finite.
+    pub gravity: f64,
+}
+
 /// The ballistic re-entry dynamics with drag and gravity.
 ///
 /// ```
-/// use kalibra_models::{Ballistic, Dynamics, check_dynamics_jacobian};
+/// use kalibra_models::{Ballistic, BallisticParams, Dynamics, check_dynamics_jacobian};
 /// use kalibra_linalg::{Matrix4, Vector4};
-/// let model = Ballistic::new(2.0, 40_000.0, 9.81, Matrix4::identity())?;
+/// let params = BallisticParams { period: 2.0, beta: 40_000.0, gravity: 9.81 };
+/// let model = Ballistic::new(params, Matrix4::identity())?;
 /// let x0 = Vector4::new(232e3, -2255.2, 88e3, -397.7);
 /// let x1 = model.transition(0, &x0);
 /// assert!(x1[2] < x0[2]); // falling
@@ -169,20 +190,34 @@ pub struct Ballistic {
 }
 
 impl Ballistic {
-    /// Period `t` (s), ballistic coefficient `beta` (kg m^-1 s^-2), gravity `g` (m/s^2), and the
+    /// The model with period, ballistic coefficient and gravity from `params` and the
     /// process-noise covariance `q` (the truth's `Qt`, or a filter's tuning `Q`); the density
     /// of [`AirDensity::farina`].
     ///
     /// # Errors
-    /// [`ModelError::InvalidParameter`] for a non-positive `t` or `beta` or a non-finite `g`;
-    /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
-    pub fn new(t: f64, beta: f64, g: f64, q: Matrix4<f64>) -> Result<Self, ModelError> {
+    /// [`ModelError::InvalidParameter`] for a non-positive `period` or `beta` or a non-finite
+    /// `gravity`; [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
+    pub fn new(params: BallisticParams, q: Matrix4<f64>) -> Result<Self, ModelError> {
+        let BallisticParams {
+            period,
+            beta,
+            gravity,
+        } = params;
         positive("ballistic coefficient beta", beta)?;
         Ok(Self {
-            params: Params::new(t, g, q)?,
+            params: Params::new(period, gravity, q)?,
             beta,
             density: AirDensity::farina(),
         })
+    }
+
+    /// The period, ballistic coefficient and gravity the model was built with.
+    pub fn params(&self) -> BallisticParams {
+        BallisticParams {
+            period: self.params.t,
+            beta: self.beta,
+            gravity: self.params.g,
+        }
     }
 
     /// The same model with another air density.
@@ -340,12 +375,37 @@ pub struct ConvertedPosition {
     sigma_elevation: f64,
 }
 
+/// The noise of [`ConvertedPosition`], by name: the two standard deviations are in different
+/// units (m, rad) and must not be swapped silently.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConvertedPositionParams {
+    /// The range standard deviation `sr` (m), positive.
+    pub sigma_range: f64,
+    /// The elevation standard deviation `se` (rad), positive.
+    pub sigma_elevation: f64,
+}
+
 impl ConvertedPosition {
-    /// Range and elevation standard deviations (m, rad).
+    /// The model with the range and elevation standard deviations of `params`.
+    ///
+    /// ```
+    /// use kalibra_models::{ConvertedPosition, ConvertedPositionParams};
+    /// let radar = ConvertedPosition::new(ConvertedPositionParams {
+    ///     sigma_range: 100.0,
+    ///     sigma_elevation: 0.017 / 57.3,
+    /// })?;
+    /// // Along the line of sight (elevation 0) the variance is the range variance.
+    /// assert!((radar.covariance(50e3, 0.0)[(0, 0)] - 1e4).abs() < 1e-9);
+    /// # Ok::<(), kalibra_models::ModelError>(())
+    /// ```
     ///
     /// # Errors
     /// [`ModelError::InvalidParameter`] unless both are positive and finite.
-    pub fn new(sigma_range: f64, sigma_elevation: f64) -> Result<Self, ModelError> {
+    pub fn new(params: ConvertedPositionParams) -> Result<Self, ModelError> {
+        let ConvertedPositionParams {
+            sigma_range,
+            sigma_elevation,
+        } = params;
         positive("range standard deviation", sigma_range)?;
         positive("elevation standard deviation", sigma_elevation)?;
         Ok(Self {
@@ -495,13 +555,23 @@ mod tests {
     use super::*;
     use crate::{check_dynamics_jacobian, check_measurement_jacobian};
 
+    const PARAMS: BallisticParams = BallisticParams {
+        period: 2.0,
+        beta: 40_000.0,
+        gravity: 9.81,
+    };
+    const RADAR: ConvertedPositionParams = ConvertedPositionParams {
+        sigma_range: 100.0,
+        sigma_elevation: 0.017 / 57.3,
+    };
+
     fn x0() -> Vector4<f64> {
         let a = 190f64.to_radians();
         Vector4::new(232e3, 2290.0 * a.cos(), 88e3, 2290.0 * a.sin())
     }
 
     fn model() -> Ballistic {
-        Ballistic::new(2.0, 40_000.0, 9.81, Matrix4::identity()).unwrap()
+        Ballistic::new(PARAMS, Matrix4::identity()).unwrap()
     }
 
     #[test]
@@ -566,7 +636,7 @@ mod tests {
 
     #[test]
     fn converted_noise_is_range_noise_along_the_line_of_sight() {
-        let m = ConvertedPosition::new(100.0, 0.017 / 57.3).unwrap();
+        let m = ConvertedPosition::new(RADAR).unwrap();
         let eps = 0.3f64;
         let ra = m.covariance(50e3, eps);
         // Along the line of sight the variance is sr^2, across it (r se)^2.
@@ -577,6 +647,25 @@ mod tests {
         assert!(((across.transpose() * ra * across)[0] - cross).abs() < 1e-8);
         assert!((along.transpose() * ra * across)[0].abs() < 1e-8);
         assert!(check_measurement_jacobian(&m, 0, &x0()).scaled_error < 1e-9);
+    }
+
+    #[test]
+    fn named_parameters_reach_their_places() {
+        // Each named parameter lands where its name says: the period in F1 and G, gravity in
+        // the input, beta in the drag. A swap of two of them would change all three checks.
+        let m = model();
+        assert_eq!(m.params(), PARAMS);
+        assert_eq!(m.period(), 2.0);
+        let x = x0();
+        let d = m.drag(&x);
+        let v = Vector2::new(x[1], x[3]);
+        let expect = v * (-AirDensity::farina().at(x[2]) * 9.81 * v.norm() / (2.0 * 40_000.0));
+        assert_eq!(d, expect);
+        let free = m.drag_free();
+        assert_eq!(
+            free.transition(0, &Vector4::zeros()),
+            ballistic_g(2.0) * Vector2::new(0.0, -9.81)
+        );
     }
 
     #[test]
@@ -595,11 +684,36 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_typed_errors() {
-        assert!(Ballistic::new(0.0, 1.0, 9.81, Matrix4::identity()).is_err());
-        assert!(Ballistic::new(2.0, -1.0, 9.81, Matrix4::identity()).is_err());
-        assert!(Ballistic::new(2.0, 1.0, f64::NAN, Matrix4::identity()).is_err());
-        assert!(Ballistic::new(2.0, 1.0, 9.81, -Matrix4::identity()).is_err());
-        assert!(ConvertedPosition::new(0.0, 1.0).is_err());
+        let with = |period, beta, gravity| BallisticParams {
+            period,
+            beta,
+            gravity,
+        };
+        let i = Matrix4::identity();
+        let invalid = |r: Result<Ballistic, ModelError>, name: &str| matches!(r, Err(ModelError::InvalidParameter { name: n, .. }) if n == name);
+        assert!(invalid(
+            Ballistic::new(with(0.0, 1.0, 9.81), i),
+            "sampling period T"
+        ));
+        assert!(invalid(
+            Ballistic::new(with(2.0, -1.0, 9.81), i),
+            "ballistic coefficient beta"
+        ));
+        assert!(invalid(
+            Ballistic::new(with(2.0, 1.0, f64::NAN), i),
+            "gravity g"
+        ));
+        assert!(matches!(
+            Ballistic::new(with(2.0, 1.0, 9.81), -i),
+            Err(ModelError::Linalg(_))
+        ));
+        assert!(
+            ConvertedPosition::new(ConvertedPositionParams {
+                sigma_range: 0.0,
+                sigma_elevation: 1.0,
+            })
+            .is_err()
+        );
         assert!(
             RadarRates::new(Matrix3::new(1.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_err()
         );

@@ -14,8 +14,8 @@ use std::f64::consts::PI;
 use std::ops::Range;
 
 use kalibra_linalg::{
-    Alloc, DefaultAllocator, Dim, Matrix2, Matrix4, OMatrix, OVector, SMatrix, SVector, U1, U2, U4,
-    Vector1, Vector2, Vector4,
+    Alloc, DefaultAllocator, Dim, Gaussian, Matrix2, Matrix4, OMatrix, OVector, SMatrix, SVector,
+    U1, U2, U4, Vector1, Vector2, Vector4,
 };
 use rand::Rng;
 
@@ -421,12 +421,12 @@ where
             }
         };
         let truth = simulate(&self.truth_dynamics, &self.measurement, x0, self.steps, rng)?;
-        let (init_mean, init_cov) = self.initialize(&truth.measurements)?;
+        let init = self.initialize(&truth.measurements)?;
         Ok(BotRun {
             states: truth.states,
             measurements: truth.measurements,
-            init_mean,
-            init_cov,
+            init_mean: init.mean,
+            init_cov: init.cov,
         })
     }
 
@@ -436,11 +436,11 @@ where
     ///
     /// ```
     /// use kalibra_models::BotScenario;
-    /// use kalibra_linalg::Vector1;
+    /// use kalibra_linalg::{Gaussian, Vector1};
     ///
     /// // Problem I: a bearing of 45 degrees puts the target 20 m along x from the platform.
     /// let s = BotScenario::problem_i()?;
-    /// let (x, p) = s.initialize(&[Vector1::new(std::f64::consts::FRAC_PI_4)])?;
+    /// let Gaussian { mean: x, cov: p } = s.initialize(&[Vector1::new(std::f64::consts::FRAC_PI_4)])?;
     /// assert!((x[0] - 20.0).abs() < 1e-12 && x[1] == 0.0);
     /// // 1 + 1 * cot^2 + R_theta 20^2 / sin^4 at 45 degrees.
     /// assert!((p[(0, 0)] - (2.0 + 0.0524_f64.powi(2) * 1600.0)).abs() < 1e-9);
@@ -494,7 +494,7 @@ where
                 step: 0,
             });
         }
-        Ok((mean, cov))
+        Ok(Gaussian { mean, cov })
     }
 
     /// Problem I's estimate from one bearing: the point of the target's line at bearing `z`,
@@ -564,9 +564,6 @@ impl Polar {
         (Vector4::new(pos[0], pos[1], vel[0], vel[1]), p)
     }
 }
-
-/// A mean and a covariance.
-type Gaussian<N> = (OVector<f64, N>, OMatrix<f64, N, N>);
 
 /// A fixed-size vector as the scenario's state type, checking the dimension.
 fn to_vector<N: Dim, const D: usize>(
@@ -733,7 +730,7 @@ mod tests {
             let p = m.platform().position(k);
             assert_eq!(p, Vector2::new((k as f64).cos(), (k as f64).sin()));
         }
-        let (x, p) = s.initialize(&[]).unwrap();
+        let Gaussian { mean: x, cov: p } = s.initialize(&[]).unwrap();
         assert_eq!(x, Vector2::new(20.0, 5.0));
         assert_eq!(p, Matrix2::identity() * 0.1);
         assert_eq!(
@@ -844,13 +841,13 @@ mod tests {
             .unwrap();
             let m = &s.measurement;
             let clean = m.measure(0, &x0);
-            let first_order = s.initialize(&[clean]).unwrap().1[(0, 0)];
+            let first_order = s.initialize(&[clean]).unwrap().cov[(0, 0)];
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             let mut acc = 0.0;
             for _ in 0..draws {
                 let mut z = clean + m.sample_noise(0, &x0, &mut rng).unwrap();
                 m.normalize(&mut z);
-                let e = s.initialize(&[z]).unwrap().0[0] - x0[0];
+                let e = s.initialize(&[z]).unwrap().mean[0] - x0[0];
                 acc += e * e;
             }
             (acc / draws as f64, first_order)
@@ -933,7 +930,7 @@ mod tests {
     fn problem_ii_initialisation_and_its_first_order_gap_at_the_paper_spreads() {
         let s = BotScenario::problem_ii().unwrap();
         let z = PI / 4.0; // the noiseless z_1: the target at (7, 7) from (0, 0)
-        let (x, p) = s.initialize(&[Vector1::new(z)]).unwrap();
+        let Gaussian { mean: x, cov: p } = s.initialize(&[Vector1::new(z)]).unwrap();
         let knot = 1.852 / 60.0;
         assert!(
             (x[0] - 7.0).abs() < 1e-12 && (x[1] - 7.0).abs() < 1e-12,
@@ -1110,7 +1107,10 @@ mod tests {
             .map(|l| l.as_u64().unwrap())
             .collect();
         assert_eq!(labels, s.labels().map(|l| l as u64).collect::<Vec<_>>());
-        let (init_x, init_p) = s.initialize(&[]).unwrap();
+        let Gaussian {
+            mean: init_x,
+            cov: init_p,
+        } = s.initialize(&[]).unwrap();
         let sigma = s.measurement.variance().sqrt();
         let (mut worst, mut sum2, mut count) = (0.0f64, 0.0, 0);
         for run in data["runs"].as_array().unwrap() {

@@ -57,10 +57,12 @@ mod simulate;
 mod target3d;
 mod traits;
 
-pub use angle::{AngularTarget, Manoeuvre, ManoeuvreProfile, ManoeuvringTarget};
+pub use angle::{
+    AngularTarget, Manoeuvre, ManoeuvreProfile, ManoeuvringTarget, ManoeuvringTargetParams,
+};
 pub use ballistic::{
-    AirDensity, Ballistic, BallisticDragFree, ConvertedPosition, RadarRates, ballistic_f1,
-    ballistic_g,
+    AirDensity, Ballistic, BallisticDragFree, BallisticParams, ConvertedPosition,
+    ConvertedPositionParams, RadarRates, ballistic_f1, ballistic_g,
 };
 pub use bearing::{
     Bearing, BearingReference, Coordinate, Moving, Platform, Stationary, Tabulated, wrap_angle,

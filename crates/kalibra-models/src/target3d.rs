@@ -6,14 +6,15 @@
 //! side; a filter on the 9-state model equals three filters on the axes when its initial
 //! covariance is block-diagonal too (tested). Studies use the axes for speed.
 
-use kalibra_linalg::nalgebra::{Matrix1x3, Matrix2x3, SMatrix};
+use kalibra_linalg::nalgebra::{Matrix1x3, Matrix2x3, SMatrix, SVector};
 use kalibra_linalg::{Matrix1, Matrix2, Matrix3, U3, U9, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::{Dynamics, LinearObservation, ModelError};
 
-/// 9 x 9 matrices.
+/// 9 x 9 matrices (inside this module; public signatures spell `SMatrix<f64, 9, 9>`, since
+/// a private alias there would name a type users cannot see).
 type Matrix9 = SMatrix<f64, 9, 9>;
 /// 9-vectors.
 type Vector9 = SMatrix<f64, 9, 1>;
@@ -309,7 +310,7 @@ impl Dynamics<U9> for Target3d {
     fn state_dim(&self) -> U9 {
         U9
     }
-    fn transition(&self, k: usize, x: &Vector9) -> Vector9 {
+    fn transition(&self, k: usize, x: &SVector<f64, 9>) -> SVector<f64, 9> {
         let mut out = Vector9::zeros();
         for (axis, model) in self.axes.iter().enumerate() {
             out.fixed_rows_mut::<3>(3 * axis)
@@ -317,7 +318,7 @@ impl Dynamics<U9> for Target3d {
         }
         out
     }
-    fn jacobian(&self, k: usize, x: &Vector9) -> Matrix9 {
+    fn jacobian(&self, k: usize, x: &SVector<f64, 9>) -> SMatrix<f64, 9, 9> {
         let mut out = Matrix9::zeros();
         for (axis, model) in self.axes.iter().enumerate() {
             out.fixed_view_mut::<3, 3>(3 * axis, 3 * axis)
@@ -325,7 +326,7 @@ impl Dynamics<U9> for Target3d {
         }
         out
     }
-    fn noise_cov(&self, k: usize) -> Matrix9 {
+    fn noise_cov(&self, k: usize) -> SMatrix<f64, 9, 9> {
         let mut out = Matrix9::zeros();
         for (axis, model) in self.axes.iter().enumerate() {
             out.fixed_view_mut::<3, 3>(3 * axis, 3 * axis)
@@ -333,7 +334,11 @@ impl Dynamics<U9> for Target3d {
         }
         out
     }
-    fn sample_noise<R: Rng + ?Sized>(&self, k: usize, rng: &mut R) -> Result<Vector9, ModelError> {
+    fn sample_noise<R: Rng + ?Sized>(
+        &self,
+        k: usize,
+        rng: &mut R,
+    ) -> Result<SVector<f64, 9>, ModelError> {
         let mut out = Vector9::zeros();
         for (axis, model) in self.axes.iter().enumerate() {
             out.fixed_rows_mut::<3>(3 * axis)

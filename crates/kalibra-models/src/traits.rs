@@ -14,6 +14,47 @@ use crate::{ModelError, noise::sample_with_factor};
 ///
 /// Values are returned by value: with `Const` dimensions they live on the stack and cost
 /// nothing; with `Dyn` dimensions the allocation is small beside the O(n^3) filter algebra.
+///
+/// # Why `noise_cov(k)` takes no state, while [`Measurement::noise_cov`] takes one
+/// The two differ on purpose. Process noise here is additive and independent of the state,
+/// `Q_k` a function of the step only, because the code that asks for it has no state to give:
+/// the steady-state gain and the surrogate bound solve Riccati and Lyapunov equations in `Q`
+/// alone, the additive-noise UKF adds `Q_k` after the unscented transform, and the split
+/// `P-_k = F P+ F^T + Q_{k-1}` that J1/J2 read from a step record assumes that `Q` does not
+/// move with the estimate. A state-dependent `Q(x)` would need the augmented UKF and a choice
+/// of `x` in each of those places, so it is not offered.
+///
+/// Measurement noise, in contrast, does depend on the state in models users meet: a bearing
+/// with translational noise has `R_eff = R_theta + g(x)^T diag(var_x, var_y) g(x)`, and a
+/// converted radar measurement has a covariance that turns with the elevation. Filters pass
+/// their prior estimate as `x`; constant noise ignores it.
+///
+/// ```
+/// use kalibra_linalg::{U2, Vector2};
+/// use kalibra_models::{
+///     Bearing, BearingReference, Coordinate, Dynamics, Kinematic, Measurement, Stationary,
+/// };
+///
+/// // Process noise: one Q per step, the same whatever the state.
+/// let cv = Kinematic::constant_velocity(1, 1.0)?.dynamics(U2)?;
+/// assert_eq!(cv.noise_cov(0), cv.noise_cov(7));
+///
+/// // Measurement noise: a bearing's effective variance falls as the target moves away.
+/// let sensor = Bearing::from_coordinates(
+///     U2,
+///     [Coordinate::State(0), Coordinate::Constant(0.0)],
+///     BearingReference::XAxis,
+///     1e-4,
+///     Stationary(Vector2::new(0.0, -20.0)),
+/// )?
+/// .with_translational_noise(1.0, 1.0)?;
+/// let near = sensor.noise_cov(0, &Vector2::new(20.0, 0.0))[(0, 0)];
+/// let far = sensor.noise_cov(0, &Vector2::new(200.0, 0.0))[(0, 0)];
+/// assert!(near > far);
+/// // R_theta + 1 / r^2 with r^2 = 20^2 + 20^2.
+/// assert!((near - (1e-4 + 1.0 / 800.0)).abs() < 1e-15);
+/// # Ok::<(), kalibra_models::ModelError>(())
+/// ```
 pub trait Dynamics<N: Dim>
 where
     DefaultAllocator: Alloc<N>,
@@ -28,15 +69,17 @@ where
     /// The Jacobian `F_k = df_k/dx` at `x`.
     fn jacobian(&self, k: usize, x: &OVector<f64, N>) -> OMatrix<f64, N, N>;
 
-    /// The process-noise covariance `Q_k` (positive semi-definite).
+    /// The process-noise covariance `Q_k` (positive semi-definite), independent of the state:
+    /// see the trait docs for why it takes no `x` while [`Measurement::noise_cov`] does.
     fn noise_cov(&self, k: usize) -> OMatrix<f64, N, N>;
 
     /// Draws `w_k` for a truth simulation.
     ///
     /// The default draws `N(0, Q_k)` through a semi-definite factor computed on every call;
     /// models with a constant `Q` override it with a stored factor, and truth models with noise
-    /// a filter does not model (non-Gaussian, rank-one, state-dependent) override it with their
-    /// own law.
+    /// a filter does not model (non-Gaussian, rank-one, a law of the step) override it with
+    /// their own law. Like [`Dynamics::noise_cov`] it sees no state: noise that depends on the
+    /// state belongs in `transition`.
     ///
     /// # Errors
     /// [`ModelError::Linalg`] if `Q_k` is not positive semi-definite.
@@ -79,7 +122,8 @@ where
 
     /// The measurement-noise covariance `R_k` at the state `x` (state-dependent noise, such as
     /// converted-measurement noise that depends on the elevation, reads `x`; constant noise
-    /// ignores it). Filters pass their prior estimate.
+    /// ignores it). Filters pass their prior estimate. Unlike [`Dynamics::noise_cov`] it takes
+    /// the state: see the [`Dynamics`] docs for why the two differ.
     fn noise_cov(&self, k: usize, x: &OVector<f64, N>) -> OMatrix<f64, M, M>;
 
     /// The residual `z - zhat`. Angles override this to wrap into (-pi, pi], so a bearing

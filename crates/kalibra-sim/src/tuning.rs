@@ -7,9 +7,11 @@
 //! eq 22 "in an offline EKF with `Q = 0`"; [`p_ad`] takes the trajectory to evaluate it along,
 //! so the caller chooses (the reproduction uses the noise-free truth, which reproduces Table II).
 
+use std::ops::RangeInclusive;
+
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, PsdMatrix, SMatrix,
-    SVector, check_finite,
+    Alloc, Const, Covariance, DefaultAllocator, Dim, Gaussian, LinalgError, OMatrix, OVector,
+    PsdMatrix, SMatrix, SVector, check_finite,
 };
 use kalibra_models::{Dynamics, Measurement, ModelError};
 use rayon::prelude::*;
@@ -47,17 +49,20 @@ pub enum TuningError {
     Model(#[from] ModelError),
 }
 
-/// The grid `from, from + step, ...` up to and including `to` (within `step / 1000`), each
-/// point computed as `from + i step` so that rounding does not accumulate.
+/// The grid `from, from + step, ...` over `from..=to`, up to and including `to` (within
+/// `step / 1000`), each point computed as `from + i step` so that rounding does not accumulate.
+///
+/// The ends come as a range so that they cannot be swapped with the step.
 ///
 /// ```
-/// let g = kalibra_sim::grid(-2.0, 1.0, 0.5).unwrap();
+/// let g = kalibra_sim::grid(-2.0..=1.0, 0.5).unwrap();
 /// assert_eq!(g, vec![-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0]);
 /// ```
 ///
 /// # Errors
 /// [`TuningError::InvalidParameter`] unless `step > 0`, `to >= from` and all are finite.
-pub fn grid(from: f64, to: f64, step: f64) -> Result<Vec<f64>, TuningError> {
+pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningError> {
+    let (from, to) = range.into_inner();
     if !(step.is_finite() && step > 0.0) {
         return Err(TuningError::InvalidParameter {
             name: "grid step",
@@ -108,11 +113,12 @@ where
 /// measurements `z1`, `z2` (`D` axes) taken `t` apart with noise covariances `r1`, `r2`, the
 /// state `[position = z2, velocity = (z2 - z1) / t]` and its exact covariance
 /// `J blockdiag(r1, r2) J^T`. `position[i]` and `velocity[i]` are the state indices of axis
-/// `i`; other states (if `N > 2 D`) get zero mean and zero covariance.
+/// `i`; other states (if `N > 2 D`) get zero mean and zero covariance. The result is a
+/// [`Gaussian`]: `mean` is the state, `cov` its covariance.
 ///
 /// ```
-/// use kalibra_linalg::{Matrix1, Vector1};
-/// let (x, p) = kalibra_sim::two_point_init::<2, 1>(
+/// use kalibra_linalg::{Gaussian, Matrix1, Vector1};
+/// let Gaussian { mean: x, cov: p } = kalibra_sim::two_point_init::<2, 1>(
 ///     &Vector1::new(10.0), &Vector1::new(14.0), &Matrix1::new(1.0), &Matrix1::new(1.0), 2.0, [0], [1])?;
 /// assert_eq!(x, kalibra_linalg::Vector2::new(14.0, 2.0));
 /// // var(v) = (r1 + r2) / t^2, cov(x, v) = r2 / t.
@@ -132,7 +138,7 @@ pub fn two_point_init<const N: usize, const D: usize>(
     t: f64,
     position: [usize; D],
     velocity: [usize; D],
-) -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), TuningError> {
+) -> Result<Gaussian<Const<N>>, TuningError> {
     if !(t.is_finite() && t > 0.0) {
         return Err(TuningError::InvalidParameter {
             name: "differencing interval t",
@@ -170,7 +176,7 @@ pub fn two_point_init<const N: usize, const D: usize>(
     let mut out = SMatrix::<f64, N, N>::zeros();
     out.copy_from(&p);
     kalibra_linalg::symmetrize(&mut out);
-    Ok((x, out))
+    Ok(Gaussian { mean: x, cov: out })
 }
 
 /// `P_ad` of paper 003, eq 22: `[(1/n) sum_{k=1..n} F_{k-1}^T H_k^T R_k^-1 H_k F_{k-1}]^-1`,
@@ -261,12 +267,12 @@ mod tests {
 
     #[test]
     fn grid_hits_both_ends_without_drift() {
-        let g = grid(-13.0, 6.0, 0.01).unwrap();
+        let g = grid(-13.0..=6.0, 0.01).unwrap();
         assert_eq!(g.len(), 1901);
         assert_eq!(g[0], -13.0);
         assert!((g[1900] - 6.0).abs() < 1e-12);
-        assert!(grid(0.0, 1.0, 0.0).is_err());
-        assert!(grid(1.0, 0.0, 0.1).is_err());
+        assert!(grid(0.0..=1.0, 0.0).is_err());
+        assert!(grid(1.0..=0.0, 0.1).is_err());
     }
 
     #[test]
@@ -289,7 +295,7 @@ mod tests {
     fn two_point_covariance_matches_the_textbook_blocks() {
         // Interleaved [x, vx, y, vy], full 2x2 R: the x-y cross terms follow R's off-diagonal.
         let r = Matrix2::new(4.0, 1.0, 1.0, 9.0);
-        let (x, p) = two_point_init::<4, 2>(
+        let Gaussian { mean: x, cov: p } = two_point_init::<4, 2>(
             &Vector2::new(0.0, 10.0),
             &Vector2::new(2.0, 16.0),
             &r,

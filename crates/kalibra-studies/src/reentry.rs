@@ -14,7 +14,7 @@
 use kalibra_filters::StepRecord;
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, Matrix4, Vector4};
 use kalibra_metrics::{JStep, MetricsError, j_step};
-use kalibra_models::{Ballistic, Dynamics, ModelError};
+use kalibra_models::{Ballistic, BallisticParams, Dynamics, ModelError};
 use serde::Serialize;
 
 /// Sampling period (s).
@@ -37,7 +37,12 @@ pub fn x0() -> Vector4<f64> {
 /// # Errors
 /// [`ModelError`] if `q` is not positive semi-definite.
 pub fn dynamics(q: Matrix4<f64>) -> Result<Ballistic, ModelError> {
-    Ballistic::new(T, BETA, G, q)
+    let params = BallisticParams {
+        period: T,
+        beta: BETA,
+        gravity: G,
+    };
+    Ballistic::new(params, q)
 }
 
 /// The noise-free truth `x_0, x_1, ..., x_N`, `x_N` the last state above ground.

@@ -2,7 +2,7 @@
 //! [`crate::plot`]. Each function returns `(file name, SVG document)` pairs; the caller writes
 //! them beside the study's `report.md`, whose links use these names.
 
-use crate::paper000::{CROSSOVER_NQ_RANGE, READINGS, Report, TABLE_I};
+use super::{CROSSOVER_NQ_RANGE, READINGS, Report, TABLE_I};
 use crate::reentry::{CrossoverRow, SweepRow};
 
 use crate::figure::{Annotation, Figure, Series};

@@ -449,7 +449,7 @@ impl Report {
 /// [`StudyError`] if a filter run fails or `config.fine_step` is not positive.
 pub fn run(config: &Config) -> Result<Report, StudyError> {
     let setup = Setup::new()?;
-    let fine = kalibra_sim::grid(-13.0, 6.0, config.fine_step)?;
+    let fine = kalibra_sim::grid(-13.0..=6.0, config.fine_step)?;
     let mut readings = Vec::new();
     for reading in &READINGS {
         let sweep_of = |kind, grid: &[f64]| -> Result<Vec<SweepRow>, StudyError> {

@@ -2,7 +2,7 @@
 //! and velocity RMSE (Figs. 2, 5, 9), NCI and ANEES with its 95% band (Figs. 3, 6, 10), and the
 //! mean kappa of the adaptive filters (Fig. 7 for problem II; ours for I and III).
 
-use crate::paper001::{FILTERS, ProblemResult, Report};
+use super::{FILTERS, ProblemResult, Report};
 
 use crate::figure::{Annotation, Figure, Series};
 

@@ -2,7 +2,7 @@
 //! (Fig. 1), errors (Fig. 2), sliding-window RMSE, bias and std of the angle (Fig. 3), and the
 //! manoeuvre-amplitude sweep (ours; not in the paper).
 
-use crate::paper002::{self as minh2025, PHASE, Q_SETS, Report, STATE_NAMES, WINDOW};
+use super::{PHASE, Q_SETS, Report, STATE_NAMES, WINDOW};
 
 use crate::figure::{Annotation, Figure, Series};
 
@@ -25,7 +25,7 @@ fn per_set(
     report: &Report,
     mut fig: Figure,
     state: usize,
-    pick: impl Fn(&minh2025::QSetResult) -> &[[f64; 3]],
+    pick: impl Fn(&super::QSetResult) -> &[[f64; 3]],
 ) -> Figure {
     for set in &Q_SETS {
         let values = pick(&report.q_sets[set.name]);
@@ -73,7 +73,7 @@ fn errors(report: &Report, state: usize) -> Figure {
     phase_marks(per_set(report, fig, state, |r| &r.errors))
 }
 
-fn windows(report: &Report, what: &str, pick: impl Fn(&minh2025::Windows) -> &[f64]) -> Figure {
+fn windows(report: &Report, what: &str, pick: impl Fn(&super::Windows) -> &[f64]) -> Figure {
     let mut fig = Figure::new(
         format!("angle: sliding-window {what}, W = {WINDOW} (at the window's first sample)"),
         "t (s)",

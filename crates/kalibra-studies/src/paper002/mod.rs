@@ -834,13 +834,13 @@ mod tests {
     fn noise_floor_matches_a_noise_only_simulation() {
         // A truth with no manoeuvre and no input noise: the filter error is measurement noise
         // only, so its stationary RMSE is the floor (up to Monte Carlo error).
-        let target = ManoeuvringTarget::new(
-            0.01,
-            200.0,
-            kalibra_models::ManoeuvreProfile::none(),
-            0.0,
-            Vector3::zeros(),
-        )
+        let target = ManoeuvringTarget::new(kalibra_models::ManoeuvringTargetParams {
+            dt: 0.01,
+            duration: 200.0,
+            profile: kalibra_models::ManoeuvreProfile::none(),
+            sigma_input: 0.0,
+            x0: Vector3::zeros(),
+        })
         .unwrap();
         let model = AngularTarget::diagonal(0.01, Q_SETS[1].diag).unwrap();
         let mut rng = MonteCarlo::new(1, 7).rng(0);

@@ -2,7 +2,7 @@
 //! (Fig. 1), RMSE per state against the CRLB (Fig. 2), observability singular values
 //! (Fig. 3), altitude and density (Fig. 4) and ITSE (Fig. 5).
 
-use crate::paper003::{self as saha2014, Report, STATE_NAMES};
+use super::{Report, STATE_NAMES};
 use crate::reentry::SweepRow;
 
 use crate::figure::{Annotation, Figure, Series};
@@ -50,18 +50,18 @@ fn j1j2(report: &Report) -> Figure {
     .series(Series::markers(
         format!(
             "paper: crossover nq = {}, J = {}",
-            saha2014::CROSSOVER_NQ,
-            saha2014::CROSSOVER_J
+            super::CROSSOVER_NQ,
+            super::CROSSOVER_J
         ),
-        vec![(saha2014::CROSSOVER_NQ, saha2014::CROSSOVER_J)],
+        vec![(super::CROSSOVER_NQ, super::CROSSOVER_J)],
     ))
     .annotate(Annotation::VLine {
         x: reading.j1_edge.0.ours,
-        label: format!("S3: J1 edge (paper {})", saha2014::PLATEAU_EDGES.0),
+        label: format!("S3: J1 edge (paper {})", super::PLATEAU_EDGES.0),
     })
     .annotate(Annotation::VLine {
         x: reading.j2_edge.0.ours,
-        label: format!("R3: J2 edge (paper {})", saha2014::PLATEAU_EDGES.1),
+        label: format!("R3: J2 edge (paper {})", super::PLATEAU_EDGES.1),
     });
     for m in &report.monte_carlo {
         // C sits on the crossover; the sensitive settings on J1, the robust ones on J2.

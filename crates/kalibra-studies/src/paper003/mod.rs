@@ -304,7 +304,7 @@ fn sweep_reading(
     config: &Config,
 ) -> Result<ReadingReport, StudyError> {
     let integer: Vec<f64> = (-10..=10).map(f64::from).collect();
-    let fine = kalibra_sim::grid(-10.0, 10.0, config.fine_step)?;
+    let fine = kalibra_sim::grid(-10.0..=10.0, config.fine_step)?;
     let run = |grid: &[f64]| -> Result<Vec<SweepRow>, StudyError> {
         Ok(kalibra_sim::sweep(grid, config.threads, |p| {
             point(setup, reading.divisor, p)

@@ -1,7 +1,7 @@
 //! The figures of paper 004 (Spall and Wei 2023): marginal densities of `e_1000`, empirical
 //! against the surrogate (the paper's Fig. 4), per reading and component.
 
-use crate::paper004::{COMPONENTS, Report};
+use super::{COMPONENTS, Report};
 
 use crate::figure::{Figure, Series};
 

@@ -435,8 +435,8 @@ where
         block_diagonal::<U3, U9>([&jacobians[0], &jacobians[1], &jacobians[2]]);
     let x0 = OMatrix::<f64, U9, kalibra_linalg::U1>::zeros();
     let surrogate = Surrogate::new(
-        k9,
-        j9,
+        &k9,
+        &j9,
         &full.jacobian(0, &x0),
         &target.noise_cov(0),
         &full.noise_cov(0, &x0),
