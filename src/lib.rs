@@ -34,8 +34,83 @@ pub use kalibra_filters as filters;
 pub use kalibra_linalg as linalg;
 pub use kalibra_metrics as metrics;
 pub use kalibra_models as models;
-
 pub use kalibra_sim as sim;
+
+pub mod prelude;
+
+/// Any error of kalibra's crates: the type a program that uses several of them can return.
+///
+/// Every crate's error converts into it with `?`, so a function that builds a model, runs a
+/// filter and computes a metric returns `Result<_, kalibra::Error>`. The variants keep the
+/// crate's typed error, so a caller can still match on what went wrong.
+///
+/// ```
+/// fn consistency() -> Result<f64, kalibra::Error> {
+///     let band = kalibra::metrics::ChiSquareBand::for_normalized_mean(4.0, 100, 0.95)?;
+///     let cv = kalibra::models::Kinematic::constant_velocity(2, 1.0)?;
+///     let _f = cv.dynamics(kalibra::linalg::U4)?;
+///     Ok(band.upper)
+/// }
+/// assert!(consistency().unwrap() > 1.0);
+/// ```
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A matrix computation failed (not positive definite, not finite, wrong size).
+    #[error(transparent)]
+    Linalg(#[from] kalibra_linalg::LinalgError),
+    /// A model could not be built or simulated.
+    #[error(transparent)]
+    Model(#[from] kalibra_models::ModelError),
+    /// A filter step or construction failed.
+    #[error(transparent)]
+    Filter(#[from] kalibra_filters::FilterError),
+    /// A metric or hypothesis test could not be computed.
+    #[error(transparent)]
+    Metrics(#[from] kalibra_metrics::MetricsError),
+    /// A bound (CRLB, surrogate) could not be computed.
+    #[error(transparent)]
+    Bounds(#[from] kalibra_bounds::BoundsError),
+    /// A tuning helper (grid, initial tuning) failed.
+    #[error(transparent)]
+    Tuning(#[from] kalibra_sim::TuningError),
+    /// A Monte Carlo run failed (the lowest-numbered failing run).
+    #[error("Monte Carlo run {run} failed: {source}")]
+    Run {
+        /// The run index.
+        run: usize,
+        /// Its error.
+        #[source]
+        source: Box<Error>,
+    },
+    /// The Monte Carlo thread pool could not be built.
+    #[error("Monte Carlo thread pool of {threads} threads: {message}")]
+    ThreadPool {
+        /// Threads asked for.
+        threads: usize,
+        /// rayon's message.
+        message: String,
+    },
+    /// Another failure of the Monte Carlo harness, rendered.
+    #[error("Monte Carlo harness: {0}")]
+    Harness(String),
+}
+
+impl From<kalibra_sim::SimError<Error>> for Error {
+    fn from(e: kalibra_sim::SimError<Error>) -> Self {
+        match e {
+            kalibra_sim::SimError::Run { run, source } => Error::Run {
+                run,
+                source: Box::new(source),
+            },
+            kalibra_sim::SimError::ThreadPool { threads, message } => {
+                Error::ThreadPool { threads, message }
+            }
+            // `SimError` is non-exhaustive: a harness failure added later keeps its message.
+            other => Error::Harness(other.to_string()),
+        }
+    }
+}
 
 /// The README's example, compiled and run as a doctest so that it stays true.
 #[doc = include_str!("../README.md")]
