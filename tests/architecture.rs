@@ -118,3 +118,140 @@ fn architecture_doc_names_every_crate() {
         );
     }
 }
+
+/// Parts of names that name a paper, a paper's problem or a paper's reading of a typo, found
+/// anywhere in a lower-cased name.
+const PAPER_WORDS: [&str; 7] = [
+    "paper",
+    "saha",
+    "minh",
+    "spall",
+    "problem_i",
+    "table_i",
+    "figures20",
+];
+
+/// Short words that name a paper's scenario only as a whole word of a name (`bot` in
+/// `BotScenario` or `bot.rs`, not in `both`).
+const PAPER_TOKENS: [&str; 2] = ["bot", "reading"];
+
+/// The paper word or token `name` contains, if any. Tokens are the lower-cased parts of a
+/// snake_case or CamelCase name.
+fn paper_word(name: &str) -> Option<&'static str> {
+    let lower = name.to_lowercase();
+    if let Some(w) = PAPER_WORDS.iter().find(|w| lower.contains(*w)) {
+        return Some(w);
+    }
+    let mut tokens = Vec::new();
+    let mut current = String::new();
+    for c in name.chars() {
+        if c == '_' || c == '.' || (c.is_uppercase() && !current.is_empty()) {
+            tokens.push(std::mem::take(&mut current));
+        }
+        if c != '_' && c != '.' {
+            current.extend(c.to_lowercase());
+        }
+    }
+    tokens.push(current);
+    PAPER_TOKENS
+        .iter()
+        .find(|t| tokens.iter().any(|k| k == *t))
+        .copied()
+}
+
+/// The identifier declared by a line such as `pub fn name(` or `struct Name<`, if any.
+fn declared_item(line: &str) -> Option<&str> {
+    let keywords = [
+        "fn ",
+        "struct ",
+        "enum ",
+        "const ",
+        "static ",
+        "type ",
+        "mod ",
+        "trait ",
+        "macro_rules! ",
+    ];
+    let code = line.trim_start();
+    if code.starts_with("//") {
+        return None;
+    }
+    keywords.iter().find_map(|k| {
+        let at = code.find(k)?;
+        // The keyword must start the line or follow a visibility/qualifier and a space.
+        if at > 0 && !code[..at].ends_with(' ') {
+            return None;
+        }
+        let rest = &code[at + k.len()..];
+        let end = rest
+            .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+            .unwrap_or(rest.len());
+        (end > 0).then(|| &rest[..end])
+    })
+}
+
+/// Issue 14, point 1: library crates carry no paper. Outside the studies crate, no file and no
+/// declared item (function, type, constant, module, test) is named after a paper, one of its
+/// problems or one of its readings; the library's models have neutral names and the papers'
+/// numbers live with their studies.
+#[test]
+fn library_crates_carry_no_paper() {
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "examples"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let mut found = Vec::new();
+    for file in files
+        .iter()
+        .filter(|f| !f.starts_with(root().join("crates/kalibra-studies")))
+    {
+        let name = file.file_stem().unwrap().to_string_lossy().into_owned();
+        if let Some(word) = paper_word(&name) {
+            found.push(format!("file {} ({word})", file.display()));
+        }
+        let text = fs::read_to_string(file).unwrap();
+        for (number, line) in text.lines().enumerate() {
+            let Some(item) = declared_item(line) else {
+                continue;
+            };
+            if let Some(word) = paper_word(item) {
+                found.push(format!(
+                    "{}:{}: {item} ({word})",
+                    file.display(),
+                    number + 1
+                ));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "named after a paper outside kalibra-studies:\n{}",
+        found.join("\n")
+    );
+}
+
+/// The scanner finds the declarations it must find, and nothing in comments.
+#[test]
+fn declared_item_reads_declarations() {
+    assert_eq!(declared_item("pub fn paper001(n: usize)"), Some("paper001"));
+    assert_eq!(
+        declared_item("    pub(crate) struct BotScenario<N>"),
+        Some("BotScenario")
+    );
+    assert_eq!(
+        declared_item("const TABLE_I: [f64; 3] = x;"),
+        Some("TABLE_I")
+    );
+    assert_eq!(
+        declared_item("    fn problem_ii_constants() {"),
+        Some("problem_ii_constants")
+    );
+    assert_eq!(declared_item("/// the paper's fn paper001"), None);
+    assert_eq!(declared_item("let reading = 3;"), None);
+    assert_eq!(paper_word("BotScenario"), Some("bot"));
+    assert_eq!(paper_word("bot"), Some("bot"));
+    assert_eq!(paper_word("grid_hits_both_ends"), None);
+    assert_eq!(paper_word("Target3dReading"), Some("reading"));
+    assert_eq!(paper_word("read_positions"), None);
+    assert_eq!(paper_word("KappaGrid_paper001"), Some("paper"));
+}

@@ -40,8 +40,9 @@ fn batch_means_small_case_by_hand() {
 }
 
 #[test]
-fn batch_means_paper_004_layout() {
-    // 1e5 steps, burn-in 1e4, batch 250: 90_000 / 250 = 360 batch means.
+fn batch_means_of_a_long_series_after_a_burn_in() {
+    // 1e5 steps, burn-in 1e4, batch 250 (the layout of Spall and Wei's Table 1):
+    // 90_000 / 250 = 360 batch means.
     let series: Vec<f64> = (0..100_000).map(|k| f64::from(k % 7)).collect();
     let means = batch_means(&series, 250, 10_000).unwrap();
     assert_eq!(means.len(), 360);
