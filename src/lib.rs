@@ -1,17 +1,24 @@
-//! kalibra: build, tune and judge Kalman-type filters, and reproduce the published studies that
-//! specify them.
+//! kalibra: build, tune and judge Kalman-type filters.
 //!
-//! This facade re-exports the workspace's crates under short names; depend on the individual
-//! crates (`kalibra-filters`, `kalibra-metrics`, ...) to take only what you need.
+//! This is the front door: [`prelude`] brings what a first program needs into scope, [`Error`]
+//! is the one error type every crate's error converts into, and the modules below re-export
+//! the workspace's crates under short names. Depend on the individual crates
+//! (`kalibra-filters`, `kalibra-metrics`, ...) to take only what you need. The repository's
+//! `examples/` folder has complete programs: a user's own nonlinear model through the EKF and
+//! UKF with a Monte Carlo consistency check, a Q sweep with J1/J2, a surrogate bound from one
+//! trajectory, and a KF over a CSV file.
 //!
 //! | module | crate | job |
 //! |---|---|---|
-//! | [`linalg`] | `kalibra-linalg` | dimension-generic matrices, checked covariances, filter kernels |
-//! | [`models`] | `kalibra-models` | dynamics and measurement traits, CV/CA, ballistic and bearing models, truth simulation |
-//! | [`filters`] | `kalibra-filters` | the `Filter` trait, KF and EKF, step records |
-//! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, RMSE accumulators, J1/J2/nq, ITSE, hypothesis tests |
-//! | [`bounds`] | `kalibra-bounds` | posterior Cramér-Rao bound, observability along a trajectory |
+//! | [`linalg`] | `kalibra-linalg` | dimension-generic matrices, checked covariances, `Gaussian`, filter kernels, Lyapunov solver |
+//! | [`models`] | `kalibra-models` | dynamics and measurement traits, CV/CA, linear-Gaussian, bearings, ballistic re-entry, angular and 3-D manoeuvring targets, truth simulation |
+//! | [`filters`] | `kalibra-filters` | the `Filter` trait, KF, EKF, UKF (adaptive kappa), shifted Rayleigh filter, constant-gain KF, step records |
+//! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, NCI, RMSE accumulators, sliding windows, J1/J2/nq, ITSE, hypothesis tests |
+//! | [`bounds`] | `kalibra-bounds` | posterior Cramér-Rao bound, observability, Spall-Wei surrogate bounds |
 //! | [`sim`] | `kalibra-sim` | seeded parallel Monte Carlo, identical for any thread count; Q sweeps, initial tuning |
+//!
+//! The reproduced papers are not part of the library: they live beside it in the
+//! `kalibra-studies` crate and run with `cargo xtask reproduce`.
 //!
 //! # Example
 //! ```
