@@ -18,8 +18,35 @@ pub enum Start {
 /// A recursive state estimator stepped by `predict` (from step `k` to `k + 1`) and `update`
 /// (with the measurement at the current step).
 ///
-/// Implementors write the four required methods; running over a whole sequence is provided.
+/// Implementors write the required methods; running over a whole sequence is provided.
 /// The filter owns (or borrows, since `&model` is a model) its dynamics and measurement models.
+///
+/// # Trait objects
+/// The trait is dyn-compatible, so a bank of different filters fits in one
+/// `Vec<Box<dyn Filter<N, M>>>`. The provided methods that run a sequence are generic (over the
+/// measurement iterator and the visitor), so they require `Self: Sized`; `Box<F>` and `&mut F`
+/// implement `Filter` for any `F: Filter + ?Sized`, so they run on a boxed filter as well.
+///
+/// ```
+/// use kalibra_filters::{Ekf, Filter, Kf, SigmaSet, Start, Ukf};
+/// use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector2, Vector4};
+/// use kalibra_models::Kinematic;
+///
+/// let cv = Kinematic::constant_velocity(2, 1.0)?;
+/// let (f, h) = (cv.dynamics(U4)?, cv.position_measurement(U4, U2, Matrix2::identity())?);
+/// let (x0, p0) = (Vector4::zeros(), Matrix4::identity());
+/// let mut bank: Vec<Box<dyn Filter<U4, U2> + '_>> = vec![
+///     Box::new(Kf::new(&f, &h, x0, p0)?),
+///     Box::new(Ekf::new(&f, &h, x0, p0)?),
+///     Box::new(Ukf::new(&f, &h, x0, p0, SigmaSet::recommended(4))?),
+/// ];
+/// let z = [Vector2::new(1.0, 2.0), Vector2::new(2.0, 4.0)];
+/// for filter in &mut bank {
+///     filter.run(z.iter().map(Some), Start::UpdateFirst, |_| {})?;
+/// }
+/// assert!((bank[0].mean() - bank[2].mean()).amax() < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait Filter<N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -69,6 +96,7 @@ where
         mut visit: impl FnMut(&StepRecord<N, M>),
     ) -> Result<(), FilterError>
     where
+        Self: Sized,
         I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
         OVector<f64, M>: 'z,
     {
@@ -93,6 +121,7 @@ where
         start: Start,
     ) -> Result<Vec<StepRecord<N, M>>, FilterError>
     where
+        Self: Sized,
         I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
         OVector<f64, M>: 'z,
     {
@@ -101,3 +130,36 @@ where
         Ok(records)
     }
 }
+
+/// Forwards every required method, so that a filter behind a pointer (`Box<dyn Filter>`,
+/// `&mut dyn Filter`) runs sequences through the provided methods.
+macro_rules! forward_filter {
+    ($($ptr:tt)*) => {
+        impl<N: Dim, M: Dim, F: Filter<N, M> + ?Sized> Filter<N, M> for $($ptr)*
+        where
+            DefaultAllocator: Alloc<N, M>,
+        {
+            fn step_index(&self) -> usize {
+                (**self).step_index()
+            }
+            fn mean(&self) -> &OVector<f64, N> {
+                (**self).mean()
+            }
+            fn covariance(&self) -> &OMatrix<f64, N, N> {
+                (**self).covariance()
+            }
+            fn predict(&mut self) -> Result<(), FilterError> {
+                (**self).predict()
+            }
+            fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+                (**self).update(z)
+            }
+            fn last_record(&self) -> Option<&StepRecord<N, M>> {
+                (**self).last_record()
+            }
+        }
+    };
+}
+
+forward_filter!(Box<F>);
+forward_filter!(&mut F);

@@ -1,0 +1,95 @@
+//! The public API's conveniences for outside users: filters as trait objects, whole-sequence
+//! runs that report every step, the step record's derived quantities, and the opt-in to an
+//! unchecked initial covariance.
+
+use approx::assert_relative_eq;
+use kalibra_filters::{ConstantGainKf, Ekf, Filter, Kf, SigmaSet, Srf, Start, Ukf};
+use kalibra_linalg::{Matrix4, U1, U2, U4, Vector1, Vector2, Vector4};
+use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary};
+
+mod common;
+use common::{p0, truth, w1};
+
+/// A bank of different filters in one `Vec` of trait objects, stepped together.
+#[test]
+fn a_bank_of_different_filters_is_one_vec_of_trait_objects() {
+    let (f, h) = w1();
+    let t = truth(3, 40);
+    let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
+    let gain = ConstantGainKf::steady_state_gain(&f, &h, 0, &x0).unwrap();
+    let mut bank: Vec<Box<dyn Filter<U4, U2> + '_>> = vec![
+        Box::new(Kf::new(&f, &h, x0, p0()).unwrap()),
+        Box::new(Ekf::new(&f, &h, x0, p0()).unwrap()),
+        Box::new(Ukf::new(&f, &h, x0, p0(), SigmaSet::recommended(4)).unwrap()),
+        Box::new(ConstantGainKf::new(&f, &h, x0, p0(), gain).unwrap()),
+    ];
+    for (k, z) in t.measurements.iter().enumerate() {
+        for filter in bank.iter_mut() {
+            if k > 0 {
+                filter.predict().unwrap();
+            }
+            let rec = filter.update(z).unwrap();
+            assert_eq!(rec.step(), k);
+        }
+    }
+    // The KF, EKF and UKF agree on a linear-Gaussian model; the constant gain differs.
+    for other in &bank[1..3] {
+        assert_relative_eq!(bank[0].mean(), other.mean(), max_relative = 1e-9);
+        assert_relative_eq!(
+            bank[0].covariance(),
+            other.covariance(),
+            max_relative = 1e-9
+        );
+    }
+    assert!(
+        bank.iter()
+            .all(|f| f.step_index() == 39 && f.last_record().is_some())
+    );
+
+    // The provided sequence methods run on a boxed filter as well.
+    let mut boxed: Box<dyn Filter<U4, U2> + '_> = Box::new(Kf::new(&f, &h, x0, p0()).unwrap());
+    let records = boxed
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
+    assert_eq!(records.len(), 40);
+    assert_eq!(boxed.mean(), bank[0].mean());
+}
+
+/// Bearings-only filters, the shifted Rayleigh filter among them, share one bank too.
+#[test]
+fn a_bearings_bank_holds_the_srf() {
+    let cv = Kinematic::constant_velocity(2, 1.0)
+        .unwrap()
+        .dynamics(U4)
+        .unwrap();
+    let sensor = Bearing::new(
+        U4,
+        [0, 1],
+        BearingReference::XAxis,
+        1e-4,
+        Stationary(Vector2::zeros()),
+    )
+    .unwrap();
+    let x0 = Vector4::new(100.0, 10.0, -1.0, 0.5);
+    let p = Matrix4::identity() * 10.0;
+    let mut bank: Vec<Box<dyn Filter<U4, U1> + '_>> = vec![
+        Box::new(Ekf::new(&cv, &sensor, x0, p).unwrap()),
+        Box::new(Ukf::new(&cv, &sensor, x0, p, SigmaSet::recommended(4)).unwrap()),
+        Box::new(Srf::new(&cv, &sensor, x0, p).unwrap()),
+    ];
+    let zs: Vec<Vector1<f64>> = (1..=10)
+        .map(|k| {
+            let (x, y) = (100.0 - k as f64, 10.0 + 0.5 * k as f64);
+            Vector1::new(y.atan2(x))
+        })
+        .collect();
+    for filter in bank.iter_mut() {
+        let mut updates = 0;
+        filter
+            .run(zs.iter().map(Some), Start::PredictFirst, |_| updates += 1)
+            .unwrap();
+        assert_eq!((updates, filter.step_index()), (10, 10));
+        let bearing = filter.mean()[1].atan2(filter.mean()[0]);
+        assert!((bearing - zs[9][0]).abs() < 0.01, "{bearing}");
+    }
+}
