@@ -93,3 +93,35 @@ fn a_bearings_bank_holds_the_srf() {
         assert!((bearing - zs[9][0]).abs() < 0.01, "{bearing}");
     }
 }
+
+/// The record's log-likelihood, from the stored factor of `S`, equals the Gaussian density
+/// computed directly with a determinant and an inverse; summed, it equals the joint density
+/// of two independent updates' innovations.
+#[test]
+fn log_likelihood_matches_a_direct_computation() {
+    let (f, h) = w1();
+    let t = truth(5, 30);
+    let mut kf = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
+    let records = kf
+        .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+        .unwrap();
+    for rec in &records {
+        let s = rec.s().matrix();
+        let nu = rec.innovation();
+        let quad = (nu.transpose() * s.try_inverse().unwrap() * nu)[0];
+        let direct = -0.5 * (2.0 * (2.0 * std::f64::consts::PI).ln() + s.determinant().ln() + quad);
+        assert_relative_eq!(rec.log_likelihood(), direct, max_relative = 1e-12);
+        // Consistent with the NIS it is built from.
+        assert_relative_eq!(
+            rec.log_likelihood(),
+            -0.5 * (2.0 * (2.0 * std::f64::consts::PI).ln() + s.determinant().ln() + rec.nis()),
+            max_relative = 1e-13
+        );
+    }
+    // A larger innovation is less likely under the same S.
+    let mut a = Kf::new(&f, &h, Vector4::zeros(), p0()).unwrap();
+    let mut b = a.clone();
+    let near = a.update(&Vector2::new(1.0, 0.0)).unwrap().log_likelihood();
+    let far = b.update(&Vector2::new(30.0, 0.0)).unwrap().log_likelihood();
+    assert!(near > far && far.is_finite());
+}

@@ -148,9 +148,9 @@ fn prior_splits_into_propagated_and_process_noise() {
     let mut kf = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
     let first = kf.update(&t.measurements[0]).unwrap().clone();
     // An update with no prediction before it: the prior is all "propagated", B = 0.
-    assert_eq!(first.b(), Matrix2::zeros());
+    assert_eq!(first.compute_b(), Matrix2::zeros());
     assert_relative_eq!(
-        first.a() + first.r(),
+        first.compute_a() + first.r(),
         first.s().matrix(),
         max_relative = 1e-12
     );
@@ -165,7 +165,7 @@ fn prior_splits_into_propagated_and_process_noise() {
         );
         assert_relative_eq!(rec.process_noise(), f.q().matrix(), max_relative = 1e-12);
         assert_relative_eq!(
-            rec.a() + rec.b() + rec.r(),
+            rec.compute_a() + rec.compute_b() + rec.r(),
             rec.s().matrix(),
             max_relative = 1e-12
         );
@@ -187,7 +187,7 @@ fn prior_splits_into_propagated_and_process_noise() {
         max_relative = 1e-12
     );
     assert_relative_eq!(
-        rec.a() + rec.b() + rec.r(),
+        rec.compute_a() + rec.compute_b() + rec.r(),
         rec.s().matrix(),
         max_relative = 1e-12
     );
