@@ -3,7 +3,9 @@
 //! # What this crate is for
 //! * [`Filter`]: a recursive estimator stepped by `predict` and `update`, with provided methods
 //!   that run it over a measurement sequence from anywhere (a simulation, a log file, a sensor),
-//!   with gaps where a step has no measurement.
+//!   with gaps where a step has no measurement, reporting the updates ([`Filter::run`]) or every
+//!   step's estimate ([`Filter::run_all`], a [`Trajectory`]). It is dyn-compatible: a bank of
+//!   different filters is one `Vec<Box<dyn Filter<N, M>>>`.
 //! * [`Kf`] (linear models), [`Ekf`] (nonlinear models) and [`ConstantGainKf`] (a fixed gain,
 //!   the user's or the steady-state one), sharing one numerical core.
 //! * [`StepRecord`]: what each update computed (prior and posterior, innovation, `S`, `K`, `H`,
@@ -63,7 +65,7 @@ mod ukf;
 pub use crate::core::{FilterOptions, InitialCheck, UpdateForm};
 pub use constant_gain::ConstantGainKf;
 pub use error::FilterError;
-pub use filter::{Filter, Start};
+pub use filter::{Filter, Start, Trajectory, TrajectoryEntry};
 pub use kalman::{Ekf, Kf};
 pub use rayleigh::{ShiftedRayleigh, shifted_rayleigh_moments};
 pub use record::{Estimate, StepRecord};

@@ -125,3 +125,71 @@ fn log_likelihood_matches_a_direct_computation() {
     let far = b.update(&Vector2::new(30.0, 0.0)).unwrap().log_likelihood();
     assert!(near > far && far.is_finite());
 }
+
+/// `run_all` reports the initial estimate and every step, with or without a measurement, and
+/// agrees with stepping by hand and with `run_collect`'s records.
+#[test]
+fn run_all_reports_every_step_including_gaps() {
+    let (f, h) = w1();
+    let t = truth(7, 12);
+    let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
+    // Gaps at steps 2, 3 and the last one.
+    let zs: Vec<Option<&Vector2<f64>>> = t
+        .measurements
+        .iter()
+        .enumerate()
+        .map(|(i, z)| (![2, 3, 11].contains(&i)).then_some(z))
+        .collect();
+    for start in [Start::PredictFirst, Start::UpdateFirst] {
+        let trajectory = Kf::new(&f, &h, x0, p0())
+            .unwrap()
+            .run_all(zs.iter().copied(), start)
+            .unwrap();
+        let entries = trajectory.entries();
+        assert_eq!(entries.len(), 1 + zs.len());
+        let initial = trajectory.initial();
+        assert_eq!((initial.step(), initial.updated()), (0, false));
+        assert_eq!((initial.mean(), initial.covariance()), (&x0, &p0()));
+
+        // By hand.
+        let mut kf = Kf::new(&f, &h, x0, p0()).unwrap();
+        for (i, (z, entry)) in zs.iter().zip(&entries[1..]).enumerate() {
+            if i > 0 || start == Start::PredictFirst {
+                kf.predict().unwrap();
+            }
+            let expected_step = i + usize::from(start == Start::PredictFirst);
+            assert_eq!(entry.step(), expected_step);
+            assert_eq!(entry.updated(), z.is_some());
+            match z {
+                Some(z) => {
+                    let rec = kf.update(z).unwrap();
+                    assert_eq!(entry.record().unwrap().posterior(), rec.posterior());
+                    assert_eq!(entry.estimate(), rec.posterior());
+                }
+                None => assert!(entry.record().is_none()),
+            }
+            assert_eq!(entry.mean(), kf.mean());
+            assert_eq!(entry.covariance(), kf.covariance());
+        }
+        assert_eq!(trajectory.last().mean(), kf.mean());
+        assert!(!trajectory.last().updated());
+        // A gap's covariance grows from the step before (prediction only).
+        assert!(entries[4].covariance()[(0, 0)] > entries[3].covariance()[(0, 0)]);
+
+        let collected = Kf::new(&f, &h, x0, p0())
+            .unwrap()
+            .run_collect(zs.iter().copied(), start)
+            .unwrap();
+        assert_eq!(trajectory.records().count(), collected.len());
+        for (a, b) in trajectory.records().zip(&collected) {
+            assert_eq!((a.step(), a.posterior()), (b.step(), b.posterior()));
+        }
+    }
+    // An empty sequence gives the initial estimate alone.
+    let empty = Kf::new(&f, &h, x0, p0())
+        .unwrap()
+        .run_all(std::iter::empty(), Start::PredictFirst)
+        .unwrap();
+    assert_eq!(empty.entries().len(), 1);
+    assert_eq!(empty.last().mean(), &x0);
+}
