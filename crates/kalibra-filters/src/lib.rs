@@ -33,6 +33,11 @@
 //! * The gain is a Cholesky solve with `S`, whose factor the record keeps for NIS and
 //!   likelihoods; no explicit inverse.
 //! * A failing step returns a typed [`FilterError`] and leaves the filter as it was.
+//! * The initial covariance is checked ([`InitialCheck`]); [`Kf::as_given`] and
+//!   [`Ekf::as_given`] are the explicit opt-in to start from one as given (asymmetric or
+//!   indefinite, as paper 000 prints it), with a type parameter ([`AsGiven`]) choosing that
+//!   algebra so the checked filters pay nothing for it, and records that say what was not
+//!   checked ([`StepRecord::initial_check`]).
 //! * With `Const` dimensions a step allocates nothing: every matrix, the record included, lives
 //!   inline.
 //!
@@ -51,6 +56,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod as_given;
 mod constant_gain;
 mod core;
 mod error;
@@ -62,7 +68,7 @@ mod srf;
 mod steady;
 mod ukf;
 
-pub use crate::core::{FilterOptions, InitialCheck, UpdateForm};
+pub use crate::core::{AsGiven, Checked, Checking, FilterOptions, InitialCheck, UpdateForm};
 pub use constant_gain::ConstantGainKf;
 pub use error::FilterError;
 pub use filter::{Filter, Start, Trajectory, TrajectoryEntry};

@@ -317,7 +317,8 @@ where
     /// form).
     ///
     /// # Errors
-    /// As [`Ukf::new`].
+    /// As [`Ukf::new`]; [`FilterError::Unsupported`] for
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven).
     pub fn with_options(
         dynamics: D,
         measurement: H,
@@ -326,6 +327,10 @@ where
         set: SigmaSet,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
+        crate::core::reject_as_given(
+            &options,
+            "the UKF with an as-given initial covariance (sigma points need P's square root)",
+        )?;
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
         set.weights(n.value())?;
         let core = KalmanCore::new(n, m, x0, p0, options)?;
@@ -425,7 +430,7 @@ where
         } else {
             (cov, q)
         };
-        self.core.predict_split(mean, f, propagated, noise)
+        self.core.predict_split::<false>(mean, f, propagated, noise)
     }
 
     fn unscented_update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
@@ -659,7 +664,9 @@ where
     fn predict(&mut self) -> Result<(), FilterError> {
         match self.prediction {
             UkfPrediction::Unscented => self.unscented_predict(),
-            UkfPrediction::Linearised => jacobian_predict(&mut self.core, &self.dynamics),
+            UkfPrediction::Linearised => {
+                jacobian_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
+            }
         }
     }
 

@@ -85,7 +85,7 @@ fn kf_matches_a_textbook_recursion() {
         let rec = kf.update(z).unwrap();
         assert_relative_eq!(rec.posterior().mean, x, max_relative = 1e-9);
         assert_relative_eq!(rec.posterior().cov, p, max_relative = 1e-9, epsilon = 1e-9);
-        assert_relative_eq!(rec.s().matrix(), &s, max_relative = 1e-12);
+        assert_relative_eq!(rec.s_matrix(), &s, max_relative = 1e-12);
     }
 }
 
@@ -151,7 +151,7 @@ fn prior_splits_into_propagated_and_process_noise() {
     assert_eq!(first.compute_b(), Matrix2::zeros());
     assert_relative_eq!(
         first.compute_a() + first.r(),
-        first.s().matrix(),
+        first.s_matrix(),
         max_relative = 1e-12
     );
     let mut prev_post = first.posterior().cov;
@@ -166,7 +166,7 @@ fn prior_splits_into_propagated_and_process_noise() {
         assert_relative_eq!(rec.process_noise(), f.q().matrix(), max_relative = 1e-12);
         assert_relative_eq!(
             rec.compute_a() + rec.compute_b() + rec.r(),
-            rec.s().matrix(),
+            rec.s_matrix(),
             max_relative = 1e-12
         );
         prev_post = rec.posterior().cov;
@@ -188,7 +188,7 @@ fn prior_splits_into_propagated_and_process_noise() {
     );
     assert_relative_eq!(
         rec.compute_a() + rec.compute_b() + rec.r(),
-        rec.s().matrix(),
+        rec.s_matrix(),
         max_relative = 1e-12
     );
 }

@@ -37,7 +37,7 @@ fn ukf_vs_kf(set: SigmaSet, prediction: UkfPrediction, seed: u64) -> f64 {
         let (pa, pb) = (a.posterior(), b.posterior());
         worst = worst.max((pa.mean - pb.mean).amax() / pa.mean.amax().max(1.0));
         worst = worst.max((pa.cov - pb.cov).amax() / pa.cov.amax());
-        worst = worst.max((a.s().matrix() - b.s().matrix()).amax() / a.s().matrix().amax());
+        worst = worst.max((a.s_matrix() - b.s_matrix()).amax() / a.s_matrix().amax());
         worst = worst.max((a.gain() - b.gain()).amax() / a.gain().amax());
         // The statistical linearisation of a linear measurement is its matrix.
         worst = worst.max((a.h() - b.h()).amax());
@@ -217,7 +217,7 @@ fn sigma_bearings_across_pi_do_not_jump() {
             rec.innovation()[0]
         );
         // Pz is the bearing variance from 5 m at 100 m plus R, not a 2 pi spread.
-        let pz = rec.s().matrix()[(0, 0)];
+        let pz = rec.s_matrix()[(0, 0)];
         assert!(pz < 1e-2 && pz > 1e-4, "Pz {pz}");
         assert!(rec.posterior().mean[1].abs() < 1.0);
     }
