@@ -15,7 +15,8 @@
 //!   and its gain.
 //!
 //! * [`Ukf`]: the unscented Kalman filter with a [`SigmaSet`] value (paper 001's symmetric set,
-//!   eqs 16-18, or the scaled set), angle-aware through the measurement residual, and with
+//!   eqs 16-18, or the scaled set), angle-aware through the measurement residual and, as an
+//!   option, in the state and the measurement mean ([`SigmaSpace`], [`AngleComponents`]), and with
 //!   kappa chosen per update on a [`KappaGrid`] by a [`KappaCriterion`] (UKF-ML, UKF-MPP).
 //! * [`Srf`]: the shifted Rayleigh filter for bearings (paper 001, Alg. 2, typos fixed) on any
 //!   [`BearingSensor`], with [`shifted_rayleigh_moments`] evaluated stably.
@@ -77,4 +78,7 @@ pub use rayleigh::{ShiftedRayleigh, shifted_rayleigh_moments};
 pub use record::{Estimate, StepRecord};
 pub use srf::{BearingSensor, Srf};
 pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};
-pub use ukf::{KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, Ukf, UkfPrediction};
+pub use ukf::{
+    AngleComponents, KappaCriterion, KappaGrid, SigmaSet, SigmaSpace, SigmaWeights, Ukf,
+    UkfPrediction,
+};
