@@ -64,7 +64,7 @@ fn fixed_size_steps_do_not_allocate() {
         let rec = kf.update(&z).unwrap();
         let e = x - rec.posterior().mean;
         total += rec.nis() + nees(&e, &rec.posterior().cov).unwrap() + rec.nees(&e).unwrap();
-        total += rec.a()[(0, 0)] + rec.b()[(1, 1)];
+        total += rec.compute_a()[(0, 0)] + rec.compute_b()[(1, 1)];
         total += ekf.update(&z).unwrap().nis();
     }
     let allocations = allocations() - before;

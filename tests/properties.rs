@@ -118,7 +118,7 @@ proptest! {
             prop_assert!(rel_close(&a.posterior().mean, &b.posterior().mean, 1e-12));
             prop_assert!(rel_close(&a.posterior().cov, &b.posterior().cov, 1e-12));
             // The prior split adds up to S.
-            prop_assert!(rel_close(&(a.a() + a.b() + a.r()), a.s().matrix(), 1e-12));
+            prop_assert!(rel_close(&(a.compute_a() + a.compute_b() + a.r()), a.s_matrix(), 1e-12));
         }
     }
 

@@ -4,6 +4,8 @@ use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
 use kalibra_models::{Dynamics, Measurement};
 
 use crate::core::KalmanCore;
+use crate::core::reject_as_given;
+use crate::kalman::{jacobian_predict, measurement_update};
 use crate::{Filter, FilterError, FilterOptions, StepRecord, steady_state};
 
 /// The constant-gain Kalman filter: the [`Ekf`](crate::Ekf)'s prediction and innovation with a
@@ -72,7 +74,8 @@ where
     /// standard form is the covariance only at the optimal gain).
     ///
     /// # Errors
-    /// As [`ConstantGainKf::new`].
+    /// As [`ConstantGainKf::new`]; [`FilterError::Unsupported`] for
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven).
     pub fn with_options(
         dynamics: D,
         measurement: H,
@@ -81,6 +84,10 @@ where
         gain: OMatrix<f64, N, M>,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
+        reject_as_given(
+            &options,
+            "the constant-gain KF with an as-given initial covariance",
+        )?;
         let mut core = KalmanCore::new(
             dynamics.state_dim(),
             measurement.meas_dim(),
@@ -142,17 +149,13 @@ where
     crate::kalman::core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        crate::kalman::jacobian_predict(&mut self.core, &self.dynamics)
+        jacobian_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
     }
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let measurement = &self.measurement;
-        crate::kalman::measurement_update(
-            &mut self.core,
-            measurement,
-            z,
-            |k, x| measurement.jacobian(k, x),
-            Some(&self.gain),
-        )
+        let h = |k, x: &OVector<f64, N>| measurement.jacobian(k, x);
+        let gain = Some(&self.gain);
+        measurement_update::<false, _, _, _>(&mut self.core, measurement, z, h, gain)
     }
 }

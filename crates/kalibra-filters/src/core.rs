@@ -7,6 +7,8 @@ use kalibra_linalg::{
     check_finite, check_symmetric, joseph_update, propagate, standard_update, symmetrize,
 };
 
+use crate::as_given::lu_solve;
+use crate::record::Unchecked;
 use crate::{Estimate, FilterError, StepRecord};
 
 /// Which covariance update a filter applies.
@@ -31,6 +33,70 @@ pub enum InitialCheck {
     /// as paper 000's printed one, symmetrised). Metrics on such runs must report the
     /// indefiniteness.
     SymmetricOnly,
+    /// Nothing but size and finiteness: `P0` as given, asymmetric or indefinite (paper 000's
+    /// printed `P0` entry by entry), for reproducing a paper's arithmetic.
+    ///
+    /// The filter then carries every covariance as computed, never symmetrised, and
+    /// solves for the gain `K = P- H^T S^-1` exactly (also for an asymmetric `P-`, as
+    /// `K^T = S^-T H P-^T`) by an LU factorisation of `S`, which it checks only for exact
+    /// singularity ([`FilterError::Singular`]). Every record says so
+    /// ([`StepRecord::initial_check`](crate::StepRecord::initial_check)): its `S` has no
+    /// Cholesky factor ([`StepRecord::s`](crate::StepRecord::s) is `None`), its NIS, NEES and
+    /// log-likelihood are computed by LU, and its `A`, `B`, `C` are not symmetrised.
+    ///
+    /// The opt-in is a constructor, [`Kf::as_given`](crate::Kf::as_given) or
+    /// [`Ekf::as_given`](crate::Ekf::as_given), which makes a filter of type
+    /// `Kf<N, M, D, H, AsGiven>`: the algebra is chosen by the type ([`Checking`]), so the
+    /// checked filters carry no trace of it (a run-time flag tested in the update cost the W1
+    /// step about 120 instructions under callgrind: the update stopped inlining into its
+    /// caller). Every `with_options` constructor returns [`FilterError::Unsupported`] for
+    /// this variant; the UKF (whose sigma points need a square root of `P`), the SRF and the
+    /// constant-gain KF have no as-given form.
+    AsGiven,
+}
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for super::Checked {}
+    impl Sealed for super::AsGiven {}
+}
+
+/// Which algebra a [`Kf`](crate::Kf) or [`Ekf`](crate::Ekf) runs, as a type: [`Checked`] (the
+/// default) or [`AsGiven`] ([`InitialCheck::AsGiven`]). Sealed: the two markers are the only
+/// implementors.
+pub trait Checking:
+    sealed::Sealed + Clone + Copy + std::fmt::Debug + Default + Send + Sync + 'static
+{
+    /// Whether the filter runs [`InitialCheck::AsGiven`]'s algebra.
+    const AS_GIVEN: bool;
+}
+
+/// The checked algebra (every covariance symmetrised, `S` factorised by Cholesky): the default
+/// [`Checking`] of every filter.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Checked;
+
+/// [`InitialCheck::AsGiven`]'s algebra: covariances as computed, the gain by LU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AsGiven;
+
+impl Checking for Checked {
+    const AS_GIVEN: bool = false;
+}
+
+impl Checking for AsGiven {
+    const AS_GIVEN: bool = true;
+}
+
+/// Rejects [`InitialCheck::AsGiven`] in the options of a constructor without an as-given form.
+pub(crate) fn reject_as_given(
+    options: &FilterOptions,
+    what: &'static str,
+) -> Result<(), FilterError> {
+    if options.initial_check == InitialCheck::AsGiven {
+        return Err(FilterError::Unsupported { what });
+    }
+    Ok(())
 }
 
 /// Options shared by the Kalman-type filters.
@@ -112,6 +178,7 @@ where
                 check_symmetric(&p0, "initial covariance").map_err(init)?;
                 symmetrize(&mut p0);
             }
+            InitialCheck::AsGiven => check_finite(&p0, "initial covariance").map_err(init)?,
         }
         let zeros_nn = || OMatrix::<f64, N, N>::zeros_generic(n, n);
         let placeholder_s =
@@ -133,6 +200,7 @@ where
             f: OMatrix::<f64, N, N>::identity_generic(n, n),
             propagated: zeros_nn(),
             process_noise: zeros_nn(),
+            unchecked: Unchecked::new(options.initial_check),
         };
         Ok(Self {
             record,
@@ -180,7 +248,7 @@ where
 
     /// Predicts from step `k` to `k + 1` given the predicted mean, the transition Jacobian and
     /// the process noise, all evaluated by the caller.
-    pub(crate) fn predict(
+    pub(crate) fn predict<const AS_GIVEN: bool>(
         &mut self,
         x_pred: OVector<f64, N>,
         f: OMatrix<f64, N, N>,
@@ -195,7 +263,7 @@ where
                 propagate(&f, &rec.process_noise) + q,
             ),
         };
-        self.predict_split(x_pred, f, propagated, noise)
+        self.predict_split::<AS_GIVEN>(x_pred, f, propagated, noise)
     }
 
     /// Whether the current estimate is a prior (a prediction ran since the last update).
@@ -212,7 +280,7 @@ where
     /// Predicts from step `k` to `k + 1` given the predicted mean, the Jacobian to record, and
     /// the prior covariance already split into its propagated and process-noise parts (the
     /// unscented prediction computes the first part itself).
-    pub(crate) fn predict_split(
+    pub(crate) fn predict_split<const AS_GIVEN: bool>(
         &mut self,
         x_pred: OVector<f64, N>,
         f: OMatrix<f64, N, N>,
@@ -221,7 +289,9 @@ where
     ) -> Result<(), FilterError> {
         let k = self.record.k;
         let mut p = &propagated + &noise;
-        symmetrize(&mut p);
+        if !AS_GIVEN {
+            symmetrize(&mut p);
+        }
         // Non-finite inputs always reach the outputs, so check the outputs on the hot path and
         // look for the culprit only when they fail.
         if !(all_finite(&p) && all_finite(&x_pred)) {
@@ -301,7 +371,7 @@ where
     /// the measurement Jacobian and the noise, all evaluated by the caller; with `fixed_gain`
     /// (the constant-gain filter) instead of the optimal gain. The KF and EKF pass `None`, a
     /// constant the compiler folds away, so their hot path carries no branch for it.
-    pub(crate) fn update(
+    pub(crate) fn update<const AS_GIVEN: bool>(
         &mut self,
         zhat: OVector<f64, M>,
         innovation: OVector<f64, M>,
@@ -309,6 +379,9 @@ where
         r: OMatrix<f64, M, M>,
         fixed_gain: Option<&OMatrix<f64, N, M>>,
     ) -> Result<&StepRecord<N, M>, FilterError> {
+        if AS_GIVEN {
+            return self.update_as_given(zhat, innovation, h, r, fixed_gain);
+        }
         let k = self.record.k;
         let at = |e| FilterError::at(k, e);
         let form = self.update;
@@ -342,6 +415,64 @@ where
             mean: x_post,
             cov: p_post,
         })
+    }
+
+    /// The update of [`InitialCheck::AsGiven`]: the Kalman update in exact arithmetic for an
+    /// asymmetric or indefinite prior, nothing symmetrised, the gain `K = P- H^T S^-1` as
+    /// `(S^-T (H P-^T))^T` by LU. The products are written as a textbook (and paper 000's
+    /// replay) writes them, so that a study reproduces that arithmetic to the bit.
+    fn update_as_given(
+        &mut self,
+        zhat: OVector<f64, M>,
+        innovation: OVector<f64, M>,
+        h: OMatrix<f64, M, N>,
+        r: OMatrix<f64, M, M>,
+        fixed_gain: Option<&OMatrix<f64, N, M>>,
+    ) -> Result<&StepRecord<N, M>, FilterError> {
+        let k = self.record.k;
+        let form = self.update;
+        let prior = self.prepare_update();
+        let s = &h * &prior.cov * h.transpose() + &r;
+        let gain = match fixed_gain {
+            Some(gain) => gain.clone(),
+            None => lu_solve(&s.transpose(), &(&h * prior.cov.transpose()))
+                .ok_or(FilterError::Singular {
+                    what: "innovation covariance S",
+                    step: k,
+                })?
+                .transpose(),
+        };
+        let mean = &prior.mean + &gain * &innovation;
+        let cov = match form {
+            UpdateForm::Joseph => {
+                let n = h.shape_generic().1;
+                let ikh = OMatrix::<f64, N, N>::identity_generic(n, n) - &gain * &h;
+                &ikh * &prior.cov * ikh.transpose() + &gain * &r * gain.transpose()
+            }
+            UpdateForm::Standard => &prior.cov - &gain * (&h * &prior.cov),
+        };
+        if !(all_finite(&mean) && all_finite(&cov)) {
+            check_finite(&innovation, "innovation").map_err(|e| FilterError::at(k, e))?;
+            check_finite(&s, "innovation covariance S").map_err(|e| FilterError::at(k, e))?;
+            return Err(FilterError::NonFinite {
+                what: "posterior estimate",
+                step: k,
+            });
+        }
+        let rec = &mut self.record;
+        rec.posterior.mean = mean;
+        rec.posterior.cov = cov;
+        rec.predicted_measurement = zhat;
+        rec.innovation = innovation;
+        if let Some(unchecked) = rec.unchecked.as_mut() {
+            unchecked.s = Some(s);
+        }
+        rec.gain = gain;
+        rec.h = h;
+        rec.r = r;
+        self.phase = Phase::Posterior;
+        self.has_record = true;
+        Ok(&self.record)
     }
 
     /// Checks the length and finiteness of a measurement handed in from outside.

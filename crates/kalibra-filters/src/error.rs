@@ -24,6 +24,23 @@ pub enum FilterError {
         /// The step index.
         step: usize,
     },
+    /// A matrix that must be invertible is exactly singular (the innovation covariance `S` of
+    /// a filter started with [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven), or a
+    /// covariance a record's NEES solves with).
+    #[error("{what} is singular at step {step}")]
+    Singular {
+        /// Which matrix.
+        what: &'static str,
+        /// The step index.
+        step: usize,
+    },
+    /// A filter was asked for a mode it does not implement (the UKF or the SRF started with
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven)).
+    #[error("{what} is not supported")]
+    Unsupported {
+        /// What was asked for.
+        what: &'static str,
+    },
     /// A dynamically sized input has the wrong size.
     #[error("{what} has dimension {found}, expected {expected}")]
     DimensionMismatch {

@@ -3,8 +3,12 @@
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
 use kalibra_models::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
 
-use crate::core::KalmanCore;
-use crate::{Filter, FilterError, FilterOptions, StepRecord};
+use std::marker::PhantomData;
+
+use crate::core::{KalmanCore, reject_as_given};
+use crate::{
+    AsGiven, Checked, Checking, Filter, FilterError, FilterOptions, InitialCheck, StepRecord,
+};
 
 /// The Kalman filter on linear models: `x- = F x + u`, `P- = F P F^T + Q`,
 /// `K = P- H^T S^-1`, `x+ = x- + K (z - H x-)`, Joseph-form covariance update by default.
@@ -30,26 +34,28 @@ use crate::{Filter, FilterError, FilterOptions, StepRecord};
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Clone, Debug)]
-pub struct Kf<N: Dim, M: Dim, D, H>
+pub struct Kf<N: Dim, M: Dim, D, H, C = Checked>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     dynamics: D,
     measurement: H,
     core: KalmanCore<N, M>,
+    checking: PhantomData<C>,
 }
 
 /// The extended Kalman filter: the [`Kf`] with `f_k`, `h_k` evaluated at the estimate and
 /// `F_{k-1}` linearised at the previous posterior mean, `H_k` at the prior mean.
 /// The innovation goes through the measurement's residual, so bearings wrap.
 #[derive(Clone, Debug)]
-pub struct Ekf<N: Dim, M: Dim, D, H>
+pub struct Ekf<N: Dim, M: Dim, D, H, C = Checked>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     dynamics: D,
     measurement: H,
     core: KalmanCore<N, M>,
+    checking: PhantomData<C>,
 }
 
 macro_rules! constructors {
@@ -75,8 +81,57 @@ macro_rules! constructors {
             /// A filter with explicit [`FilterOptions`].
             ///
             /// # Errors
-            /// As `new`, with the initial check the options choose.
+            /// As `new`, with the initial check the options choose;
+            /// [`FilterError::Unsupported`] for [`InitialCheck::AsGiven`], which has its own
+            /// constructor, `as_given`.
             pub fn with_options(
+                dynamics: D,
+                measurement: H,
+                x0: OVector<f64, N>,
+                p0: OMatrix<f64, N, N>,
+                options: FilterOptions,
+            ) -> Result<Self, FilterError> {
+                reject_as_given(
+                    &options,
+                    "InitialCheck::AsGiven in with_options (the as_given constructor opts in)",
+                )?;
+                Self::build(dynamics, measurement, x0, p0, options)
+            }
+        }
+
+        impl<N: Dim, M: Dim, D: $dyn_bound<N>, H: $meas_bound<N, M>> $name<N, M, D, H, AsGiven>
+        where
+            DefaultAllocator: Alloc<N, M>,
+        {
+            /// The explicit opt-in to a filter started from `p0` as given, asymmetric or
+            /// indefinite (paper 000's printed `P0`): only sizes and finiteness are checked,
+            /// and the filter runs [`InitialCheck::AsGiven`]'s algebra (nothing symmetrised,
+            /// the gain by LU), which every record reports. `options.initial_check` is
+            /// ignored (it is [`InitialCheck::AsGiven`]); `first_step` and `update` apply.
+            ///
+            /// # Errors
+            /// [`FilterError::Initial`] if `x0` or `p0` has the wrong size or is not finite.
+            pub fn as_given(
+                dynamics: D,
+                measurement: H,
+                x0: OVector<f64, N>,
+                p0: OMatrix<f64, N, N>,
+                options: FilterOptions,
+            ) -> Result<Self, FilterError> {
+                let options = FilterOptions {
+                    initial_check: InitialCheck::AsGiven,
+                    ..options
+                };
+                Self::build(dynamics, measurement, x0, p0, options)
+            }
+        }
+
+        impl<N: Dim, M: Dim, D: $dyn_bound<N>, H: $meas_bound<N, M>, C: Checking>
+            $name<N, M, D, H, C>
+        where
+            DefaultAllocator: Alloc<N, M>,
+        {
+            fn build(
                 dynamics: D,
                 measurement: H,
                 x0: OVector<f64, N>,
@@ -94,6 +149,7 @@ macro_rules! constructors {
                     dynamics,
                     measurement,
                     core,
+                    checking: PhantomData,
                 })
             }
 
@@ -114,7 +170,7 @@ constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
 
 /// The update shared by the KF and the EKF; they differ only in where `H_k` comes from.
-pub(crate) fn measurement_update<'a, N: Dim, M: Dim, H: Measurement<N, M>>(
+pub(crate) fn measurement_update<'a, const AS_GIVEN: bool, N: Dim, M: Dim, H: Measurement<N, M>>(
     core: &'a mut KalmanCore<N, M>,
     measurement: &H,
     z: &OVector<f64, M>,
@@ -131,11 +187,11 @@ where
     let nu = measurement.residual(z, &zhat);
     let h = h_matrix(k, x);
     let r = measurement.noise_cov(k, x);
-    core.update(zhat, nu, h, r, fixed_gain)
+    core.update::<AS_GIVEN>(zhat, nu, h, r, fixed_gain)
 }
 
 /// The prediction of the filters that linearise `f` at the estimate (EKF, constant-gain KF).
-pub(crate) fn jacobian_predict<N: Dim, M: Dim, D: Dynamics<N>>(
+pub(crate) fn jacobian_predict<const AS_GIVEN: bool, N: Dim, M: Dim, D: Dynamics<N>>(
     core: &mut KalmanCore<N, M>,
     dynamics: &D,
 ) -> Result<(), FilterError>
@@ -145,7 +201,20 @@ where
     let k = core.step();
     let x = core.mean();
     let x_pred = dynamics.transition(k, x);
-    core.predict(x_pred, dynamics.jacobian(k, x), dynamics.noise_cov(k))
+    core.predict::<AS_GIVEN>(x_pred, dynamics.jacobian(k, x), dynamics.noise_cov(k))
+}
+
+/// The prediction of the filters with linear dynamics (KF, SRF): `F_k` is the model's matrix.
+pub(crate) fn linear_predict<const AS_GIVEN: bool, N: Dim, M: Dim, D: LinearDynamics<N>>(
+    core: &mut KalmanCore<N, M>,
+    dynamics: &D,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let k = core.step();
+    let x_pred = dynamics.transition(k, core.mean());
+    core.predict::<AS_GIVEN>(x_pred, dynamics.matrix(k), dynamics.noise_cov(k))
 }
 
 /// The accessors both filters forward to their core.
@@ -170,50 +239,50 @@ macro_rules! core_accessors {
 }
 pub(crate) use core_accessors;
 
-impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>> Filter<N, M>
-    for Kf<N, M, D, H>
+impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>, C: Checking> Filter<N, M>
+    for Kf<N, M, D, H, C>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        let k = self.core.step();
-        let x_pred = self.dynamics.transition(k, self.core.mean());
-        self.core
-            .predict(x_pred, self.dynamics.matrix(k), self.dynamics.noise_cov(k))
+        if C::AS_GIVEN {
+            return linear_predict::<true, _, _, _>(&mut self.core, &self.dynamics);
+        }
+        linear_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
     }
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let measurement = &self.measurement;
-        measurement_update(
-            &mut self.core,
-            measurement,
-            z,
-            |k, _| measurement.matrix(k),
-            None,
-        )
+        let h = |k, _: &OVector<f64, N>| measurement.matrix(k);
+        if C::AS_GIVEN {
+            return measurement_update::<true, _, _, _>(&mut self.core, measurement, z, h, None);
+        }
+        measurement_update::<false, _, _, _>(&mut self.core, measurement, z, h, None)
     }
 }
 
-impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M> for Ekf<N, M, D, H>
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>, C: Checking> Filter<N, M>
+    for Ekf<N, M, D, H, C>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        jacobian_predict(&mut self.core, &self.dynamics)
+        if C::AS_GIVEN {
+            return jacobian_predict::<true, _, _, _>(&mut self.core, &self.dynamics);
+        }
+        jacobian_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
     }
 
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         let measurement = &self.measurement;
-        measurement_update(
-            &mut self.core,
-            measurement,
-            z,
-            |k, x| measurement.jacobian(k, x),
-            None,
-        )
+        let h = |k, x: &OVector<f64, N>| measurement.jacobian(k, x);
+        if C::AS_GIVEN {
+            return measurement_update::<true, _, _, _>(&mut self.core, measurement, z, h, None);
+        }
+        measurement_update::<false, _, _, _>(&mut self.core, measurement, z, h, None)
     }
 }

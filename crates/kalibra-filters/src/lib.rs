@@ -3,7 +3,9 @@
 //! # What this crate is for
 //! * [`Filter`]: a recursive estimator stepped by `predict` and `update`, with provided methods
 //!   that run it over a measurement sequence from anywhere (a simulation, a log file, a sensor),
-//!   with gaps where a step has no measurement.
+//!   with gaps where a step has no measurement, reporting the updates ([`Filter::run`]) or every
+//!   step's estimate ([`Filter::run_all`], a [`Trajectory`]). It is dyn-compatible: a bank of
+//!   different filters is one `Vec<Box<dyn Filter<N, M>>>`.
 //! * [`Kf`] (linear models), [`Ekf`] (nonlinear models) and [`ConstantGainKf`] (a fixed gain,
 //!   the user's or the steady-state one), sharing one numerical core.
 //! * [`StepRecord`]: what each update computed (prior and posterior, innovation, `S`, `K`, `H`,
@@ -13,7 +15,8 @@
 //!   and its gain.
 //!
 //! * [`Ukf`]: the unscented Kalman filter with a [`SigmaSet`] value (paper 001's symmetric set,
-//!   eqs 16-18, or the scaled set), angle-aware through the measurement residual, and with
+//!   eqs 16-18, or the scaled set), angle-aware through the measurement residual and, as an
+//!   option, in the state and the measurement mean ([`SigmaSpace`], [`AngleComponents`]), and with
 //!   kappa chosen per update on a [`KappaGrid`] by a [`KappaCriterion`] (UKF-ML, UKF-MPP).
 //! * [`Srf`]: the shifted Rayleigh filter for bearings (paper 001, Alg. 2, typos fixed) on any
 //!   [`BearingSensor`], with [`shifted_rayleigh_moments`] evaluated stably.
@@ -31,6 +34,11 @@
 //! * The gain is a Cholesky solve with `S`, whose factor the record keeps for NIS and
 //!   likelihoods; no explicit inverse.
 //! * A failing step returns a typed [`FilterError`] and leaves the filter as it was.
+//! * The initial covariance is checked ([`InitialCheck`]); [`Kf::as_given`] and
+//!   [`Ekf::as_given`] are the explicit opt-in to start from one as given (asymmetric or
+//!   indefinite, as paper 000 prints it), with a type parameter ([`AsGiven`]) choosing that
+//!   algebra so the checked filters pay nothing for it, and records that say what was not
+//!   checked ([`StepRecord::initial_check`]).
 //! * With `Const` dimensions a step allocates nothing: every matrix, the record included, lives
 //!   inline.
 //!
@@ -51,6 +59,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod as_given;
 mod constant_gain;
 mod core;
 mod error;
@@ -62,13 +71,16 @@ mod srf;
 mod steady;
 mod ukf;
 
-pub use crate::core::{FilterOptions, InitialCheck, UpdateForm};
+pub use crate::core::{AsGiven, Checked, Checking, FilterOptions, InitialCheck, UpdateForm};
 pub use constant_gain::ConstantGainKf;
 pub use error::FilterError;
-pub use filter::{Filter, Start};
+pub use filter::{Filter, Start, Trajectory, TrajectoryEntry};
 pub use kalman::{Ekf, Kf};
 pub use rayleigh::{ShiftedRayleigh, shifted_rayleigh_moments};
 pub use record::{Estimate, StepRecord};
 pub use srf::{BearingSensor, Srf};
 pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};
-pub use ukf::{KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, Ukf, UkfPrediction};
+pub use ukf::{
+    AngleComponents, KappaCriterion, KappaGrid, SigmaSet, SigmaSpace, SigmaWeights, Ukf,
+    UkfPrediction,
+};

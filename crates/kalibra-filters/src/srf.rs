@@ -130,7 +130,8 @@ where
     /// update form is always eq 28's).
     ///
     /// # Errors
-    /// As [`Srf::new`].
+    /// As [`Srf::new`]; [`FilterError::Unsupported`] for
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven).
     pub fn with_options(
         dynamics: D,
         bearing: B,
@@ -138,6 +139,7 @@ where
         p0: OMatrix<f64, N, N>,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
+        crate::core::reject_as_given(&options, "the SRF with an as-given initial covariance")?;
         let core = KalmanCore::new(dynamics.state_dim(), U1, x0, p0, options)?;
         Ok(Self {
             dynamics,
@@ -164,10 +166,7 @@ where
     core_accessors!(U1);
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        let k = self.core.step();
-        let x_pred = self.dynamics.transition(k, self.core.mean());
-        self.core
-            .predict(x_pred, self.dynamics.matrix(k), self.dynamics.noise_cov(k))
+        crate::kalman::linear_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
     }
 
     fn update(&mut self, z: &OVector<f64, U1>) -> Result<&StepRecord<N, U1>, FilterError> {

@@ -5,7 +5,9 @@ use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, SqrtMethod,
     all_finite, check_finite, propagate, sigma_sqrt, symmetrize,
 };
-use kalibra_models::{Dynamics, Measurement};
+use std::sync::Arc;
+
+use kalibra_models::{Dynamics, Measurement, wrap_angle};
 
 use crate::core::{KalmanCore, UpdateParts};
 use crate::kalman::{core_accessors, jacobian_predict};
@@ -242,6 +244,128 @@ impl KappaGrid {
     }
 }
 
+/// How the UKF averages and subtracts the vectors of a space that is not plain Euclidean,
+/// for instance one with angle components (FilterPy's `x_mean_fn`, `residual_x` and
+/// `z_mean_fn`; Stone Soup's angle types).
+///
+/// A state space ([`Ukf::with_state_space`]) uses all three methods: the predicted mean of the
+/// sigma points, the deviations that form the predicted covariance, and the normalisation of
+/// the updated mean `x- + K nu`. A measurement mean ([`Ukf::with_measurement_mean`]) uses
+/// [`SigmaSpace::mean`] for `zhat`; the deviations there come from the measurement model's
+/// own residual. [`AngleComponents`] is the ready-made space with angles at given positions.
+pub trait SigmaSpace<D: Dim>: Send + Sync + std::fmt::Debug
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// The weighted mean of sigma points: `points[0]` is the central point, weighted
+    /// `weights.mean_center`, every other point is weighted `weights.other` (the weights sum to
+    /// one; the central one may be negative).
+    fn mean(&self, points: &[OVector<f64, D>], weights: &SigmaWeights) -> OVector<f64, D>;
+
+    /// The deviation `a - b` (angles wrapped); plain subtraction by default.
+    fn residual(&self, a: &OVector<f64, D>, b: &OVector<f64, D>) -> OVector<f64, D> {
+        a - b
+    }
+
+    /// Brings `x` back into its canonical range (angles into `(-pi, pi]`); nothing by default.
+    fn normalize(&self, _x: &mut OVector<f64, D>) {}
+
+    /// Checks that the space fits vectors of dimension `dim` (used once, when it is attached).
+    ///
+    /// # Errors
+    /// A [`FilterError`] if it does not; none by default.
+    fn check(&self, _dim: usize) -> Result<(), FilterError> {
+        Ok(())
+    }
+}
+
+/// A vector space whose components at the given positions are angles in radians: their mean is
+/// the circular mean `atan2(sum w_i sin a_i, sum w_i cos a_i)`, their residual and
+/// normalisation wrap into `(-pi, pi]` ([`wrap_angle`]); the other components are plain.
+///
+/// ```
+/// use kalibra_filters::{AngleComponents, SigmaSpace, SigmaWeights};
+/// use kalibra_linalg::Vector2;
+/// use std::f64::consts::PI;
+///
+/// let heading = AngleComponents::new([0]);
+/// let w = SigmaWeights { spread: 1.0, mean_center: 0.0, cov_center: 0.0, other: 0.5 };
+/// // Two headings either side of +-pi average to pi, not to 0.
+/// let mean = heading.mean(&[Vector2::zeros(), Vector2::new(PI - 0.1, 1.0), Vector2::new(-PI + 0.1, 3.0)], &w);
+/// assert!((mean[0] - PI).abs() < 1e-12 && (mean[1] - 2.0).abs() < 1e-12);
+/// ```
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct AngleComponents {
+    indices: Vec<usize>,
+}
+
+impl AngleComponents {
+    /// Angles at the given component positions.
+    pub fn new(indices: impl IntoIterator<Item = usize>) -> Self {
+        let mut indices: Vec<usize> = indices.into_iter().collect();
+        indices.sort_unstable();
+        indices.dedup();
+        Self { indices }
+    }
+
+    /// The positions of the angle components, increasing.
+    pub fn indices(&self) -> &[usize] {
+        &self.indices
+    }
+}
+
+impl<D: Dim> SigmaSpace<D> for AngleComponents
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn mean(&self, points: &[OVector<f64, D>], weights: &SigmaWeights) -> OVector<f64, D> {
+        let weight = |i: usize| {
+            if i == 0 {
+                weights.mean_center
+            } else {
+                weights.other
+            }
+        };
+        let mut mean = points[0].clone() * weights.mean_center;
+        for p in &points[1..] {
+            mean += p * weights.other;
+        }
+        for &a in &self.indices {
+            let (mut sin, mut cos) = (0.0, 0.0);
+            for (i, p) in points.iter().enumerate() {
+                sin += weight(i) * p[a].sin();
+                cos += weight(i) * p[a].cos();
+            }
+            mean[a] = wrap_angle(sin.atan2(cos));
+        }
+        mean
+    }
+
+    fn residual(&self, a: &OVector<f64, D>, b: &OVector<f64, D>) -> OVector<f64, D> {
+        let mut d = a - b;
+        for &i in &self.indices {
+            d[i] = wrap_angle(d[i]);
+        }
+        d
+    }
+
+    fn normalize(&self, x: &mut OVector<f64, D>) {
+        for &i in &self.indices {
+            x[i] = wrap_angle(x[i]);
+        }
+    }
+
+    fn check(&self, dim: usize) -> Result<(), FilterError> {
+        match self.indices.last() {
+            Some(&last) if last >= dim => Err(FilterError::InvalidParameter {
+                name: "angle component index",
+                value: last as f64,
+            }),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// The unscented Kalman filter (Julier and Uhlmann), paper 001 eqs 16-22.
 ///
 /// Update: the `2n + 1` sigma points of the prior through `h_k`, each measurement taken as a
@@ -292,6 +416,9 @@ where
     // on the fixed-size path.
     scratch_z: Vec<OVector<f64, M>>,
     scratch_x: Vec<OVector<f64, N>>,
+    // The optional non-Euclidean spaces; `None` keeps the plain arithmetic, bit for bit.
+    state_space: Option<Arc<dyn SigmaSpace<N>>>,
+    measurement_mean: Option<Arc<dyn SigmaSpace<M>>>,
 }
 
 impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Ukf<N, M, D, H>
@@ -319,7 +446,8 @@ where
     /// form).
     ///
     /// # Errors
-    /// As [`Ukf::new`].
+    /// As [`Ukf::new`]; [`FilterError::Unsupported`] for
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven).
     pub fn with_options(
         dynamics: D,
         measurement: H,
@@ -328,6 +456,10 @@ where
         set: SigmaSet,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
+        crate::core::reject_as_given(
+            &options,
+            "the UKF with an as-given initial covariance (sigma points need P's square root)",
+        )?;
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
         set.weights(n.value())?;
         let core = KalmanCore::new(n, m, x0, p0, options)?;
@@ -343,7 +475,45 @@ where
             last_kappa: None,
             scratch_z: vec![zeros_z; 2 * n.value()],
             scratch_x: vec![zeros_x; 2 * n.value()],
+            state_space: None,
+            measurement_mean: None,
         })
+    }
+
+    /// The same filter with a non-Euclidean state space (FilterPy's `x_mean_fn` and
+    /// `residual_x`): the unscented prediction averages its sigma points with
+    /// [`SigmaSpace::mean`] and forms the covariance from [`SigmaSpace::residual`]s, and the
+    /// updated mean `x- + K nu` is [`SigmaSpace::normalize`]d. With [`AngleComponents`] an
+    /// angle in the state near `+-pi` averages to near `pi`, where the plain mean gives about 0.
+    /// A prediction with a space collects its sigma points in a fresh `Vec` (one allocation
+    /// per step); without one the filter keeps its allocation-free path, bit for bit.
+    ///
+    /// # Errors
+    /// [`SigmaSpace::check`]'s error if the space does not fit the state dimension.
+    pub fn with_state_space(
+        mut self,
+        space: impl SigmaSpace<N> + 'static,
+    ) -> Result<Self, FilterError> {
+        space.check(self.dynamics.state_dim().value())?;
+        self.state_space = Some(Arc::new(space));
+        Ok(self)
+    }
+
+    /// The same filter forming the predicted measurement `zhat` with `mean` (FilterPy's
+    /// `z_mean_fn`) from the sigma points' measurements, for instance the circular mean of
+    /// [`AngleComponents`]. By default `zhat` is the central measurement plus the mean of the
+    /// others' residuals from it, which handles angles through the model's residual; the option
+    /// serves models whose residual does not wrap, or a circular mean by choice.
+    ///
+    /// # Errors
+    /// [`SigmaSpace::check`]'s error if `mean` does not fit the measurement dimension.
+    pub fn with_measurement_mean(
+        mut self,
+        mean: impl SigmaSpace<M> + 'static,
+    ) -> Result<Self, FilterError> {
+        mean.check(self.measurement.meas_dim().value())?;
+        self.measurement_mean = Some(Arc::new(mean));
+        Ok(self)
     }
 
     /// The same filter predicting as `prediction` says.
@@ -404,16 +574,34 @@ where
             self.scratch_x[j] = self.dynamics.transition(k, &(&x + &d));
             self.scratch_x[n + j] = self.dynamics.transition(k, &(&x - &d));
         }
-        let mut mean = &x0 * w.mean_center;
-        for xi in &self.scratch_x {
-            mean += xi * w.other;
-        }
-        let d0 = &x0 - &mean;
-        let mut cov = &d0 * d0.transpose() * w.cov_center;
-        for xi in &self.scratch_x {
-            let d = xi - &mean;
-            cov += &d * d.transpose() * w.other;
-        }
+        let (mean, mut cov) = match &self.state_space {
+            None => {
+                let mut mean = &x0 * w.mean_center;
+                for xi in &self.scratch_x {
+                    mean += xi * w.other;
+                }
+                let d0 = &x0 - &mean;
+                let mut cov = &d0 * d0.transpose() * w.cov_center;
+                for xi in &self.scratch_x {
+                    let d = xi - &mean;
+                    cov += &d * d.transpose() * w.other;
+                }
+                (mean, cov)
+            }
+            Some(space) => {
+                let mut points = Vec::with_capacity(2 * n + 1);
+                points.push(x0);
+                points.extend(self.scratch_x.iter().cloned());
+                let mean = space.mean(&points, &w);
+                let d0 = space.residual(&points[0], &mean);
+                let mut cov = &d0 * d0.transpose() * w.cov_center;
+                for xi in &points[1..] {
+                    let d = space.residual(xi, &mean);
+                    cov += &d * d.transpose() * w.other;
+                }
+                (mean, cov)
+            }
+        };
         symmetrize(&mut cov);
         let f = self.dynamics.jacobian(k, &x);
         let q = self.dynamics.noise_cov(k);
@@ -427,7 +615,7 @@ where
         } else {
             (cov, q)
         };
-        self.core.predict_split(mean, f, propagated, noise)
+        self.core.predict_split::<false>(mean, f, propagated, noise)
     }
 
     fn unscented_update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
@@ -441,6 +629,10 @@ where
         let r = self.measurement.noise_cov(k, &prior.mean);
         check_finite(&r, "measurement noise covariance R").map_err(|e| FilterError::at(k, e))?;
         let z0 = self.measurement.measure(k, &prior.mean);
+        let spaces = Spaces {
+            state: self.state_space.as_deref(),
+            measurement_mean: self.measurement_mean.as_deref(),
+        };
 
         let best = match &self.adaptive {
             None => {
@@ -456,6 +648,7 @@ where
                     &r,
                     z,
                     w,
+                    spaces,
                 )?;
                 (kappa, c)
             }
@@ -475,6 +668,7 @@ where
                         &r,
                         z,
                         w,
+                        spaces,
                     ) {
                         Ok(c) => c,
                         Err(e) => {
@@ -547,6 +741,26 @@ where
     cov: OMatrix<f64, N, N>,
 }
 
+/// The optional non-Euclidean spaces of an update.
+struct Spaces<'a, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    state: Option<&'a dyn SigmaSpace<N>>,
+    measurement_mean: Option<&'a dyn SigmaSpace<M>>,
+}
+
+impl<N: Dim, M: Dim> Clone for Spaces<'_, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<N: Dim, M: Dim> Copy for Spaces<'_, N, M> where DefaultAllocator: Alloc<N, M> {}
+
 /// The unscented measurement update with weights `w`, the prior's factor `l` and the central
 /// measurement `z0` given (they do not depend on kappa).
 #[allow(clippy::too_many_arguments)]
@@ -560,40 +774,71 @@ fn candidate<N: Dim, M: Dim, H: Measurement<N, M>>(
     r: &OMatrix<f64, M, M>,
     z: &OVector<f64, M>,
     w: SigmaWeights,
+    spaces: Spaces<'_, N, M>,
 ) -> Result<Candidate<N, M>, FilterError>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = prior.mean.nrows();
     let x = &prior.mean;
-    // Sigma measurements as residuals from the central one: unwrapped around it.
-    for j in 0..n {
-        let d = l.column(j) * w.spread;
-        scratch[j] = measurement.residual(&measurement.measure(k, &(x + &d)), z0);
-        scratch[n + j] = measurement.residual(&measurement.measure(k, &(x - &d)), z0);
-    }
-    let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, nalgebra::U1);
-    for d in scratch.iter() {
-        dbar += d * w.other;
-    }
-    let mut pz = &dbar * dbar.transpose() * w.cov_center;
-    for d in scratch.iter() {
-        let dd = d - &dbar;
-        pz += &dd * dd.transpose() * w.other;
-    }
+    let (zhat, mut pz) = match spaces.measurement_mean {
+        None => {
+            // Sigma measurements as residuals from the central one: unwrapped around it.
+            for j in 0..n {
+                let d = l.column(j) * w.spread;
+                scratch[j] = measurement.residual(&measurement.measure(k, &(x + &d)), z0);
+                scratch[n + j] = measurement.residual(&measurement.measure(k, &(x - &d)), z0);
+            }
+            let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, nalgebra::U1);
+            for d in scratch.iter() {
+                dbar += d * w.other;
+            }
+            let mut pz = &dbar * dbar.transpose() * w.cov_center;
+            for d in scratch.iter() {
+                let dd = d - &dbar;
+                pz += &dd * dd.transpose() * w.other;
+            }
+            (z0 + &dbar, pz)
+        }
+        Some(mean) => {
+            // The sigma measurements as measured, averaged by the chosen mean, then their
+            // residuals from it.
+            let mut points = Vec::with_capacity(2 * n + 1);
+            points.push(z0.clone());
+            for sign in [1.0, -1.0] {
+                for j in 0..n {
+                    let d = l.column(j) * (sign * w.spread);
+                    points.push(measurement.measure(k, &(x + &d)));
+                }
+            }
+            let mut zhat = mean.mean(&points, &w);
+            measurement.normalize(&mut zhat);
+            for (slot, zi) in scratch.iter_mut().zip(&points[1..]) {
+                *slot = measurement.residual(zi, &zhat);
+            }
+            let e0 = measurement.residual(z0, &zhat);
+            let mut pz = &e0 * e0.transpose() * w.cov_center;
+            for e in scratch.iter() {
+                pz += e * e.transpose() * w.other;
+            }
+            (zhat, pz)
+        }
+    };
     pz += r;
     symmetrize(&mut pz);
-    // The central point has no state deviation, and dbar cancels between each pair.
+    // The central point has no state deviation, and the mean cancels between each pair.
     let mut pxz = OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
     for j in 0..n {
         let dz = &scratch[j] - &scratch[n + j];
         pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
     }
-    let mut zhat = z0 + &dbar;
-    measurement.normalize(&mut zhat);
+    let mut zhat = zhat;
+    if spaces.measurement_mean.is_none() {
+        measurement.normalize(&mut zhat);
+    }
     let nu = measurement.residual(z, &zhat);
     let s = Covariance::from_symmetric(pz, "innovation covariance Pz").map_err(|e| {
-        let e = if all_finite(&dbar) {
+        let e = if all_finite(&zhat) {
             e
         } else {
             LinalgError::NonFinite {
@@ -603,7 +848,10 @@ where
         FilterError::at(k, e)
     })?;
     let gain = s.cholesky().solve(&pxz.transpose()).transpose();
-    let mean = x + &gain * &nu;
+    let mut mean = x + &gain * &nu;
+    if let Some(space) = spaces.state {
+        space.normalize(&mut mean);
+    }
     let cov = &prior.cov - &gain * s.matrix() * gain.transpose();
     Ok(Candidate {
         zhat,
@@ -661,7 +909,9 @@ where
     fn predict(&mut self) -> Result<(), FilterError> {
         match self.prediction {
             UkfPrediction::Unscented => self.unscented_predict(),
-            UkfPrediction::Linearised => jacobian_predict(&mut self.core, &self.dynamics),
+            UkfPrediction::Linearised => {
+                jacobian_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
+            }
         }
     }
 

@@ -85,7 +85,7 @@ fn kf_matches_a_textbook_recursion() {
         let rec = kf.update(z).unwrap();
         assert_relative_eq!(rec.posterior().mean, x, max_relative = 1e-9);
         assert_relative_eq!(rec.posterior().cov, p, max_relative = 1e-9, epsilon = 1e-9);
-        assert_relative_eq!(rec.s().matrix(), &s, max_relative = 1e-12);
+        assert_relative_eq!(rec.s_matrix(), &s, max_relative = 1e-12);
     }
 }
 
@@ -148,10 +148,10 @@ fn prior_splits_into_propagated_and_process_noise() {
     let mut kf = Kf::new(&f, &h, Vector4::new(0.0, 0.0, 10.0, -5.0), p0()).unwrap();
     let first = kf.update(&t.measurements[0]).unwrap().clone();
     // An update with no prediction before it: the prior is all "propagated", B = 0.
-    assert_eq!(first.b(), Matrix2::zeros());
+    assert_eq!(first.compute_b(), Matrix2::zeros());
     assert_relative_eq!(
-        first.a() + first.r(),
-        first.s().matrix(),
+        first.compute_a() + first.r(),
+        first.s_matrix(),
         max_relative = 1e-12
     );
     let mut prev_post = first.posterior().cov;
@@ -165,8 +165,8 @@ fn prior_splits_into_propagated_and_process_noise() {
         );
         assert_relative_eq!(rec.process_noise(), f.q().matrix(), max_relative = 1e-12);
         assert_relative_eq!(
-            rec.a() + rec.b() + rec.r(),
-            rec.s().matrix(),
+            rec.compute_a() + rec.compute_b() + rec.r(),
+            rec.s_matrix(),
             max_relative = 1e-12
         );
         prev_post = rec.posterior().cov;
@@ -187,8 +187,8 @@ fn prior_splits_into_propagated_and_process_noise() {
         max_relative = 1e-12
     );
     assert_relative_eq!(
-        rec.a() + rec.b() + rec.r(),
-        rec.s().matrix(),
+        rec.compute_a() + rec.compute_b() + rec.r(),
+        rec.s_matrix(),
         max_relative = 1e-12
     );
 }

@@ -37,7 +37,7 @@ fn ukf_vs_kf(set: SigmaSet, prediction: UkfPrediction, seed: u64) -> f64 {
         let (pa, pb) = (a.posterior(), b.posterior());
         worst = worst.max((pa.mean - pb.mean).amax() / pa.mean.amax().max(1.0));
         worst = worst.max((pa.cov - pb.cov).amax() / pa.cov.amax());
-        worst = worst.max((a.s().matrix() - b.s().matrix()).amax() / a.s().matrix().amax());
+        worst = worst.max((a.s_matrix() - b.s_matrix()).amax() / a.s_matrix().amax());
         worst = worst.max((a.gain() - b.gain()).amax() / a.gain().amax());
         // The statistical linearisation of a linear measurement is its matrix.
         worst = worst.max((a.h() - b.h()).amax());
@@ -217,7 +217,7 @@ fn sigma_bearings_across_pi_do_not_jump() {
             rec.innovation()[0]
         );
         // Pz is the bearing variance from 5 m at 100 m plus R, not a 2 pi spread.
-        let pz = rec.s().matrix()[(0, 0)];
+        let pz = rec.s_matrix()[(0, 0)];
         assert!(pz < 1e-2 && pz > 1e-4, "Pz {pz}");
         assert!(rec.posterior().mean[1].abs() < 1.0);
     }
@@ -299,4 +299,161 @@ fn bad_measurements_give_typed_errors_and_leave_the_filter_untouched() {
         ),
         Err(FilterError::InvalidParameter { .. })
     ));
+}
+
+mod angles_in_the_state {
+    use super::*;
+    use kalibra_filters::{AngleComponents, FilterError};
+    use kalibra_linalg::{Matrix1, U1, U2};
+    use kalibra_models::wrap_angle;
+    use std::f64::consts::PI;
+
+    /// A heading `theta` (wrapped into (-pi, pi] by the dynamics) turning at rate `omega`.
+    #[derive(Clone, Debug)]
+    struct Turning;
+
+    impl kalibra_models::Dynamics<U2> for Turning {
+        fn state_dim(&self) -> U2 {
+            U2
+        }
+        fn transition(&self, _k: usize, x: &Vector2<f64>) -> Vector2<f64> {
+            Vector2::new(wrap_angle(x[0] + x[1]), x[1])
+        }
+        fn jacobian(&self, _k: usize, _x: &Vector2<f64>) -> Matrix2<f64> {
+            Matrix2::new(1.0, 1.0, 0.0, 1.0)
+        }
+        fn noise_cov(&self, _k: usize) -> Matrix2<f64> {
+            Matrix2::new(1e-4, 0.0, 0.0, 1e-6)
+        }
+    }
+
+    /// The heading measured directly; `wraps` chooses whether the residual wraps.
+    #[derive(Clone, Debug)]
+    struct Compass {
+        wraps: bool,
+    }
+
+    impl kalibra_models::Measurement<U2, U1> for Compass {
+        fn meas_dim(&self) -> U1 {
+            U1
+        }
+        fn measure(&self, _k: usize, x: &Vector2<f64>) -> Vector1<f64> {
+            Vector1::new(wrap_angle(x[0]))
+        }
+        fn jacobian(
+            &self,
+            _k: usize,
+            _x: &Vector2<f64>,
+        ) -> kalibra_linalg::nalgebra::Matrix1x2<f64> {
+            kalibra_linalg::nalgebra::Matrix1x2::new(1.0, 0.0)
+        }
+        fn noise_cov(&self, _k: usize, _x: &Vector2<f64>) -> Matrix1<f64> {
+            Matrix1::new(0.01)
+        }
+        fn residual(&self, z: &Vector1<f64>, zhat: &Vector1<f64>) -> Vector1<f64> {
+            let d = z - zhat;
+            if self.wraps {
+                Vector1::new(wrap_angle(d[0]))
+            } else {
+                d
+            }
+        }
+    }
+
+    fn distance_to_pi(a: f64) -> f64 {
+        wrap_angle(a - PI).abs()
+    }
+
+    /// Sigma points of a heading just below pi straddle +-pi after the wrapping dynamics: the
+    /// plain mean lands near 0, the angle-aware state space near pi; the updated heading stays
+    /// in (-pi, pi] and near pi.
+    #[test]
+    fn an_angle_state_near_pi_averages_to_pi_with_the_state_space() {
+        let x0 = Vector2::new(PI - 0.05, 0.02);
+        let p0 = Matrix2::new(0.2f64.powi(2), 0.0, 0.0, 1e-4);
+        let set = SigmaSet::recommended(2);
+        let compass = Compass { wraps: true };
+        let mut plain = Ukf::new(Turning, compass.clone(), x0, p0, set).unwrap();
+        let mut aware = Ukf::new(Turning, compass, x0, p0, set)
+            .unwrap()
+            .with_state_space(AngleComponents::new([0]))
+            .unwrap();
+        plain.predict().unwrap();
+        aware.predict().unwrap();
+        // The truth: pi - 0.03.
+        assert!(
+            distance_to_pi(aware.mean()[0]) < 0.05,
+            "{}",
+            aware.mean()[0]
+        );
+        assert!(distance_to_pi(plain.mean()[0]) > 1.0, "{}", plain.mean()[0]);
+        // The angle-aware covariance is the spread of the points, not of a jump by 2 pi.
+        assert!(aware.covariance()[(0, 0)] < 0.1);
+        assert!(plain.covariance()[(0, 0)] > 1.0);
+
+        // An update across the cut: measured -pi + 0.02 (that is pi + 0.02).
+        let rec = aware.update(&Vector1::new(-PI + 0.02)).unwrap();
+        let theta = rec.posterior().mean[0];
+        assert!(theta > -PI && theta <= PI);
+        assert!(distance_to_pi(theta) < 0.05, "{theta}");
+        assert!(rec.nis() < 1.0);
+    }
+
+    /// A measurement model whose residual does not wrap: the default predicted measurement
+    /// (central value plus mean residual) is thrown off by the cut, the circular mean is not.
+    #[test]
+    fn the_circular_measurement_mean_is_an_option() {
+        let x0 = Vector2::new(PI - 0.05, 0.0);
+        let p0 = Matrix2::new(0.2f64.powi(2), 0.0, 0.0, 1e-6);
+        let set = SigmaSet::recommended(2);
+        let compass = Compass { wraps: false };
+        let mut plain = Ukf::new(Turning, compass.clone(), x0, p0, set).unwrap();
+        let mut circular = Ukf::new(Turning, compass, x0, p0, set)
+            .unwrap()
+            .with_measurement_mean(AngleComponents::new([0]))
+            .unwrap();
+        let z = Vector1::new(PI - 0.04);
+        let zhat_plain = plain.update(&z).unwrap().predicted_measurement()[0];
+        let zhat_circular = circular.update(&z).unwrap().predicted_measurement()[0];
+        assert!(distance_to_pi(zhat_circular) < 0.06, "{zhat_circular}");
+        assert!(distance_to_pi(zhat_plain) > 1.0, "{zhat_plain}");
+    }
+
+    /// On a linear model without angles the spaces change nothing; an angle index beyond the
+    /// dimension is a typed error.
+    #[test]
+    fn spaces_without_angles_equal_the_plain_ukf_and_bad_indices_are_errors() {
+        let (f, h) = w1();
+        let t = truth(2, 30);
+        let x0 = Vector4::new(0.0, 0.0, 10.0, -5.0);
+        let set = SigmaSet::recommended(4);
+        let plain = Ukf::new(&f, &h, x0, p0(), set)
+            .unwrap()
+            .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+            .unwrap();
+        let spaced = Ukf::new(&f, &h, x0, p0(), set)
+            .unwrap()
+            .with_state_space(AngleComponents::new([]))
+            .unwrap()
+            .with_measurement_mean(AngleComponents::new([]))
+            .unwrap()
+            .run_collect(t.measurements.iter().map(Some), Start::UpdateFirst)
+            .unwrap();
+        for (a, b) in plain.iter().zip(&spaced) {
+            assert_relative_eq!(a.posterior().mean, b.posterior().mean, max_relative = 1e-12);
+            assert_relative_eq!(a.posterior().cov, b.posterior().cov, max_relative = 1e-12);
+        }
+        assert!(matches!(
+            Ukf::new(&f, &h, x0, p0(), set)
+                .unwrap()
+                .with_state_space(AngleComponents::new([4])),
+            Err(FilterError::InvalidParameter { .. })
+        ));
+        assert!(matches!(
+            Ukf::new(&f, &h, x0, p0(), set)
+                .unwrap()
+                .with_measurement_mean(AngleComponents::new([2])),
+            Err(FilterError::InvalidParameter { .. })
+        ));
+    }
 }

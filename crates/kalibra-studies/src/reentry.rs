@@ -72,8 +72,8 @@ pub fn noise_free_truth() -> Result<Vec<Vector4<f64>>, ModelError> {
 }
 
 /// The J1/J2 step metrics of one filter update, from its step record:
-/// `A = H F P+ F^T H^T`, `B = H Q H^T`, `R`, and `C = H P+_k H^T` ([`StepRecord::a`],
-/// [`StepRecord::b`], [`StepRecord::c`]).
+/// `A = H F P+ F^T H^T`, `B = H Q H^T`, `R`, and `C = H P+_k H^T` ([`StepRecord::compute_a`],
+/// [`StepRecord::compute_b`], [`StepRecord::compute_c`]).
 ///
 /// # Errors
 /// [`MetricsError`] if `S` is not positive definite or `A + B` is singular.
@@ -81,7 +81,12 @@ pub fn j_of<N: Dim, M: Dim>(rec: &StepRecord<N, M>) -> Result<JStep, MetricsErro
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    j_step(&rec.a(), &rec.b(), rec.r(), &rec.c())
+    j_step(
+        &rec.compute_a(),
+        &rec.compute_b(),
+        rec.r(),
+        &rec.compute_c(),
+    )
 }
 
 /// One point of a `Q = 10^p Q_nom` sweep, serialised in `results.json`.
