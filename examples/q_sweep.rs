@@ -45,7 +45,12 @@ fn main() -> Result<(), kalibra::Error> {
         let mut horizon = JHorizon::new();
         let mut squared = 0.0;
         for (record, x) in records.iter().zip(&truth.states) {
-            horizon.push(&j_step(&record.a(), &record.b(), record.r(), &record.c())?);
+            horizon.push(&j_step(
+                &record.compute_a(),
+                &record.compute_b(),
+                record.r(),
+                &record.compute_c(),
+            )?);
             let e = x - record.posterior().mean;
             squared += e[0] * e[0] + e[1] * e[1];
         }

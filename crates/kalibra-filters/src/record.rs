@@ -9,17 +9,9 @@ use nalgebra::{Matrix, Storage, storage::IsContiguous};
 use crate::as_given::{lu_ln_det, lu_solve};
 use crate::{FilterError, InitialCheck};
 
-/// A Gaussian estimate: mean and covariance.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Estimate<N: Dim>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    /// The mean `x`.
-    pub mean: OVector<f64, N>,
-    /// The covariance `P`.
-    pub cov: OMatrix<f64, N, N>,
-}
+/// A filter's Gaussian estimate: mean and covariance (the library's one mean-and-covariance
+/// type, [`kalibra_linalg::Gaussian`]).
+pub type Estimate<N> = kalibra_linalg::Gaussian<N>;
 
 /// Everything a measurement update at step `k` computed, so that metrics (NEES, NIS, J1/J2,
 /// NCI, surrogate bounds) need no recomputation and no access to the filter.
@@ -213,21 +205,6 @@ where
     /// symmetrised as [`StepRecord::compute_a`].
     pub fn compute_c(&self) -> OMatrix<f64, M, M> {
         self.projected(&self.posterior.cov)
-    }
-    /// Renamed [`StepRecord::compute_a`] (the name now says that it computes a new matrix).
-    #[deprecated(since = "0.1.0", note = "renamed to `compute_a`")]
-    pub fn a(&self) -> OMatrix<f64, M, M> {
-        self.compute_a()
-    }
-    /// Renamed [`StepRecord::compute_b`].
-    #[deprecated(since = "0.1.0", note = "renamed to `compute_b`")]
-    pub fn b(&self) -> OMatrix<f64, M, M> {
-        self.compute_b()
-    }
-    /// Renamed [`StepRecord::compute_c`].
-    #[deprecated(since = "0.1.0", note = "renamed to `compute_c`")]
-    pub fn c(&self) -> OMatrix<f64, M, M> {
-        self.compute_c()
     }
     /// The normalised estimation error squared `e^T (P+_k)^-1 e` of an error `e = x_k - x+_k`
     /// (either sign) against the posterior covariance.

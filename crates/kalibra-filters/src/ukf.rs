@@ -396,7 +396,7 @@ where
 /// ukf.predict()?;
 /// let record = ukf.update(&Vector1::new(0.11))?;
 /// // NIS = nu^2 / S for a scalar measurement, from the record's innovation and S.
-/// let direct = record.innovation()[0].powi(2) / record.s().matrix()[(0, 0)];
+/// let direct = record.innovation()[0].powi(2) / record.s_matrix()[(0, 0)];
 /// assert!((record.nis() - direct).abs() <= 1e-12 * direct);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```

@@ -2,7 +2,7 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-use crate::Alloc;
+use crate::{Alloc, LinalgError, check_dim};
 
 /// A Gaussian `N(mean, cov)` given by its mean and covariance, as plain data.
 ///
@@ -44,16 +44,13 @@ where
 {
     /// The Gaussian with mean `mean` and covariance `cov`.
     ///
-    /// # Panics
-    /// If the dimensions disagree (`Dyn` sizes only; `Const` sizes are checked by the
-    /// compiler): a programmer's mistake, not a property of data.
-    pub fn new(mean: OVector<f64, N>, cov: OMatrix<f64, N, N>) -> Self {
-        assert_eq!(
-            (cov.nrows(), cov.ncols()),
-            (mean.len(), mean.len()),
-            "Gaussian::new: the covariance must be n x n for a mean of length n"
-        );
-        Self { mean, cov }
+    /// # Errors
+    /// [`LinalgError::DimensionMismatch`] if the covariance is not `n x n` for a mean of
+    /// length `n` (possible with `Dyn` sizes only; `Const` sizes are checked by the compiler).
+    pub fn new(mean: OVector<f64, N>, cov: OMatrix<f64, N, N>) -> Result<Self, LinalgError> {
+        check_dim(mean.len(), cov.nrows(), "covariance rows")?;
+        check_dim(mean.len(), cov.ncols(), "covariance columns")?;
+        Ok(Self { mean, cov })
     }
 
     /// The dimension `n`.
@@ -69,15 +66,23 @@ mod tests {
 
     #[test]
     fn new_keeps_both_parts_by_name() {
-        let g = Gaussian::new(Vector2::new(1.0, -1.0), Matrix2::new(2.0, 0.5, 0.5, 1.0));
+        let g = Gaussian::new(Vector2::new(1.0, -1.0), Matrix2::new(2.0, 0.5, 0.5, 1.0)).unwrap();
         assert_eq!(g.mean, Vector2::new(1.0, -1.0));
         assert_eq!(g.cov, Matrix2::new(2.0, 0.5, 0.5, 1.0));
         assert_eq!(g.dim(), 2);
     }
 
     #[test]
-    #[should_panic(expected = "must be n x n")]
     fn new_rejects_mismatched_dynamic_sizes() {
-        let _ = Gaussian::new(DVector::zeros(2), DMatrix::zeros(3, 3));
+        let err = Gaussian::new(DVector::zeros(2), DMatrix::zeros(3, 3)).unwrap_err();
+        assert_eq!(
+            err,
+            LinalgError::DimensionMismatch {
+                what: "covariance rows",
+                expected: 2,
+                found: 3
+            }
+        );
+        assert!(Gaussian::new(DVector::zeros(2), DMatrix::zeros(2, 3)).is_err());
     }
 }
