@@ -40,7 +40,7 @@ fn batch_means_small_case_by_hand() {
 }
 
 #[test]
-fn batch_means_paper_004_layout() {
+fn batch_means_of_a_long_trajectory() {
     // 1e5 steps, burn-in 1e4, batch 250: 90_000 / 250 = 360 batch means.
     let series: Vec<f64> = (0..100_000).map(|k| f64::from(k % 7)).collect();
     let means = batch_means(&series, 250, 10_000).unwrap();
