@@ -1,8 +1,9 @@
 //! Spall and Wei's surrogate uncertainty bounds for the error of an EKF or a constant-gain
-//! filter, from one trajectory (paper 004).
+//! filter, from one trajectory ("Uncertainty bounds for state estimates with applications in
+//! target tracking", AIAA Defense Forum 2023).
 //!
 //! # Notation
-//! The filter error `e_k = x_k - x_hat_k` (this paper's sign) of a model
+//! The filter error `e_k = x_k - x_hat_k` (Spall and Wei's sign) of a model
 //! `x_k = f(x_{k-1}) + w_k`, `z_k = H x_k + v_k` obeys
 //! `e_{k+1} = (I - K_{k+1} H) F_{k+1} e_k + (I - K_{k+1} H) w_{k+1} - K_{k+1} v_{k+1}`, an AR
 //! process with random coefficients (`F_{k+1}` is a mean-value Jacobian, not computable). The

@@ -1,9 +1,10 @@
-//! Paper 002's angular target: the angle / rate / acceleration model (eq 3) the filter uses,
-//! and a manoeuvring truth whose acceleration follows a profile plus white input noise.
+//! An angular target: the constant-acceleration angle / rate / acceleration model a filter
+//! uses ([`AngularTarget`]), and a manoeuvring truth whose acceleration follows a
+//! deterministic profile plus white input noise ([`ManoeuvringTarget`]).
 //!
-//! The paper gives the filter model and the noise levels but not the time step, the duration,
-//! the initial state or the true manoeuvre; [`ManoeuvringTarget::default`] is the spec's
-//! workable choice, and every one of those is a parameter.
+//! The model is the one of Minh, Luong, Bang and Toan, "Simulation and performance evaluation
+//! of EKF in angular coordinate tracking of highly maneuvering targets" (eqs 3 and 4). The
+//! truth's time step, duration, initial state, manoeuvre and input noise are all parameters.
 
 use kalibra_linalg::{Matrix1, Matrix3, U1, U3, Vector1, Vector3};
 use rand::Rng;
@@ -11,18 +12,18 @@ use rand_distr::{Distribution, StandardNormal};
 
 use crate::{Dynamics, LinearDynamics, LinearGaussian, LinearObservation, ModelError};
 
-/// The constant-acceleration angle model of paper 002, eq 3: state `[theta, theta', theta'']`,
+/// The constant-acceleration angle model: state `[theta, theta', theta'']`,
 /// `x_{k+1} = F x_k + w_k` with `F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]` and `w_k ~ N(0, Q)`,
-/// `Q` a per-step covariance as the paper prints it (eq 19).
+/// `Q` a per-step covariance.
 ///
-/// The paper calls the model nonlinear and tracks it with an EKF, but `f` is linear, so its
-/// Jacobian is `F` everywhere and the EKF is the linear Kalman filter.
+/// `f` is linear, so its Jacobian is `F` everywhere and an EKF on this model is the linear
+/// Kalman filter.
 ///
 /// ```
 /// use kalibra_models::{AngularTarget, Dynamics};
 /// use kalibra_linalg::Vector3;
 ///
-/// let model = AngularTarget::diagonal(0.01, [0.005, 0.05, 0.2])?; // paper 002's Q(2)
+/// let model = AngularTarget::diagonal(0.01, [0.005, 0.05, 0.2])?;
 /// let x = model.transition(0, &Vector3::new(0.0, 1.0, 2.0));
 /// assert!((x[0] - (0.01 + 0.5 * 2.0 * 1e-4)).abs() < 1e-15);
 /// # Ok::<(), kalibra_models::ModelError>(())
@@ -53,7 +54,7 @@ impl AngularTarget {
         })
     }
 
-    /// The model with a diagonal `Q = diag(q)` (paper 002's sets, eq 19).
+    /// The model with a diagonal `Q = diag(q)`.
     ///
     /// # Errors
     /// As [`AngularTarget::new`].
@@ -76,9 +77,10 @@ impl AngularTarget {
         self.inner.q().matrix()
     }
 
-    /// The angle-only measurement of eq 4: `z = theta + v`, `v ~ N(0, r)`, `H = [1 0 0]`.
+    /// The angle-only measurement: `z = theta + v`, `v ~ N(0, r)`, `H = [1 0 0]`.
     ///
-    /// The angle is not wrapped: paper 002's angles are small and unwrapped (degrees).
+    /// The angle is not wrapped: the model's angle is unwrapped (in any unit, degrees
+    /// included), so the residual is a plain difference.
     ///
     /// # Errors
     /// [`ModelError::Linalg`] unless `r` is finite and non-negative.
@@ -118,8 +120,8 @@ impl LinearDynamics<U3> for AngularTarget {
     }
 }
 
-/// One piece of a manoeuvre: an acceleration (deg/s^2 in paper 002) active on the half-open
-/// interval `[start, end)` of time (s).
+/// One piece of a manoeuvre: an angular acceleration (in the angle's unit per s^2) active on
+/// the half-open interval `[start, end)` of time (s).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Manoeuvre {
     /// A constant acceleration.
@@ -247,32 +249,6 @@ impl ManoeuvreProfile {
         Self { parts: Vec::new() }
     }
 
-    /// The spec's reading of paper 002's unstated manoeuvre: `+3` deg/s^2 on `[2, 4)` s, `-3`
-    /// on `[4, 6)`, `10 sin(2 pi 0.5 (t - 6))` on `[6, 14)` (the "strongly oscillating" phase the
-    /// paper discusses), zero elsewhere.
-    pub fn paper002() -> Self {
-        Self {
-            parts: vec![
-                Manoeuvre::Step {
-                    start: 2.0,
-                    end: 4.0,
-                    acceleration: 3.0,
-                },
-                Manoeuvre::Step {
-                    start: 4.0,
-                    end: 6.0,
-                    acceleration: -3.0,
-                },
-                Manoeuvre::Sine {
-                    start: 6.0,
-                    end: 14.0,
-                    amplitude: 10.0,
-                    frequency: 0.5,
-                },
-            ],
-        }
-    }
-
     /// The pieces.
     pub fn parts(&self) -> &[Manoeuvre] {
         &self.parts
@@ -301,11 +277,11 @@ impl ManoeuvreProfile {
     }
 }
 
-/// A manoeuvring angular target (the truth of paper 002's study).
+/// A manoeuvring angular target, as a truth for filters built on [`AngularTarget`].
 ///
 /// Sample `k` is at `t_k = k dt`, `k = 0 ..= K` with `K = round(duration / dt)`. The
 /// acceleration at sample `k` is `a_k = x0[2] + profile(t_k) + sigma_input n_k`, `n_k` standard
-/// normal: the paper's "acceleration input noise" is white jitter on the acceleration, not a
+/// normal: the acceleration input noise is white jitter on the acceleration, not a
 /// random walk. Angle and rate then move exactly under the constant acceleration `a_k` over
 /// the step: `theta_{k+1} = theta_k + theta'_k dt + a_k dt^2 / 2`, `theta'_{k+1} = theta'_k + a_k dt`.
 /// The truth is thus not the filter's model: the filter's `Q` is a tuning choice.
@@ -318,35 +294,19 @@ pub struct ManoeuvringTarget {
     x0: Vector3<f64>,
 }
 
-impl Default for ManoeuvringTarget {
-    /// The target of [`ManoeuvringTargetParams::default`].
-    fn default() -> Self {
-        let ManoeuvringTargetParams {
-            dt,
-            duration,
-            profile,
-            sigma_input,
-            x0,
-        } = ManoeuvringTargetParams::default();
-        Self {
-            dt,
-            duration,
-            profile,
-            sigma_input,
-            x0,
-        }
-    }
-}
-
 /// The parameters of a [`ManoeuvringTarget`], by name so that the three scalars (time step,
 /// duration, input noise) cannot be swapped silently.
 ///
 /// ```
-/// use kalibra_models::{ManoeuvreProfile, ManoeuvringTarget, ManoeuvringTargetParams};
+/// use kalibra_linalg::Vector3;
+/// use kalibra_models::{Manoeuvre, ManoeuvreProfile, ManoeuvringTarget, ManoeuvringTargetParams};
+/// let turn = Manoeuvre::Step { start: 1.0, end: 2.0, acceleration: 3.0 };
 /// let target = ManoeuvringTarget::new(ManoeuvringTargetParams {
+///     dt: 0.01,
 ///     duration: 5.0,
-///     profile: ManoeuvreProfile::none(),
-///     ..ManoeuvringTargetParams::default()
+///     profile: ManoeuvreProfile::new(vec![turn])?,
+///     sigma_input: 0.5,
+///     x0: Vector3::zeros(),
 /// })?;
 /// assert_eq!(target.steps(), 500);
 /// # Ok::<(), kalibra_models::ModelError>(())
@@ -363,20 +323,6 @@ pub struct ManoeuvringTargetParams {
     pub sigma_input: f64,
     /// The initial state `[theta_0, theta'_0, a_bias]`, finite.
     pub x0: Vector3<f64>,
-}
-
-impl Default for ManoeuvringTargetParams {
-    /// The spec's choice for paper 002: `dt = 0.01` s, 20 s, [`ManoeuvreProfile::paper002`],
-    /// input noise `0.8` deg/s^2 (printed), `x0 = 0`.
-    fn default() -> Self {
-        Self {
-            dt: 0.01,
-            duration: 20.0,
-            profile: ManoeuvreProfile::paper002(),
-            sigma_input: 0.8,
-            x0: Vector3::zeros(),
-        }
-    }
 }
 
 impl ManoeuvringTarget {
@@ -584,18 +530,57 @@ mod tests {
         assert_eq!(model.jacobian(3, &x), *model.f());
     }
 
+    /// A step then a sine, with a piece that overlaps the sine.
+    fn profile() -> ManoeuvreProfile {
+        ManoeuvreProfile::new(vec![
+            Manoeuvre::Step {
+                start: 1.0,
+                end: 2.0,
+                acceleration: 4.0,
+            },
+            Manoeuvre::Sine {
+                start: 2.0,
+                end: 6.0,
+                amplitude: 5.0,
+                frequency: 0.25,
+            },
+            Manoeuvre::Step {
+                start: 5.0,
+                end: 6.0,
+                acceleration: -1.0,
+            },
+        ])
+        .unwrap()
+    }
+
+    /// A 10 s target sampled at 0.1 s with input noise.
+    fn target() -> ManoeuvringTarget {
+        ManoeuvringTarget::new(ManoeuvringTargetParams {
+            dt: 0.1,
+            duration: 10.0,
+            profile: profile(),
+            sigma_input: 0.5,
+            x0: Vector3::zeros(),
+        })
+        .unwrap()
+    }
+
     #[test]
-    fn profile_is_half_open_and_scales() {
-        let p = ManoeuvreProfile::paper002();
-        assert_eq!(p.acceleration(1.999), 0.0);
-        assert_eq!(p.acceleration(2.0), 3.0);
-        assert_eq!(p.acceleration(4.0), -3.0);
-        assert_eq!(p.acceleration(6.0), 0.0); // sin(0)
-        assert!((p.acceleration(6.5) - 10.0).abs() < 1e-12);
-        assert_eq!(p.acceleration(14.0), 0.0);
+    fn profile_is_half_open_adds_overlaps_and_scales() {
+        let p = profile();
+        assert_eq!(p.parts().len(), 3);
+        assert_eq!(p.acceleration(0.999), 0.0);
+        assert_eq!(p.acceleration(1.0), 4.0);
+        assert_eq!(p.acceleration(2.0), 0.0); // the step has ended, the sine is at sin(0)
+        assert!((p.acceleration(3.0) - 5.0).abs() < 1e-12); // a quarter period in
+        assert!(
+            (p.acceleration(5.5) - (5.0 * (1.75 * std::f64::consts::PI).sin() - 1.0)).abs() < 1e-12
+        );
+        assert_eq!(p.acceleration(6.0), 0.0);
+        assert_eq!(ManoeuvreProfile::none().acceleration(3.0), 0.0);
         let s = p.scaled(2.0).unwrap();
-        assert!((s.acceleration(6.5) - 20.0).abs() < 1e-12);
-        assert_eq!(s.acceleration(3.0), 6.0);
+        assert!((s.acceleration(3.0) - 10.0).abs() < 1e-12);
+        assert_eq!(s.acceleration(1.5), 8.0);
         assert!(p.scaled(f64::NAN).is_err());
     }
 
@@ -628,15 +613,15 @@ mod tests {
 
     #[test]
     fn draws_are_seeded_and_sized() {
-        let target = ManoeuvringTarget::default();
-        assert_eq!(target.steps(), 2000);
+        let target = target();
+        assert_eq!(target.steps(), 100);
         let a = target.truth(&mut ChaCha8Rng::seed_from_u64(1));
         let b = target.truth(&mut ChaCha8Rng::seed_from_u64(1));
         assert_eq!(a, b);
-        assert_eq!(a.len(), 2001);
+        assert_eq!(a.len(), 101);
         let z =
             ManoeuvringTarget::measurements(&a, 0.25, &mut ChaCha8Rng::seed_from_u64(2)).unwrap();
-        assert_eq!(z.len(), 2000);
+        assert_eq!(z.len(), 100);
     }
 
     #[test]
@@ -662,11 +647,6 @@ mod tests {
             ManoeuvringTarget::new(with(0.1, 1.0, 0.1, Vector3::new(f64::NAN, 0.0, 0.0))),
             Err(ModelError::NonFinite { .. })
         ));
-        // The default target is the default parameters, checked or not.
-        assert_eq!(
-            ManoeuvringTarget::new(ManoeuvringTargetParams::default()).unwrap(),
-            ManoeuvringTarget::default()
-        );
         assert!(
             ManoeuvreProfile::new(vec![Manoeuvre::Step {
                 start: 2.0,
@@ -675,11 +655,11 @@ mod tests {
             }])
             .is_err()
         );
-        let target = ManoeuvringTarget::default();
+        let target = target();
         assert!(target.truth_from_noise(&[0.0; 3]).is_err());
-        let truth = target.truth_from_noise(&vec![0.0; 2001]).unwrap();
+        let truth = target.truth_from_noise(&[0.0; 101]).unwrap();
         assert!(ManoeuvringTarget::measurements_from_noise(&truth, 0.25, &[0.0; 3]).is_err());
-        assert!(ManoeuvringTarget::measurements_from_noise(&truth, -1.0, &[0.0; 2000]).is_err());
+        assert!(ManoeuvringTarget::measurements_from_noise(&truth, -1.0, &[0.0; 100]).is_err());
         assert!(AngularTarget::diagonal(-0.1, [1.0; 3]).is_err());
         assert!(AngularTarget::diagonal(0.1, [1.0, -1.0, 1.0]).is_err());
     }

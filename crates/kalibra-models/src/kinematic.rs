@@ -349,7 +349,7 @@ mod tests {
     }
 
     #[test]
-    fn interleaved_ca_matches_paper_004_blocks() {
+    fn interleaved_ca_has_per_axis_blocks() {
         let dt = 0.05;
         let m = Kinematic::constant_acceleration(3, dt)
             .unwrap()

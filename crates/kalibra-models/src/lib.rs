@@ -8,9 +8,10 @@
 //! * Concrete models: [`Kinematic`] constant-velocity and constant-acceleration models in any
 //!   number of axes, [`LinearGaussian`] and [`LinearObservation`] for any `F, Q, H, R`,
 //!   [`WithInput`] for a known control input, [`Bearing`] from a moving [`Platform`], the
-//!   ballistic re-entry models of papers 000 and 003, and paper 002's angular target
-//!   ([`AngularTarget`], with the manoeuvring truth [`ManoeuvringTarget`]), and paper 004's
-//!   3-D target with nonlinear acceleration ([`Target3d`], per axis [`AccelAxis`]).
+//!   ballistic re-entry models of papers 000 and 003, the constant-acceleration angular target
+//!   ([`AngularTarget`], with a manoeuvring truth [`ManoeuvringTarget`] driven by a
+//!   [`ManoeuvreProfile`]), and a 3-D target with nonlinear acceleration ([`Target3d`], per
+//!   axis [`AccelAxis`], parameters [`Target3dParams`]).
 //! * Paper 001's three bearings-only tracking problems as ready scenarios ([`BotScenario`]:
 //!   truth, platform, the filter's models and initialisation), on a [`Bearing`] whose target
 //!   coordinates may be constants ([`Coordinate`]) and which models translational noise.
@@ -76,5 +77,5 @@ pub use kinematic::{Kinematic, Layout, Order, ProcessNoise};
 pub use linear::{LinearGaussian, LinearObservation, WithInput};
 pub use noise::{sample_with_factor, standard_normal};
 pub use simulate::{Simulator, Truth, TruthStep, simulate, simulate_until};
-pub use target3d::{AccelAxis, Target3d, Target3dParams, Target3dReading};
+pub use target3d::{AccelAxis, Target3d, Target3dParams};
 pub use traits::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};

@@ -1,5 +1,9 @@
-//! Paper 004's 3-D target with nonlinear acceleration: `f(x) = A x + u(x)` on the state
+//! A 3-D target with nonlinear acceleration: `f(x) = A x + u(x)` on the state
 //! `[p_x, v_x, a_x, p_y, v_y, a_y, p_z, v_z, a_z]`, and its per-axis blocks.
+//!
+//! The model is the one of Spall and Wei, "Uncertainty bounds for state estimates with
+//! applications in target tracking" (AIAA Defense Forum 2023), with every coefficient a
+//! parameter ([`Target3dParams`]).
 //!
 //! Every block of `A`, `u`, `Q` (and of the measurement models offered here) acts on one axis
 //! only, so the 9-state model is three independent 3-state models ([`AccelAxis`]) side by
@@ -19,37 +23,40 @@ type Matrix9 = SMatrix<f64, 9, 9>;
 /// 9-vectors.
 type Vector9 = SMatrix<f64, 9, 1>;
 
-/// The parameters of paper 004's target (defaults: the printed values with the velocity-row
-/// typo fixed).
+/// The parameters of a [`Target3d`] (and of each [`AccelAxis`]), by name.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Target3dParams {
-    /// Sampling interval `Delta T` (printed 0.05).
+    /// Sampling interval `dt` (s).
     pub dt: f64,
-    /// Process-noise scale `sigma_w` (printed 4): each axis's noise is `sigma_w b n`,
+    /// Process-noise scale `sigma_w`: each axis's noise is `sigma_w b n`,
     /// `b = [dt^2/2, dt, 1]`, `n ~ N(0, 1)`.
     pub sigma_w: f64,
-    /// The `(2, 2)` entry of each block of `A` (velocity row). Printed 0, which makes velocity
-    /// forget itself every step; the constant-acceleration block has 1, the default.
+    /// The `(2, 2)` entry of each block of `A` (velocity row): 1 in a constant-acceleration
+    /// block; 0 makes velocity forget itself every step.
     pub velocity_diagonal: f64,
-    /// The linear coefficient of the acceleration in `u` (printed -0.5, so that with `A`'s 1
-    /// the acceleration map is `a' = 0.5 a + 0.5 sin a`; -1 gives `a' = 0.5 sin a`).
+    /// The linear coefficient `c_a` of the acceleration in `u`: with `A`'s 1 the acceleration
+    /// map is `a' = (1 + c_a) a + amp g(a)` (-0.5 gives `0.5 a + amp g(a)`, -1 gives
+    /// `amp g(a)` alone).
     pub accel_coefficient: f64,
-    /// Amplitude of the sine (x, z) or cosine (y) term in `u` (printed 0.5).
+    /// Amplitude `amp` of the sine (x, z) or cosine (y) term `g` in `u`.
     pub accel_amplitude: f64,
-    /// Linear damping of position and velocity in `u` per axis (printed -0.1 for x, -0.05 for
-    /// y and z).
+    /// Linear damping `d` of position and velocity in `u`, per axis (x, y, z); 0 for none,
+    /// negative to pull position and velocity toward zero.
     pub damping: [f64; 3],
 }
 
 impl Default for Target3dParams {
+    /// A constant-acceleration block per axis (velocity diagonal 1, no damping) with unit noise
+    /// scale at `dt = 0.1`, whose acceleration follows `a' = 0.5 a + 0.5 g(a)`: a contraction,
+    /// so the acceleration stays bounded while position and velocity integrate it.
     fn default() -> Self {
         Self {
-            dt: 0.05,
-            sigma_w: 4.0,
+            dt: 0.1,
+            sigma_w: 1.0,
             velocity_diagonal: 1.0,
             accel_coefficient: -0.5,
             accel_amplitude: 0.5,
-            damping: [-0.1, -0.05, -0.05],
+            damping: [0.0; 3],
         }
     }
 }
@@ -87,43 +94,7 @@ impl Target3dParams {
     }
 }
 
-/// The named readings of paper 004's measurement model, which was lost in conversion (the
-/// spec's three; each is [`Target3dParams`] plus `H` and `R`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Target3dReading {
-    /// Positions observed, `R = sigma_v^2 I = 4 I`: plausible from the text.
-    Positions,
-    /// Positions and velocities observed, `R = 4 I`: keeps every printed number.
-    PositionsVelocities,
-    /// Positions observed, `R = sigma_v^2 dt I = 0.2 I`, acceleration coefficient -1 instead
-    /// of the printed -0.5: fitted to the paper's Table 2, not stated in the text.
-    Fitted,
-}
-
-impl Target3dReading {
-    /// Every reading.
-    pub const ALL: [Self; 3] = [Self::Positions, Self::PositionsVelocities, Self::Fitted];
-
-    /// The model parameters.
-    pub fn params(self) -> Target3dParams {
-        Target3dParams {
-            accel_coefficient: if self == Self::Fitted { -1.0 } else { -0.5 },
-            ..Target3dParams::default()
-        }
-    }
-
-    /// The measurement noise variance per observed component.
-    pub fn r(self) -> f64 {
-        if self == Self::Fitted { 0.2 } else { 4.0 }
-    }
-
-    /// Whether velocities are observed as well as positions.
-    pub fn observes_velocity(self) -> bool {
-        self == Self::PositionsVelocities
-    }
-}
-
-/// One axis of paper 004's target: state `[p, v, a]`,
+/// One axis of a [`Target3d`]: state `[p, v, a]`,
 /// `p' = (1 + d) p + dt v + dt^2/2 a`, `v' = (c_v + d) v + dt a`,
 /// `a' = (1 + c_a) a + amp g(a)` with `g = sin` on the x and z axes and `cos` on y, plus the
 /// rank-one noise `sigma_w b n`, `b = [dt^2/2, dt, 1]`.
@@ -234,8 +205,8 @@ impl Dynamics<U3> for AccelAxis {
     }
 }
 
-/// Paper 004's 9-state target, `f(x) = A x + u(x)`: three [`AccelAxis`] blocks in the paper's
-/// state order `[p_x, v_x, a_x, p_y, v_y, a_y, p_z, v_z, a_z]`.
+/// The 9-state target, `f(x) = A x + u(x)`: three [`AccelAxis`] blocks in the state order
+/// `[p_x, v_x, a_x, p_y, v_y, a_y, p_z, v_z, a_z]`.
 ///
 /// ```
 /// use kalibra_models::{check_dynamics_jacobian, Target3d, Target3dParams};
@@ -370,21 +341,32 @@ mod tests {
     }
 
     #[test]
-    fn printed_values_and_the_typo_fix() {
-        let p = Target3dParams::default();
+    fn coefficients_land_where_the_model_says() {
+        let p = Target3dParams {
+            dt: 0.2,
+            sigma_w: 3.0,
+            velocity_diagonal: 0.5,
+            accel_coefficient: -0.25,
+            accel_amplitude: 2.0,
+            damping: [-0.1, -0.2, -0.3],
+        };
         let x = AccelAxis::new(p, 0).unwrap();
         let j = x.jacobian(0, &Vector3::zeros());
-        // Position damped by 0.1 on x; velocity row has 1 (the printed 0 fixed) minus 0.1;
-        // acceleration 1 - 0.5 + 0.5 cos(0) = 1.
+        // Position 1 + d_x; velocity c_v + d_x; acceleration 1 + c_a + amp cos(0).
         assert!((j[(0, 0)] - 0.9).abs() < 1e-15);
-        assert!((j[(1, 1)] - 0.9).abs() < 1e-15);
-        assert!((j[(2, 2)] - 1.0).abs() < 1e-15);
-        // y uses cos: a' = 0.5 a + 0.5 cos a, so a = 0 maps to 0.5.
+        assert!((j[(0, 1)] - 0.2).abs() < 1e-15);
+        assert!((j[(0, 2)] - 0.02).abs() < 1e-15);
+        assert!((j[(1, 1)] - 0.4).abs() < 1e-15);
+        assert!((j[(1, 2)] - 0.2).abs() < 1e-15);
+        assert!((j[(2, 2)] - 2.75).abs() < 1e-15);
+        // y uses cos: a' = 0.75 a + 2 cos a, so a = 0 maps to 2; z has its own damping.
         let y = AccelAxis::new(p, 1).unwrap();
-        assert!((y.transition(0, &Vector3::zeros())[2] - 0.5).abs() < 1e-15);
+        assert!((y.transition(0, &Vector3::zeros())[2] - 2.0).abs() < 1e-15);
+        let z = AccelAxis::new(p, 2).unwrap();
+        assert!((z.jacobian(0, &Vector3::zeros())[(0, 0)] - 0.7).abs() < 1e-15);
         let q = x.noise_cov(0);
-        let b = Vector3::new(0.00125, 0.05, 1.0);
-        assert!((q - b * b.transpose() * 16.0).amax() < 1e-15);
+        let b = Vector3::new(0.02, 0.2, 1.0);
+        assert!((q - b * b.transpose() * 9.0).amax() < 1e-15);
     }
 
     #[test]
