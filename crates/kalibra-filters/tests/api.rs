@@ -329,7 +329,7 @@ mod as_given {
     /// The opt-in KF and EKF reproduce the replay's numbers bit for bit on the printed `P0`,
     /// through steps where `S` is indefinite.
     #[test]
-    fn the_as_given_kf_and_ekf_equal_paper_000s_replay_to_the_bit() {
+    fn the_as_given_kf_and_ekf_equal_a_hand_written_lu_replay_to_the_bit() {
         let mut indefinite = 0;
         for p in [-8.0, -2.0, 0.0, 1.0] {
             let (f, meas) = models(p);
