@@ -1,6 +1,12 @@
 //! Paper 000's set-up: the printed `x0`, `P0`, `R` and `Q_nom`, Table I as printed, the
 //! claimed crossover range, the readings of what the paper leaves open, and the noise-free
 //! position measurements of the shared re-entry truth ([`crate::reentry`]).
+//!
+//! The paper's eq 18 converts radar range and elevation to Cartesian position with a noise
+//! covariance that depends on the range and elevation
+//! ([`kalibra_models::ConvertedPosition`]); it calls `sr` and `se` variances, but its values,
+//! 100 m and 0.017/57.3 rad, are standard deviations. Its filters use the constant printed `R`
+//! instead, and so does this study.
 
 use kalibra_linalg::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use serde::Serialize;
