@@ -29,7 +29,6 @@
 //!   `P0 = P_ad`, `Q_guess = Qt` on the noise-free measurements.
 //! * Observability (Fig. 3, not defined in the paper): singular values of
 //!   `O_k = [H_k; H_{k+1} F_k; H_{k+2} F_{k+1} F_k; H_{k+3} ...]` along the noise-free truth.
-
 //!
 //! # Layout
 //! `scenario.rs` holds the published values, Tables II and III and the readings, `run.rs` the
