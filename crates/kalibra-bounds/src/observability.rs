@@ -7,8 +7,8 @@ use crate::BoundsError;
 /// The singular values, largest first, of `O_k = [H_k; H_{k+1} F_k; ...;
 /// H_{k+d-1} F_{k+d-2} ... F_k]` (`d = depth` blocks), where `f[j]` is the transition Jacobian
 /// from step `j` to `j + 1` and `h[j]` the measurement Jacobian at step `j`, both at the true
-/// state. Paper 003 plots such values (its Fig. 3) without defining the matrix; this is the
-/// usual local (`depth = n`) observability matrix of the linearised system.
+/// state. Saha, Ghosh and Goswami (2014, Fig. 3) plot such values without defining the
+/// matrix; this is the usual local (`depth = n`) observability matrix of the linearised system.
 ///
 /// ```
 /// use kalibra_bounds::observability_singular_values;

@@ -19,12 +19,12 @@
 //! Bounds: `0 <= J1k <= m` when `R_k` and `A_k + B_k` are positive semi-definite (then the
 //! eigenvalues of `S^-1 R` lie in `[0, 1]`), and `0 <= J2k <= m` when `A_k` and `B_k` are
 //! positive semi-definite with a non-singular sum. An indefinite initial covariance (as printed
-//! in paper 000) can make `A_k + B_k` indefinite and break the second bound; [`j_step`] reports
+//! in the 2012 paper) can make `A_k + B_k` indefinite and break the second bound; [`j_step`] reports
 //! that in [`JStep::a_plus_b_definite`] instead of hiding it.
 //!
-//! Over a horizon (paper 000 and 003): `J1 = sum_k J1k / divisor`, `J2` likewise, and the
-//! process-noise level `nq` in decades, either the mean of `log10 tr(B_k)` (paper 000) or
-//! `log10` of the mean of `tr(B_k)` (paper 003); see [`JHorizon`].
+//! Over a horizon: `J1 = sum_k J1k / divisor`, `J2` likewise, and the process-noise level `nq`
+//! in decades, either the mean of `log10 tr(B_k)` (the 2012 paper) or `log10` of the mean of
+//! `tr(B_k)` (the 2014 paper); see [`JHorizon`].
 //!
 //! # Numerical choices
 //! Every trace is of a solve through a factorisation, never of an explicit inverse: Cholesky
@@ -62,7 +62,7 @@ pub struct JStep {
 
 /// `J1k`, `J2k`, `tr(N_k)` and `tr(B_k)` of one update from `A_k`, `B_k`, `R_k` and `C_k`.
 ///
-/// Notation (papers 000 and 003), for an update with `m` measurements:
+/// Notation (as in the module documentation), for an update with `m` measurements:
 /// `A_k = H_k F P+_{k-1} F^T H_k^T`, `B_k = H_k Q_{k-1} H_k^T`, `S_k = A_k + B_k + R_k`,
 /// `C_k = H_k P+_k H_k^T`; `J1k = tr(S_k^-1 R_k)`, `J2k = tr((A_k + B_k)^-1 B_k)`,
 /// `N_k = (A_k + B_k)^-1 (A_k - C_k)`, and `J1k + J2k = m - tr(N_k)` at the optimal gain.
@@ -208,9 +208,10 @@ pub struct JSummary {
     pub j1: f64,
     /// `J2 = sum_k J2k / divisor`.
     pub j2: f64,
-    /// Mean over the updates of `log10 tr(B_k)` (paper 000's `nq`); `-inf` if some `B_k` is 0.
+    /// Mean over the updates of `log10 tr(B_k)` (the 2012 paper's `nq`); `-inf` if some `B_k`
+    /// is 0.
     pub nq_mean_log10: f64,
-    /// `log10` of the mean over the updates of `tr(B_k)` (paper 003's `nq`).
+    /// `log10` of the mean over the updates of `tr(B_k)` (the 2014 paper's `nq`).
     pub nq_log10_mean: f64,
     /// Number of updates pushed.
     pub updates: usize,
@@ -228,8 +229,8 @@ pub struct JSummary {
 /// runs, through [`Merge`]).
 ///
 /// The papers divide the sums of `J1k` and `J2k` by the horizon length even when the filter
-/// skipped some points (paper 000 starts two steps late, paper 003 runs 59 updates over a
-/// horizon of 60), so [`JHorizon::summary`] takes the divisor explicitly; the `nq` averages
+/// skipped some points (a filter started from two-point differencing misses the first two,
+/// for instance), so [`JHorizon::summary`] takes the divisor explicitly; the `nq` averages
 /// divide by the number of updates.
 ///
 /// ```

@@ -5,7 +5,7 @@ use crate::MetricsError;
 /// `ITSE = integral of t e(t)^2 dt`, by the trapezoid rule over samples `(t_k, e_k^2)`.
 /// Pass mean squared errors over Monte Carlo runs to get the mean ITSE (the integral is
 /// linear). Weighting by `t` makes late errors count more than the initial transient, which is
-/// why paper 003 uses it to compare tunings.
+/// why Saha, Ghosh and Goswami (2014) use it to compare tunings.
 ///
 /// ```
 /// // e^2 = 1 on [0, 2]: ITSE = 2^2 / 2 = 2.

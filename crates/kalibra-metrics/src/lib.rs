@@ -10,7 +10,7 @@
 //!   per-step scalar) and [`SquaredErrors`] (RMSE per step, per component, for groups such as
 //!   position and velocity, and over time). They implement [`Merge`], so partial results from
 //!   parallel runs combine in a fixed order.
-//! * Innovation-covariance tuning metrics (papers 000 and 003): [`j_step`] computes `J1k`,
+//! * Innovation-covariance tuning metrics (Saha et al. 2012, 2014): [`j_step`] computes `J1k`,
 //!   `J2k` and `tr(N_k)` of one update, [`JHorizon`] averages them over a horizon with the
 //!   process-noise level `nq`, and [`crossover`] finds where `J1` and `J2` cross along a sweep
 //!   of the process-noise scale.

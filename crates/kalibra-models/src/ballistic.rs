@@ -1,5 +1,5 @@
-//! Two-dimensional ballistic re-entry with air drag (Farina, Ristic and Benvenuti 2002), as
-//! papers 000 and 003 use it, and the radar measurements of those papers.
+//! Two-dimensional ballistic re-entry with air drag (Farina, Ristic and Benvenuti 2002), its
+//! drag-free linear counterpart, and two radar measurement models for it.
 //!
 //! # Notation
 //! State `x = [x1, x1dot, x2, x2dot]`: down-range, its rate, altitude, its rate (m, m/s); the
@@ -11,15 +11,11 @@
 //! `u = [0, -g]` (gravity as a known input), and the drag acceleration
 //! `fkk(x) = -rho(x2) g v [x1dot, x2dot] / (2 beta)`, `v = |[x1dot, x2dot]|`, with the
 //! piecewise exponential air density `rho(h) = C1 exp(-C2 h)`. The map is discrete: one Euler
-//! step of the continuous model per sample, exactly as the papers write it.
-//!
-//! Paper 003 prints `G` as `[[T^2/2, 0], [0, T^2/2], [0, 0], [0, 0]]`, a layout typo (it would
-//! leave the velocities without gravity); `G` here is the one of the source paper (Farina et
-//! al.) that both papers cite.
+//! step of the continuous model per sample, as Farina et al. write it, with their `G`.
 //!
 //! # Numerical choices
 //! The density switches at 9144 m (30 000 ft): below it `(C1, C2) = (1.227, 1.093e-4)`, at or
-//! above it `(1.754, 1.490e-4)` (003's reading of the boundary; 000 leaves `x2 = 9144` open).
+//! above it `(1.754, 1.490e-4)` (the boundary belongs to the upper piece).
 //! The analytic Jacobian is the one-sided derivative on the current piece; it is undefined at
 //! the switch and at zero speed (`v = 0`), where this module returns the limit without the
 //! `x dot x dot^T / v` term.
@@ -313,7 +309,8 @@ impl Dynamics<U4> for Ballistic {
     }
 }
 
-/// The ballistic model without drag: `x_{k+1} = F1 x_k + G u + w_k` (paper 000's "KF").
+/// The ballistic model without drag: `x_{k+1} = F1 x_k + G u + w_k`, the linear model a
+/// Kalman filter can run on when it ignores drag.
 #[derive(Clone, Debug)]
 pub struct BallisticDragFree {
     params: Params,
@@ -359,16 +356,15 @@ impl LinearDynamics<U4> for BallisticDragFree {
     }
 }
 
-/// Radar range and elevation converted to Cartesian position (paper 000, eq 18):
+/// Radar range and elevation converted to Cartesian position:
 /// `z = [x1, x2] + v`, `v ~ N(0, RA(r, eps))` with
 /// `RA = [[sr^2 c^2 + r^2 se^2 s^2, (sr^2 - r^2 se^2) s c], [., sr^2 s^2 + r^2 se^2 c^2]]`,
 /// `c = cos eps`, `s = sin eps`, at the true range `r` and elevation `eps`. `sr` and `se` are
-/// standard deviations (the paper calls them variances; its values, 100 m and
-/// 0.017/57.3 rad, are standard deviations).
+/// the standard deviations of range (m) and elevation (rad).
 ///
 /// A filter that evaluates [`Measurement::noise_cov`] passes its prior estimate, so this type
-/// also serves a filter that models the converted noise; paper 000's filters use a constant
-/// `R` instead ([`crate::LinearObservation`]).
+/// also serves a filter that models the converted noise; a filter with a constant `R` uses
+/// [`crate::LinearObservation`] instead.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ConvertedPosition {
     sigma_range: f64,
@@ -455,12 +451,12 @@ impl LinearMeasurement<U4, U2> for ConvertedPosition {
     }
 }
 
-/// Radar range rate, elevation and sightline rate (paper 003, eq 3), with the radar at the
+/// Radar range rate, elevation and sightline rate, with the radar at the
 /// origin: `h(x) = [(x1 x1dot + x2 x2dot) / r, atan2(x2, x1), (x1 x2dot - x2 x1dot) / r^2]`,
 /// `r = |[x1, x2]|`. The elevation residual is wrapped into (-pi, pi].
 ///
-/// 003 writes the elevation as `tan^-1(x2 / x1)`; `atan2` agrees with it for a target
-/// down-range (`x1 > 0`) and stays continuous when `x1` changes sign.
+/// `atan2(x2, x1)` equals the elevation `tan^-1(x2 / x1)` for a target down-range (`x1 > 0`)
+/// and stays continuous when `x1` changes sign.
 ///
 /// ```
 /// use kalibra_models::{RadarRates, check_measurement_jacobian};

@@ -1,11 +1,12 @@
-//! Tuning: sweeps `Q = 10^p Q_nom` over a grid of `p`, and the initial tuning of paper 003
-//! (two-point differencing, `P_ad` of eq 22, `Q_ad` of eq 23).
+//! Tuning: sweeps `Q = 10^p Q_nom` over a grid of `p`, and initial tuning: two-point
+//! differencing for the initial state, and the adaptive initial covariance `P_ad` and process
+//! noise `Q_ad` of Saha, Ghosh and Goswami (IEEE TIM 2014, eqs 22 and 23).
 //!
 //! # Notation
 //! `N` states, `M` measurements; `F_{k-1}` the transition Jacobian at step `k - 1`, `H_k` the
-//! measurement Jacobian at step `k`, `R` the measurement-noise covariance. Paper 003 evaluates
-//! eq 22 "in an offline EKF with `Q = 0`"; [`p_ad`] takes the trajectory to evaluate it along,
-//! so the caller chooses (the reproduction uses the noise-free truth, which reproduces Table II).
+//! measurement Jacobian at step `k`, `R` the measurement-noise covariance. The method
+//! evaluates `P_ad` "in an offline EKF with `Q = 0`"; [`p_ad`] takes the trajectory to
+//! evaluate it along, so the caller chooses (a noise-free truth, or a filter's estimates).
 
 use std::ops::RangeInclusive;
 
@@ -179,8 +180,8 @@ pub fn two_point_init<const N: usize, const D: usize>(
     Ok(Gaussian { mean: x, cov: out })
 }
 
-/// `P_ad` of paper 003, eq 22: `[(1/n) sum_{k=1..n} F_{k-1}^T H_k^T R_k^-1 H_k F_{k-1}]^-1`,
-/// with `F_{k-1}` the dynamics Jacobian at `states[k-1]` (step `first_step + k - 1`) and
+/// The adaptive initial covariance `P_ad` (Saha, Ghosh and Goswami 2014, eq 22):
+/// `[(1/n) sum_{k=1..n} F_{k-1}^T H_k^T R_k^-1 H_k F_{k-1}]^-1`, with `F_{k-1}` the dynamics Jacobian at `states[k-1]` (step `first_step + k - 1`) and
 /// `H_k`, `R_k` the measurement Jacobian and noise at `states[k]`; `n = states.len() - 1`.
 ///
 /// # Errors
@@ -223,10 +224,11 @@ where
     Ok(info.inverse())
 }
 
-/// `Q_ad` of paper 003, eq 23: `(1/n) sum_{k=1..n} [Q_guess - (P+_k - P-_k)]` over the
-/// `(P-_k, P+_k)` pairs of a filter run with `Q = Q_guess` (paper 003 starts it from
-/// `P_ad`). The result is symmetrised; it need not be positive semi-definite, and is not
-/// checked (a paper's value is reported as computed).
+/// The adaptive process noise `Q_ad` (Saha, Ghosh and Goswami 2014, eq 23):
+/// `(1/n) sum_{k=1..n} [Q_guess - (P+_k - P-_k)]` over the `(P-_k, P+_k)` pairs of a filter
+/// run with `Q = Q_guess` (the method starts that filter from [`p_ad`]). The result is
+/// symmetrised; it need not be positive semi-definite, and is not checked (the value is
+/// returned as computed, for the caller to judge).
 ///
 /// # Errors
 /// [`TuningError::TooShort`] for no pairs; [`TuningError::Linalg`] for sizes that differ from

@@ -10,6 +10,13 @@
 //! noise-free measurements (the papers call the metrics an offline computation; the KF's J
 //! values do not depend on the measurements at all, the EKF's only through its linearisation
 //! point).
+//!
+//! # Readings of the papers
+//! * Paper 003 prints `G` as `[[T^2/2, 0], [0, T^2/2], [0, 0], [0, 0]]`, a layout typo (it
+//!   would leave the velocities without gravity); [`Ballistic`] uses the `G` of the source
+//!   paper (Farina et al.) that both papers cite.
+//! * The air density switches at 9144 m; at exactly 9144 m the upper piece applies, which is
+//!   003's reading of the boundary (000 leaves `x2 = 9144` open).
 
 use kalibra_filters::StepRecord;
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, Matrix4, Vector4};

@@ -9,6 +9,7 @@
 //! | filter | output for `0.0123` |
 //! |---|---|
 //! | `x \| fixed(3)` | `0.012` |
+//! | `x \| signed(3)` | `+0.012` (always a sign, as Rust's `{:+.3}`) |
 //! | `x \| percent(1)` | `1.2` (the value times 100) |
 //! | `x \| sci(2)` | `1.23e-2` |
 //! | `text \| cell` | the text with `\|` escaped, for a table cell |
@@ -46,6 +47,11 @@ fn special(v: f64) -> Option<String> {
 fn fixed(value: Value, digits: Option<usize>) -> Result<String, minijinja::Error> {
     let v = number(&value)?;
     Ok(special(v).unwrap_or_else(|| format!("{:.*}", digits.unwrap_or(3), v)))
+}
+
+fn signed(value: Value, digits: Option<usize>) -> Result<String, minijinja::Error> {
+    let v = number(&value)?;
+    Ok(special(v).unwrap_or_else(|| format!("{:+.*}", digits.unwrap_or(3), v)))
 }
 
 fn percent(value: Value, digits: Option<usize>) -> Result<String, minijinja::Error> {
@@ -100,6 +106,7 @@ pub fn render(name: &str, source: &str, context: &impl Serialize) -> Result<Stri
     env.set_lstrip_blocks(true);
     env.set_keep_trailing_newline(true);
     env.add_filter("fixed", fixed);
+    env.add_filter("signed", signed);
     env.add_filter("percent", percent);
     env.add_filter("sci", sci);
     env.add_filter("cell", cell);
@@ -141,6 +148,8 @@ mod tests {
         assert_eq!(out, "0.01 1.2 1.2e-2 3.0 a\\|b");
         assert_eq!(fixed(Value::from(f64::NAN), None).unwrap(), "n/a");
         assert_eq!(percent(Value::from(f64::INFINITY), None).unwrap(), "inf");
+        assert_eq!(signed(Value::from(0.0123), Some(2)).unwrap(), "+0.01");
+        assert_eq!(signed(Value::from(-0.0001), Some(3)).unwrap(), "-0.000");
     }
 
     #[test]

@@ -150,7 +150,7 @@ mod tests {
 
     /// Every figure has data; the crossover is marked; the readings figure names each reading.
     #[test]
-    fn saha2012_figures_have_data() {
+    fn figures_have_data() {
         let report = run(&Config::quick()).unwrap();
         let figures = figures(&report);
         let names: Vec<&str> = figures.iter().map(|(n, _)| n.as_str()).collect();

@@ -220,7 +220,7 @@ mod tests {
 
     /// Every figure of the quick study has data and no NaN in its text.
     #[test]
-    fn figures2014_are_valid_svg() {
+    fn figures_are_drawable() {
         let report = run(&Config::quick()).unwrap();
         let figures = figures(&report);
         let names: Vec<&str> = figures.iter().map(|(n, _)| n.as_str()).collect();
@@ -242,7 +242,7 @@ mod tests {
 
     /// Interpolation between sweep rows, and `None` outside them.
     #[test]
-    fn figures2014_interpolate_in_nq() {
+    fn figures_interpolate_in_nq() {
         let row = |nq: f64, j1: f64| SweepRow {
             p: nq,
             nq,
