@@ -1,7 +1,9 @@
-//! The run: the configuration, the paper's filter arithmetic ([`replay`]), Table I and the
+//! The run: the configuration, the as-given filter runs and their J metrics ([`replay`]), Table I and the
 //! fine sweeps of every reading, and the report they fill.
 
+use kalibra_filters::{Ekf, Filter, FilterOptions, Kf, Start, StepRecord};
 use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector2, Vector4};
+use kalibra_models::{Ballistic, LinearObservation};
 use serde::Serialize;
 
 use super::scenario::{
@@ -53,71 +55,61 @@ pub struct ReplayStep {
     pub definite: bool,
 }
 
-/// A KF/EKF run in the paper's arithmetic: `x- = f(x+)`, `F` the Jacobian at `x+`,
-/// `P- = F P F^T + Q`, `S = H P- H^T + R`, `K = P- H^T S^-1` by LU, Joseph update, and the J
-/// metrics of every update by LU solves. It exists because paper 000's printed `P0` is
-/// indefinite (and asymmetric), which makes `S` indefinite at some steps: the library filters
-/// refuse that with a typed error, as they should, while the published numbers come from
-/// arithmetic that carries on. On valid inputs it equals the library's filters (a test checks
-/// it to 1e-9), so it adds no other difference. `zs[i]` is the measurement at step
-/// `first_step + 1 + i`.
+/// A KF (drag-free, [`Ballistic::drag_free`]) or EKF run from `p0` as given, with the J metrics of every update in the paper's
+/// arithmetic. The filter is the library's, through its explicit opt-in
+/// ([`Kf::as_given`], [`Ekf::as_given`]): paper 000's printed `P0` is asymmetric and
+/// indefinite, which makes `S` indefinite at some steps, and the as-given filter carries on
+/// with LU solves where a checked filter would (rightly) stop with a typed error. The J
+/// metrics are computed here by LU too, since the library's `j_step` refuses the asymmetric
+/// `A_k` such a run produces. `zs[i]` is the measurement at step `first_step + 1 + i`.
 ///
 /// # Errors
-/// [`StudyError::Harness`] if `S` or `A + B` is singular.
-pub fn replay<D: kalibra_models::Dynamics<U4>>(
-    dynamics: &D,
+/// [`StudyError::Filter`] if the filter fails (a singular `S`), [`StudyError::Harness`] if
+/// `S` or `A + B` is singular in the J metrics.
+pub fn replay(
+    dynamics: &Ballistic,
     r: &Matrix2<f64>,
     x0: Vector4<f64>,
     p0: Matrix4<f64>,
     first_step: usize,
+    kind: FilterKind,
     zs: &[Vector2<f64>],
 ) -> Result<Vec<ReplayStep>, StudyError> {
-    let h = h();
-    let (mut x, mut p) = (x0, p0);
-    let singular =
-        |what: &str, k: usize| StudyError::Harness(format!("{what} singular at step {k}"));
-    let mut out = Vec::with_capacity(zs.len());
-    for (i, z) in zs.iter().enumerate() {
-        let k = first_step + i + 1;
-        let f = dynamics.jacobian(k - 1, &x);
-        let q = dynamics.noise_cov(k - 1);
-        x = dynamics.transition(k - 1, &x);
-        let propagated = f * p * f.transpose();
-        let prior = propagated + q;
-        let a = h * propagated * h.transpose();
-        let b = h * q * h.transpose();
-        let s = h * prior * h.transpose() + r;
-        let s_lu = s.lu();
-        // K = P- H^T S^-1 exactly, also when P- (hence S) is asymmetric: K^T = S^-T H P-^T.
-        let gain = s
-            .transpose()
-            .lu()
-            .solve(&(h * prior.transpose()))
-            .ok_or_else(|| singular("S", k))?
-            .transpose();
-        x += gain * (z - h * x);
-        let ikh = Matrix4::identity() - gain * h;
-        p = ikh * prior * ikh.transpose() + gain * r * gain.transpose();
-        let c = h * p * h.transpose();
-        let ab = a + b;
-        let ab_lu = ab.lu();
-        let trace_solve = |lu: &kalibra_linalg::nalgebra::LU<f64, U2, U2>, y: &Matrix2<f64>| {
-            lu.solve(y).map(|m| m.trace())
-        };
-        let j1 = trace_solve(&s_lu, r).ok_or_else(|| singular("S", k))?;
-        let j2 = trace_solve(&ab_lu, &b).ok_or_else(|| singular("A + B", k))?;
-        let tr_n = trace_solve(&ab_lu, &(a - c)).ok_or_else(|| singular("A + B", k))?;
-        let sym = |m: Matrix2<f64>| (m + m.transpose()) * 0.5;
-        let definite = sym(s).cholesky().is_some() && sym(ab).cholesky().is_some();
-        out.push(ReplayStep {
-            j1,
-            j2,
-            tr_n,
-            tr_b: b.trace(),
-            definite,
-        });
-    }
-    Ok(out)
+    let meas = LinearObservation::<U4, U2>::new(h(), *r)?;
+    let options = FilterOptions {
+        first_step,
+        ..FilterOptions::default()
+    };
+    let measurements = zs.iter().map(Some);
+    let records = match kind {
+        FilterKind::Kf => Kf::as_given(dynamics.drag_free(), &meas, x0, p0, options)?
+            .run_collect(measurements, Start::PredictFirst)?,
+        FilterKind::Ekf => Ekf::as_given(dynamics, &meas, x0, p0, options)?
+            .run_collect(measurements, Start::PredictFirst)?,
+    };
+    records.iter().map(j_lu).collect()
+}
+
+/// The J metrics of one as-given update by LU solves, and whether `S` and `A + B`
+/// (symmetrised) were positive definite.
+fn j_lu(rec: &StepRecord<U4, U2>) -> Result<ReplayStep, StudyError> {
+    let k = rec.step();
+    let singular = |what: &str| StudyError::Harness(format!("{what} singular at step {k}"));
+    let (s, r) = (*rec.s_matrix(), *rec.r());
+    let (a, b, c) = (rec.compute_a(), rec.compute_b(), rec.compute_c());
+    let ab = a + b;
+    let (s_lu, ab_lu) = (s.lu(), ab.lu());
+    let trace_solve = |lu: &kalibra_linalg::nalgebra::LU<f64, U2, U2>, y: &Matrix2<f64>| {
+        lu.solve(y).map(|m| m.trace())
+    };
+    let sym = |m: Matrix2<f64>| (m + m.transpose()) * 0.5;
+    Ok(ReplayStep {
+        j1: trace_solve(&s_lu, &r).ok_or_else(|| singular("S"))?,
+        j2: trace_solve(&ab_lu, &b).ok_or_else(|| singular("A + B"))?,
+        tr_n: trace_solve(&ab_lu, &(a - c)).ok_or_else(|| singular("A + B"))?,
+        tr_b: b.trace(),
+        definite: sym(s).cholesky().is_some() && sym(ab).cholesky().is_some(),
+    })
 }
 
 /// J1, J2 and nq of one filter at one `p`.
@@ -136,17 +128,15 @@ fn point(
     // y_k is measurements[k - 1]; the filter processes y_{first_step + 1} onwards.
     let zs = &setup.measurements[reading.first_step..];
     let dynamics = reentry::dynamics(q)?;
-    let steps = match kind {
-        FilterKind::Kf => replay(
-            &dynamics.drag_free(),
-            &r,
-            x0_printed(),
-            p0,
-            reading.first_step,
-            zs,
-        )?,
-        FilterKind::Ekf => replay(&dynamics, &r, x0_printed(), p0, reading.first_step, zs)?,
-    };
+    let steps = replay(
+        &dynamics,
+        &r,
+        x0_printed(),
+        p0,
+        reading.first_step,
+        kind,
+        zs,
+    )?;
     let updates = steps.len();
     let divisor = if reading.divide_by_horizon {
         setup.horizon()
@@ -321,12 +311,11 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kalibra_filters::{Ekf, Filter, FilterOptions, Kf, Start};
-    use kalibra_linalg::{U2, Vector4};
-    use kalibra_models::LinearObservation;
+    use kalibra_linalg::Vector4;
 
-    /// The replay is the library's KF/EKF arithmetic: on a valid (positive definite) `P0`
-    /// both give the same J values.
+    /// On a valid (positive definite) `P0` the as-given runs and their LU J metrics equal the
+    /// checked filters and the library's `j_step`: the opt-in changes nothing where it is not
+    /// needed.
     #[test]
     fn replay_equals_the_library_filters_on_valid_inputs() {
         let setup = Setup::new().unwrap();
@@ -340,8 +329,8 @@ mod tests {
         };
         for p in [-8.0, -4.0, 1.0] {
             let dynamics = reentry::dynamics(reentry::scaled(&q_nom(), p)).unwrap();
-            let ours = replay(&dynamics, &r, x0_printed(), p0, 2, zs).unwrap();
-            let ours_kf = replay(&dynamics.drag_free(), &r, x0_printed(), p0, 2, zs).unwrap();
+            let ours = replay(&dynamics, &r, x0_printed(), p0, 2, FilterKind::Ekf, zs).unwrap();
+            let ours_kf = replay(&dynamics, &r, x0_printed(), p0, 2, FilterKind::Kf, zs).unwrap();
             let mut ekf = Ekf::with_options(&dynamics, &meas, x0_printed(), p0, options).unwrap();
             let ekf_records = ekf
                 .run_collect(zs.iter().map(Some), Start::PredictFirst)
