@@ -91,13 +91,68 @@ impl NamedFigure {
     }
 }
 
+/// A study's configuration: the sizes it comes in and what every run may override (the seed,
+/// the thread count). Implement it with [`study_config!`](crate::study_config).
+pub trait StudyConfig: Serialize + Sized {
+    /// The configuration of `size`.
+    fn for_size(size: Size) -> Self;
+    /// The seed the configuration runs with, `None` when the study draws nothing at random.
+    fn seed(&self) -> Option<u64>;
+    /// Replaces the seed (ignored by a study without randomness).
+    fn set_seed(&mut self, seed: u64);
+    /// Sets the thread count (0: every core).
+    fn set_threads(&mut self, threads: usize);
+
+    /// The configuration `options` select: its size, with the seed and thread count applied.
+    fn from_options(options: &Options) -> Self {
+        let mut config = Self::for_size(options.size);
+        if let Some(seed) = options.seed {
+            config.set_seed(seed);
+        }
+        config.set_threads(options.threads);
+        config
+    }
+}
+
+/// Implements [`StudyConfig`] for a configuration type with `paper()` and `quick()`
+/// constructors and a `threads` field: `study_config!(Config, seed)` when it has a `seed: u64`
+/// field, `study_config!(Config)` when the study draws nothing at random.
+#[macro_export]
+macro_rules! study_config {
+    ($config:ty, seed) => {
+        $crate::study_config!(@impl $config, |c: &$config| Some(c.seed), |c: &mut $config, s| c.seed = s);
+    };
+    ($config:ty) => {
+        $crate::study_config!(@impl $config, |_: &$config| None, |_: &mut $config, _| ());
+    };
+    (@impl $config:ty, $get:expr, $set:expr) => {
+        impl $crate::study::StudyConfig for $config {
+            fn for_size(size: $crate::study::Size) -> Self {
+                match size {
+                    $crate::study::Size::Paper => Self::paper(),
+                    $crate::study::Size::Quick => Self::quick(),
+                }
+            }
+            fn seed(&self) -> Option<u64> {
+                ($get)(self)
+            }
+            fn set_seed(&mut self, seed: u64) {
+                ($set)(self, seed)
+            }
+            fn set_threads(&mut self, threads: usize) {
+                self.threads = threads;
+            }
+        }
+    };
+}
+
 /// One reproduced study, with its own configuration and report types.
 ///
 /// Implement this for a study and add one line to [`crate::REGISTRY`]; `cargo xtask reproduce`
 /// and the tests find it there.
 pub trait Study: Sync {
     /// Size, seed and parameters of a run.
-    type Config: Serialize;
+    type Config: StudyConfig;
     /// Everything the run computed, serialised to `results.json`.
     type Report: Serialize;
 
@@ -113,10 +168,14 @@ pub trait Study: Sync {
 
     /// The configuration for `options` (the published or quick size, with the seed and thread
     /// count applied).
-    fn config(&self, options: &Options) -> Self::Config;
+    fn config(&self, options: &Options) -> Self::Config {
+        Self::Config::from_options(options)
+    }
 
     /// The seed `config` runs with, `None` when the study draws nothing at random.
-    fn seed(&self, config: &Self::Config) -> Option<u64>;
+    fn seed(&self, config: &Self::Config) -> Option<u64> {
+        config.seed()
+    }
 
     /// What a run of `config` is about to do, in one line (printed before a long run).
     fn describe(&self, config: &Self::Config) -> String;

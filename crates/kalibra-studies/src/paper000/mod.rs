@@ -46,7 +46,7 @@ pub use scenario::{
 
 use crate::StudyError;
 use crate::claims::Claim;
-use crate::study::{NamedFigure, Options, Size, Study};
+use crate::study::{NamedFigure, Study};
 
 /// The report's template (prose with the numbers filled in from [`Report`]).
 const TEMPLATE: &str = include_str!("report.md");
@@ -54,6 +54,8 @@ const TEMPLATE: &str = include_str!("report.md");
 /// The study, as the registry lists it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper000;
+
+crate::study_config!(Config);
 
 impl Study for Paper000 {
     type Config = Config;
@@ -71,19 +73,6 @@ impl Study for Paper000 {
         Some(
             "Saha, Goswami, Ghosh, \"Two novel metrics for determining the tuning parameters of the Kalman filter\", ACODS 2012",
         )
-    }
-
-    fn config(&self, options: &Options) -> Config {
-        let mut config = match options.size {
-            Size::Paper => Config::paper(),
-            Size::Quick => Config::quick(),
-        };
-        config.threads = options.threads;
-        config
-    }
-
-    fn seed(&self, _config: &Config) -> Option<u64> {
-        None
     }
 
     fn describe(&self, _config: &Config) -> String {
@@ -138,7 +127,7 @@ mod tests {
     /// The template renders at quick size (every field it names exists).
     #[test]
     fn markdown_renders() {
-        let config = Paper000.config(&Options::quick());
+        let config = Paper000.config(&crate::study::Options::quick());
         let report = Paper000.run(&config).unwrap();
         assert!(Paper000.markdown(&config, &report).is_ok());
     }

@@ -852,6 +852,8 @@ impl Report {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper001;
 
+crate::study_config!(Config, seed);
+
 impl Study for Paper001 {
     type Config = Config;
     type Report = Report;

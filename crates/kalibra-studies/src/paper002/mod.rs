@@ -50,7 +50,7 @@ pub use scenario::{
 
 use crate::StudyError;
 use crate::claims::Claim;
-use crate::study::{NamedFigure, Options, Size, Study};
+use crate::study::{NamedFigure, Study};
 
 /// The report's template (prose with the numbers filled in from [`Report`]).
 const TEMPLATE: &str = include_str!("report.md");
@@ -58,6 +58,8 @@ const TEMPLATE: &str = include_str!("report.md");
 /// The study, as the registry lists it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper002;
+
+crate::study_config!(Config, seed);
 
 impl Study for Paper002 {
     type Config = Config;
@@ -75,22 +77,6 @@ impl Study for Paper002 {
         Some(
             "Minh, Luong, Bang, Toan, \"Simulation and performance evaluation of EKF in angular coordinate tracking of highly maneuvering targets\"",
         )
-    }
-
-    fn config(&self, options: &Options) -> Config {
-        let mut config = match options.size {
-            Size::Paper => Config::paper(),
-            Size::Quick => Config::quick(),
-        };
-        if let Some(seed) = options.seed {
-            config.seed = seed;
-        }
-        config.threads = options.threads;
-        config
-    }
-
-    fn seed(&self, config: &Config) -> Option<u64> {
-        Some(config.seed)
     }
 
     fn describe(&self, config: &Config) -> String {

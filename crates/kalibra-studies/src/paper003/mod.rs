@@ -52,7 +52,7 @@ pub use scenario::{
 use crate::StudyError;
 use crate::claims::Claim;
 use crate::paper000::Entry;
-use crate::study::{NamedFigure, Options, Size, Study};
+use crate::study::{NamedFigure, Study};
 
 /// The report's template (prose with the numbers filled in from [`Report`]).
 const TEMPLATE: &str = include_str!("report.md");
@@ -60,6 +60,8 @@ const TEMPLATE: &str = include_str!("report.md");
 /// The study, as the registry lists it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper003;
+
+crate::study_config!(Config, seed);
 
 impl Study for Paper003 {
     type Config = Config;
@@ -77,22 +79,6 @@ impl Study for Paper003 {
         Some(
             "Saha, Ghosh, Goswami, \"Robustness and sensitivity metrics for tuning the extended Kalman filter\", IEEE TIM 2014",
         )
-    }
-
-    fn config(&self, options: &Options) -> Config {
-        let mut config = match options.size {
-            Size::Paper => Config::paper(),
-            Size::Quick => Config::quick(),
-        };
-        if let Some(seed) = options.seed {
-            config.seed = seed;
-        }
-        config.threads = options.threads;
-        config
-    }
-
-    fn seed(&self, config: &Config) -> Option<u64> {
-        Some(config.seed)
     }
 
     fn describe(&self, config: &Config) -> String {
@@ -158,7 +144,7 @@ mod tests {
     /// numbers: six J claims of the `paper` reading within their tolerances, and `P_ad`.
     #[test]
     fn claims_follow_the_report_and_markdown_renders() {
-        let config = Paper003.config(&Options::quick());
+        let config = Paper003.config(&crate::study::Options::quick());
         let report = Paper003.run(&config).unwrap();
         assert!(Paper003.markdown(&config, &report).is_ok());
         let claims = Paper003.claims(&report);

@@ -45,7 +45,7 @@ pub use scenario::{
 
 use crate::StudyError;
 use crate::claims::Claim;
-use crate::study::{NamedFigure, Options, Size, Study};
+use crate::study::{NamedFigure, Study};
 
 /// The report's template (prose with the numbers filled in from [`Report`]).
 const TEMPLATE: &str = include_str!("report.md");
@@ -53,6 +53,8 @@ const TEMPLATE: &str = include_str!("report.md");
 /// The study, as the registry lists it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper004;
+
+crate::study_config!(Config, seed);
 
 impl Study for Paper004 {
     type Config = Config;
@@ -70,22 +72,6 @@ impl Study for Paper004 {
         Some(
             "Spall and Wei, \"Uncertainty bounds for state estimates with applications in target tracking\", AIAA Defense Forum 2023",
         )
-    }
-
-    fn config(&self, options: &Options) -> Config {
-        let mut config = match options.size {
-            Size::Paper => Config::paper(),
-            Size::Quick => Config::quick(),
-        };
-        if let Some(seed) = options.seed {
-            config.seed = seed;
-        }
-        config.threads = options.threads;
-        config
-    }
-
-    fn seed(&self, config: &Config) -> Option<u64> {
-        Some(config.seed)
     }
 
     fn describe(&self, config: &Config) -> String {

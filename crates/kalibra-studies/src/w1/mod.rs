@@ -22,7 +22,7 @@ pub use scenario::{models, prior};
 
 use crate::StudyError;
 use crate::claims::Claim;
-use crate::study::{NamedFigure, Options, Size, Study};
+use crate::study::{NamedFigure, Study};
 
 /// The W1 study, as the registry lists it.
 #[derive(Clone, Copy, Debug, Default)]
@@ -33,6 +33,8 @@ const TEMPLATE: &str = include_str!("report.md");
 
 /// Steps the report's table samples (those past the end of a short run are left out).
 const SHOWN_STEPS: [usize; 10] = [0, 1, 2, 5, 10, 20, 50, 100, 200, 500];
+
+crate::study_config!(Config, seed);
 
 impl Study for W1 {
     type Config = Config;
@@ -48,22 +50,6 @@ impl Study for W1 {
 
     fn paper(&self) -> Option<&'static str> {
         None
-    }
-
-    fn config(&self, options: &Options) -> Config {
-        let mut config = match options.size {
-            Size::Paper => Config::paper(),
-            Size::Quick => Config::quick(),
-        };
-        if let Some(seed) = options.seed {
-            config.seed = seed;
-        }
-        config.threads = options.threads;
-        config
-    }
-
-    fn seed(&self, config: &Config) -> Option<u64> {
-        Some(config.seed)
     }
 
     fn describe(&self, config: &Config) -> String {
