@@ -11,9 +11,8 @@
 //!   ballistic re-entry models of papers 000 and 003, and paper 002's angular target
 //!   ([`AngularTarget`], with the manoeuvring truth [`ManoeuvringTarget`]), and paper 004's
 //!   3-D target with nonlinear acceleration ([`Target3d`], per axis [`AccelAxis`]).
-//! * Paper 001's three bearings-only tracking problems as ready scenarios ([`BotScenario`]:
-//!   truth, platform, the filter's models and initialisation), on a [`Bearing`] whose target
-//!   coordinates may be constants ([`Coordinate`]) and which models translational noise.
+//! * A [`Bearing`] whose target coordinates may be constants ([`Coordinate`], a target on a
+//!   known line) and which models translational noise.
 //! * Seeded truth simulation ([`Simulator`], [`simulate`], [`simulate_until`]), where the truth
 //!   may use models and noise the filter does not.
 //! * [`check_dynamics_jacobian`] and [`check_measurement_jacobian`]: finite-difference checks
@@ -47,7 +46,6 @@
 mod angle;
 mod ballistic;
 mod bearing;
-mod bot;
 mod error;
 mod jacobian;
 mod kinematic;
@@ -67,7 +65,6 @@ pub use ballistic::{
 pub use bearing::{
     Bearing, BearingReference, Coordinate, Moving, Platform, Stationary, Tabulated, wrap_angle,
 };
-pub use bot::{BotProblem, BotRun, BotScenario, BotStart};
 pub use error::ModelError;
 pub use jacobian::{
     FD_RELATIVE_STEP, JacobianCheck, check_dynamics_jacobian, check_measurement_jacobian,

@@ -14,7 +14,7 @@
 //!   see its documentation for every reading.
 //! * Filters as in `kalibra-filters`: [`Ukf`] with the symmetric set of eqs 16-18 and the linear
 //!   prediction of Alg. 1 (exact here: every problem's dynamics are linear); the adaptive
-//!   filters search [`KappaGrid::paper001`] (10 values on `[0, 19 n]`). UKF-MPP is eq 26 with
+//!   filters search [`kappa_grid`] (10 values on `[0, 19 n]`). UKF-MPP is eq 26 with
 //!   its inverses restored ([`KappaCriterion::MaximumPosterior`]); we also report the pure MAP
 //!   reading ([`KappaCriterion::PureMap`]) as a sixth filter, "UKF-MAP", because the spec found
 //!   it, not eq 26, closer to the paper's UKF-MPP numbers.
@@ -36,19 +36,22 @@
 //!   within 0.5 dB.
 
 mod figures;
+mod scenario;
+
+pub use scenario::{BotProblem, BotRun, BotScenario, BotStart, kappa_grid};
 
 use crate::study::{NamedFigure, Options, Size, Study};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
 use kalibra_filters::UkfPrediction;
-use kalibra_filters::{Ekf, Filter, FilterError, KappaCriterion, KappaGrid, SigmaSet, Srf, Ukf};
+use kalibra_filters::{Ekf, Filter, FilterError, KappaCriterion, SigmaSet, Srf, Ukf};
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, U1, U2, U4};
 use kalibra_metrics::{
     ChiSquareBand, Credibility, Merge, SquaredErrors, StepMean, consistent_median_nees, nees,
     time_average,
 };
-use kalibra_models::{BotProblem, BotRun, BotScenario, BotStart, Dynamics};
+use kalibra_models::Dynamics;
 use kalibra_sim::MonteCarlo;
 use serde::Serialize;
 
@@ -309,7 +312,7 @@ where
         )
     };
     let adaptive = |criterion| -> Result<_, FilterError> {
-        ukf()?.with_adaptive_kappa(criterion, KappaGrid::paper001(n)?)
+        ukf()?.with_adaptive_kappa(criterion, kappa_grid(n)?)
     };
     let kappa = |u: &Ukf<N, U1, _, _>| u.last_kappa();
     match FILTERS[which] {

@@ -19,7 +19,7 @@ use kalibra_linalg::{
 };
 use rand::Rng;
 
-use crate::{
+use kalibra_models::{
     Bearing, BearingReference, Coordinate, Dynamics, Kinematic, LinearGaussian, ModelError,
     ProcessNoise, Tabulated, simulate, standard_normal,
 };
@@ -112,7 +112,7 @@ pub enum BotStart {
 /// * Bearings are four-quadrant (`atan2`) and wrapped to (-pi, pi]; so are residuals.
 /// * The platform is a [`Tabulated`] table with one position per index; past its end it stays
 ///   put, so a filter run longer than `steps` sees a parked platform.
-/// * The truth measures `x_i`, then steps to `x_{i+1}` ([`crate::Simulator`]); the filter's
+/// * The truth measures `x_i`, then steps to `x_{i+1}` ([`kalibra_models::Simulator`]); the filter's
 ///   prediction is the exact linear one, with `Qd = G Q G^T`.
 ///
 /// # Problem I (metres, seconds; paper section IV.A, its reference \[8\])
@@ -183,7 +183,7 @@ pub enum BotStart {
 ///   index 0 and updates it with `z_0` ([`BotStart::UpdateFirst`]); metrics count from index 0.
 ///
 /// ```
-/// use kalibra_models::{BotScenario, BotStart};
+/// use kalibra_studies::paper001::{BotScenario, BotStart};
 /// use rand_chacha::{ChaCha8Rng, rand_core::SeedableRng};
 ///
 /// let scenario = BotScenario::problem_iii()?;
@@ -387,11 +387,11 @@ where
 
     /// Draws one run: the true initial state (problem III draws it from its prior; I and II
     /// start at fixed states and draw nothing here), then per index the bearing noise and the
-    /// process noise (see [`crate::Simulator::step`]), then the filter's initial estimate from
+    /// process noise (see [`kalibra_models::Simulator::step`]), then the filter's initial estimate from
     /// the bearings ([`BotScenario::initialize`]). A run is fixed by the generator's state.
     ///
     /// ```
-    /// use kalibra_models::BotScenario;
+    /// use kalibra_studies::paper001::BotScenario;
     /// use rand_chacha::{ChaCha8Rng, rand_core::SeedableRng};
     ///
     /// let run = BotScenario::problem_ii()?.simulate(&mut ChaCha8Rng::seed_from_u64(3))?;
@@ -435,7 +435,7 @@ where
     /// [`BotScenario`] docs for each problem's formula.
     ///
     /// ```
-    /// use kalibra_models::BotScenario;
+    /// use kalibra_studies::paper001::BotScenario;
     /// use kalibra_linalg::{Gaussian, Vector1};
     ///
     /// // Problem I: a bearing of 45 degrees puts the target 20 m along x from the platform.
@@ -606,7 +606,7 @@ fn check_state_dim<N: Dim>(n: N, expected: usize) -> Result<(), ModelError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Measurement, Platform, wrap_angle};
+    use kalibra_models::{Measurement, Platform, wrap_angle};
     use rand_chacha::ChaCha8Rng;
     use rand_chacha::rand_core::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
@@ -1086,7 +1086,7 @@ mod tests {
         // An independent implementation's runs (tests/data/README in the shared data): their
         // truth cannot be reproduced (another generator), but their bearings must be our
         // measurement function of their truth plus noise of the stated size.
-        let text = include_str!("../../../tests/data/bot-problem3-traces.json");
+        let text = include_str!("../data/bot-problem3-traces.json");
         let data: serde_json::Value = serde_json::from_str(text).unwrap();
         let s = BotScenario::problem_iii().unwrap();
         let num = |v: &serde_json::Value| v.as_f64().unwrap();
