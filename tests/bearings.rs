@@ -18,6 +18,7 @@ use kalibra::models::{Bearing, BearingReference, LinearGaussian, Moving};
 use kalibra::sim::MonteCarlo;
 use kalibra_studies::claims::Verdict;
 use kalibra_studies::paper001::{self, BotProblem, BotScenario, Config, FILTERS, kappa_grid};
+use kalibra_studies::study::Study;
 use serde_json::Value;
 
 fn trace() -> Value {
@@ -312,6 +313,10 @@ fn quick_study_reproduces_what_the_spec_says_reproduces() {
         ..Config::quick()
     };
     let report = paper001::run(&config).unwrap();
+    // The report's template renders at this size.
+    paper001::Paper001
+        .markdown(&config, &report)
+        .expect("the report renders");
     let cell = |problem: &str, metric: &str, filter: &str| {
         report
             .claims
