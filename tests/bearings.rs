@@ -4,23 +4,28 @@
 //! stay positive definite and bearings that cross +-pi without a jump on problem II; the
 //! claims that reproduce at quick size; thread invariance.
 //!
-//! `tests/data/bot-problem3-traces.json` is a copy of `shared/data/bot-problem3-traces.json`:
+//! `crates/kalibra-studies/src/paper001/data/bot-problem3-traces.json` is a copy of
+//! `shared/data/bot-problem3-traces.json`:
 //! three runs of problem III (truth, bearings, and every filter's estimates) from an
 //! independent Python implementation (numpy, float64). Two independent implementations agreed
 //! on it to about 1e-11; we compare to 1e-9 relative.
 
 use kalibra::filters::{
-    Ekf, Filter, KappaCriterion, KappaGrid, SigmaSet, Srf, StepRecord, Ukf, UkfPrediction,
+    Ekf, Filter, KappaCriterion, SigmaSet, Srf, StepRecord, Ukf, UkfPrediction,
 };
 use kalibra::linalg::{Matrix2, U1, U2, U4, Vector1, Vector2};
-use kalibra::models::{Bearing, BearingReference, BotProblem, BotScenario, LinearGaussian, Moving};
+use kalibra::models::{Bearing, BearingReference, LinearGaussian, Moving};
 use kalibra::sim::MonteCarlo;
 use kalibra_studies::claims::Verdict;
-use kalibra_studies::paper001::{self, Config, FILTERS};
+use kalibra_studies::paper001::{self, BotProblem, BotScenario, Config, FILTERS, kappa_grid};
+use kalibra_studies::study::Study;
 use serde_json::Value;
 
 fn trace() -> Value {
-    serde_json::from_str(include_str!("data/bot-problem3-traces.json")).expect("the trace parses")
+    serde_json::from_str(include_str!(
+        "../crates/kalibra-studies/src/paper001/data/bot-problem3-traces.json"
+    ))
+    .expect("the trace parses")
 }
 
 fn floats(v: &Value) -> Vec<f64> {
@@ -110,7 +115,7 @@ fn replays_the_independent_problem3_traces() {
     let data = trace();
     let config = &data["config"];
     assert_eq!(config["kappa_ukf"].as_f64(), Some(1.0));
-    let grid = KappaGrid::paper001(2).unwrap();
+    let grid = kappa_grid(2).unwrap();
     let trace_grid = floats(&config["kappa_grid"]);
     assert_eq!(grid.values().len(), trace_grid.len());
     for (a, b) in grid.values().iter().zip(&trace_grid) {
@@ -237,7 +242,7 @@ fn problem2_covariances_stay_positive_definite_and_bearings_do_not_jump() {
     let s = BotScenario::problem_ii().unwrap();
     let mc = MonteCarlo::new(40, 11);
     let (f, h) = (&s.dynamics, &s.measurement);
-    let grid = KappaGrid::paper001(4).unwrap();
+    let grid = kappa_grid(4).unwrap();
     let tau = 2.0 * std::f64::consts::PI;
     for i in 0..mc.runs() {
         let run = s.simulate(&mut mc.rng(i)).unwrap();
@@ -308,6 +313,10 @@ fn quick_study_reproduces_what_the_spec_says_reproduces() {
         ..Config::quick()
     };
     let report = paper001::run(&config).unwrap();
+    // The report's template renders at this size.
+    paper001::Paper001
+        .markdown(&config, &report)
+        .expect("the report renders");
     let cell = |problem: &str, metric: &str, filter: &str| {
         report
             .claims

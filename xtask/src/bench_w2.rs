@@ -17,8 +17,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use kalibra_filters::{Ekf, Filter, SigmaSet, Ukf, UkfPrediction};
 use kalibra_linalg::{U1, U2};
-use kalibra_models::{BotRun, BotScenario};
 use kalibra_sim::{MAX_BLOCKS, MonteCarlo};
+use kalibra_studies::paper001::{BotRun, BotScenario};
 use nalgebra::{Matrix2, RowVector2, Vector2};
 use rayon::prelude::*;
 

@@ -220,24 +220,6 @@ impl KappaGrid {
         Self::new(values)
     }
 
-    /// Paper 001's grid for state dimension `n`: 10 equidistant values on
-    /// `[0, 19 n]`. The upper end keeps every non-central weight `W_i = 1/(2(n + kappa))` at
-    /// least `0.025 / n`; the lower end keeps all weights non-negative, which keeps the
-    /// unscented covariances positive semi-definite (the paper says only that its minimum
-    /// "ensures positive definiteness").
-    ///
-    /// # Errors
-    /// [`FilterError::InvalidParameter`] for `n == 0`.
-    pub fn paper001(n: usize) -> Result<Self, FilterError> {
-        if n == 0 {
-            return Err(FilterError::InvalidParameter {
-                name: "state dimension",
-                value: 0.0,
-            });
-        }
-        Self::equidistant(0.0, 19.0 * n as f64, 10)
-    }
-
     /// The values.
     pub fn values(&self) -> &[f64] {
         &self.values

@@ -134,17 +134,16 @@ fn sigma_weights_sum_to_one_and_reject_an_empty_spread() {
 }
 
 #[test]
-fn kappa_grid_is_paper001s_and_validated() {
-    let g = KappaGrid::paper001(4).unwrap();
+fn kappa_grid_is_equidistant_and_validated() {
+    let g = KappaGrid::equidistant(0.0, 76.0, 10).unwrap();
     assert_eq!(g.values().len(), 10);
     assert_eq!(g.values()[0], 0.0);
     assert_eq!(g.values()[9], 76.0);
-    // The largest kappa keeps W_i = 1/(2(n + kappa)) at 0.025/n.
-    assert_relative_eq!(0.5 / (4.0 + 76.0), 0.025 / 4.0, epsilon = 1e-15);
+    assert_relative_eq!(g.values()[1], 76.0 / 9.0, epsilon = 1e-15);
     assert!(KappaGrid::new(vec![]).is_err());
     assert!(KappaGrid::new(vec![1.0, 1.0]).is_err());
     assert!(KappaGrid::new(vec![0.0, f64::INFINITY]).is_err());
-    assert!(KappaGrid::paper001(0).is_err());
+    assert!(KappaGrid::equidistant(0.0, 1.0, 0).is_err());
     // A grid value that makes n + kappa <= 0 is rejected when the filter adopts it.
     let (f, h) = w1();
     let ukf = Ukf::new(&f, &h, Vector4::zeros(), p0(), SigmaSet::recommended(4)).unwrap();
@@ -255,7 +254,7 @@ fn covariances_stay_symmetric_positive_definite_on_a_bearings_run() {
         .unwrap();
         if let Some(c) = criterion {
             ukf = ukf
-                .with_adaptive_kappa(c, KappaGrid::paper001(4).unwrap())
+                .with_adaptive_kappa(c, KappaGrid::equidistant(0.0, 76.0, 10).unwrap())
                 .unwrap();
         }
         ukf.run(t.measurements.iter().map(Some), Start::UpdateFirst, |rec| {
@@ -278,7 +277,7 @@ fn bad_measurements_give_typed_errors_and_leave_the_filter_untouched() {
         .unwrap()
         .with_adaptive_kappa(
             KappaCriterion::MaximumLikelihood,
-            KappaGrid::paper001(4).unwrap(),
+            KappaGrid::equidistant(0.0, 76.0, 10).unwrap(),
         )
         .unwrap();
     ukf.predict().unwrap();

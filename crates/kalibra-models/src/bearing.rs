@@ -162,7 +162,7 @@ pub enum Coordinate {
 ///
 /// # The measurement
 /// The target position is a pair of [`Coordinate`]s, each a state entry or a constant, so any
-/// state layout works and a target moving along a known line (paper 001's problem I: state `[x, xdot]`, target on
+/// state layout works and a target moving along a known line (state `[x, xdot]`, target on
 /// `y = 0`) is as easy to describe as a free target. With the platform at `p_k`, the relative
 /// position is `d = (target coordinates) - p_k`, and the bearing is (paper 001, eqs 2-3)
 ///
@@ -196,7 +196,7 @@ pub enum Coordinate {
 /// use kalibra_linalg::{U2, Vector2};
 ///
 /// // A target on the line y = 0 with state [x, xdot], seen from (0, -20) with translational
-/// // noise of variance 1 per axis (paper 001, problem I at k = 0).
+/// // noise of variance 1 per axis.
 /// let sensor = Bearing::from_coordinates(
 ///     U2,
 ///     [Coordinate::State(0), Coordinate::Constant(0.0)],
@@ -528,7 +528,7 @@ mod tests {
 
     #[test]
     fn jacobian_with_constant_coordinates_matches_finite_differences() {
-        // Paper 001's problem I: state [x, xdot], target on y = 0, platform at (4k, -20).
+        // A target on a known line: state [x, xdot], target on y = 0, platform at (4k, -20).
         let platform = Moving(|k: usize| Vector2::new(4.0 * k as f64, -20.0));
         for reference in [BearingReference::XAxis, BearingReference::North] {
             let m = Bearing::from_coordinates(

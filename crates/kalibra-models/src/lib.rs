@@ -8,13 +8,13 @@
 //! * Concrete models: [`Kinematic`] constant-velocity and constant-acceleration models in any
 //!   number of axes, [`LinearGaussian`] and [`LinearObservation`] for any `F, Q, H, R`,
 //!   [`WithInput`] for a known control input, [`Bearing`] from a moving [`Platform`], the
-//!   ballistic re-entry models of papers 000 and 003, the constant-acceleration angular target
+//!   ballistic re-entry models (drag with an exponential air density, drag-free, radar
+//!   measurements and positions converted from them), the constant-acceleration angular target
 //!   ([`AngularTarget`], with a manoeuvring truth [`ManoeuvringTarget`] driven by a
 //!   [`ManoeuvreProfile`]), and a 3-D target with nonlinear acceleration ([`Target3d`], per
 //!   axis [`AccelAxis`], parameters [`Target3dParams`]).
-//! * Paper 001's three bearings-only tracking problems as ready scenarios ([`BotScenario`]:
-//!   truth, platform, the filter's models and initialisation), on a [`Bearing`] whose target
-//!   coordinates may be constants ([`Coordinate`]) and which models translational noise.
+//! * A [`Bearing`] whose target coordinates may be constants ([`Coordinate`], a target on a
+//!   known line) and which models translational noise.
 //! * Seeded truth simulation ([`Simulator`], [`simulate`], [`simulate_until`]), where the truth
 //!   may use models and noise the filter does not.
 //! * [`check_dynamics_jacobian`] and [`check_measurement_jacobian`]: finite-difference checks
@@ -48,7 +48,6 @@
 mod angle;
 mod ballistic;
 mod bearing;
-mod bot;
 mod error;
 mod jacobian;
 mod kinematic;
@@ -68,7 +67,6 @@ pub use ballistic::{
 pub use bearing::{
     Bearing, BearingReference, Coordinate, Moving, Platform, Stationary, Tabulated, wrap_angle,
 };
-pub use bot::{BotProblem, BotRun, BotScenario, BotStart};
 pub use error::ModelError;
 pub use jacobian::{
     FD_RELATIVE_STEP, JacobianCheck, check_dynamics_jacobian, check_measurement_jacobian,

@@ -1,0 +1,523 @@
+//! The study's computation: [`Config`], the Monte Carlo over the three problems and six
+//! filters, the time averages and their seed-to-seed spread, Table II's timing, and the
+//! [`Report`] they fill.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use kalibra_filters::{
+    Ekf, Filter, FilterError, KappaCriterion, SigmaSet, Srf, Ukf, UkfPrediction,
+};
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, U1, U2, U4};
+use kalibra_metrics::{
+    ChiSquareBand, Credibility, Merge, SquaredErrors, StepMean, consistent_median_nees, nees,
+    time_average,
+};
+use kalibra_models::Dynamics;
+use kalibra_sim::MonteCarlo;
+use serde::Serialize;
+
+use super::claims::claims;
+use super::scenario::{BotProblem, BotRun, BotScenario, BotStart, FILTERS, kappa_grid};
+use crate::StudyError;
+use crate::claims::Claim;
+
+/// Size and seeds of the study.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Config {
+    /// Seed of the main run; run `i` uses ChaCha8 stream `i`.
+    pub seed: u64,
+    /// Threads (0: all cores); results do not depend on it.
+    pub threads: usize,
+    /// Monte Carlo runs per problem.
+    pub runs: usize,
+    /// Further seeds (`seed + 1 ..= seed + extra_seeds`) for the seed-to-seed spread.
+    pub extra_seeds: u64,
+    /// Runs of problem II timed for Table II (0: no timing).
+    pub cost_runs: usize,
+}
+
+impl Config {
+    /// The published size: 1000 runs per problem, five further seeds, Table II from 200 runs.
+    pub fn paper() -> Self {
+        Self {
+            seed: 2013,
+            threads: 0,
+            runs: 1000,
+            extra_seeds: 5,
+            cost_runs: 200,
+        }
+    }
+
+    /// Reduced size for tests: 200 runs, two further seeds, Table II from 50 runs.
+    pub fn quick() -> Self {
+        Self {
+            runs: 200,
+            extra_seeds: 2,
+            cost_runs: 50,
+            ..Self::paper()
+        }
+    }
+}
+
+/// One filter's results on one problem.
+#[derive(Clone, Debug, Serialize)]
+pub struct FilterResult {
+    /// Time-averaged position RMSE.
+    pub rmse_pos: f64,
+    /// Time-averaged velocity RMSE; `None` where the state has no velocity (problem III).
+    pub rmse_vel: Option<f64>,
+    /// Time-averaged NCI (dB).
+    pub nci: f64,
+    /// Time-averaged ANEES.
+    pub anees: f64,
+    /// Time-averaged median NEES / n.
+    pub anees_median: f64,
+    /// Runs left out because the filter failed.
+    pub failed_runs: usize,
+    /// Per step: position RMSE.
+    pub rmse_pos_steps: Vec<f64>,
+    /// Per step: velocity RMSE (empty without velocity).
+    pub rmse_vel_steps: Vec<f64>,
+    /// Per step: NCI.
+    pub nci_steps: Vec<f64>,
+    /// Per step: ANEES.
+    pub anees_steps: Vec<f64>,
+    /// Per step: median NEES / n.
+    pub anees_median_steps: Vec<f64>,
+    /// Per step: the mean chosen kappa (adaptive filters), or the fixed one (UKF); empty for
+    /// the EKF and SRF.
+    pub mean_kappa_steps: Vec<f64>,
+    /// Seed-to-seed spread of each time average (this seed and the extra ones).
+    pub spread: BTreeMap<&'static str, Spread>,
+}
+
+/// Mean, standard deviation and range of a time average over seeds.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Spread {
+    /// Mean over seeds.
+    pub mean: f64,
+    /// Sample standard deviation over seeds.
+    pub std: f64,
+    /// Smallest.
+    pub min: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+/// One problem's results.
+#[derive(Clone, Debug, Serialize)]
+pub struct ProblemResult {
+    /// The paper's step labels of the evaluated steps.
+    pub labels: Vec<usize>,
+    /// State dimension.
+    pub dim: usize,
+    /// Runs.
+    pub runs: usize,
+    /// The 95% two-sided ANEES band for `runs` runs.
+    pub anees_band: (f64, f64),
+    /// The median of chi-square(n) / n: what a consistent filter's median NEES / n is near.
+    pub consistent_median: f64,
+    /// Per filter.
+    pub filters: BTreeMap<&'static str, FilterResult>,
+}
+
+/// The study's report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// The configuration run.
+    pub config: Config,
+    /// Per problem (`I`, `II`, `III`).
+    pub problems: BTreeMap<&'static str, ProblemResult>,
+    /// Table II: cost of a time step in problem II relative to the SRF's, per filter (1 = the
+    /// SRF's); empty if not timed.
+    pub cost_relative_to_srf: BTreeMap<&'static str, f64>,
+    /// Nanoseconds per filter step in the timing of Table II.
+    pub cost_ns_per_step: BTreeMap<&'static str, f64>,
+    /// Published claims beside ours.
+    pub claims: Vec<Claim>,
+}
+
+/// Per filter accumulators of one problem.
+#[derive(Clone, Debug)]
+struct Acc {
+    errors: Vec<SquaredErrors>,
+    credibility: Vec<Credibility>,
+    kappa: Vec<StepMean>,
+    failed: Vec<usize>,
+}
+
+impl Acc {
+    fn new(steps: usize, dim: usize) -> Self {
+        Self {
+            errors: vec![SquaredErrors::new(steps, dim); FILTERS.len()],
+            credibility: vec![Credibility::new(steps, dim); FILTERS.len()],
+            kappa: vec![StepMean::new(steps); FILTERS.len()],
+            failed: vec![0; FILTERS.len()],
+        }
+    }
+}
+
+impl Merge for Acc {
+    fn merge(&mut self, other: &Self) {
+        for i in 0..FILTERS.len() {
+            self.errors[i].merge(&other.errors[i]);
+            self.credibility[i].merge(&other.credibility[i]);
+            self.kappa[i].merge(&other.kappa[i]);
+            self.failed[i] += other.failed[i];
+        }
+    }
+}
+
+/// One filter's output on one run: per evaluated step, the error `x - xhat`, the covariance
+/// and the kappa used.
+type Track<N> = Vec<(OVector<f64, N>, OMatrix<f64, N, N>, Option<f64>)>;
+
+/// Runs `filter` over `run` as the scenario starts it; the estimates at the evaluated indices.
+fn track<N: Dim, F: Filter<N, U1>>(
+    scenario: &BotScenario<N>,
+    run: &BotRun<N>,
+    mut filter: F,
+    kappa: impl Fn(&F) -> Option<f64>,
+) -> Result<Track<N>, FilterError>
+where
+    DefaultAllocator: Alloc<N, U1>,
+{
+    let mut out = Vec::with_capacity(run.states.len());
+    for (i, z) in run.measurements.iter().enumerate() {
+        let updated = match scenario.start {
+            BotStart::UpdateFirst => {
+                if i > 0 {
+                    filter.predict()?;
+                }
+                filter.update(z)?;
+                true
+            }
+            BotStart::PredictFirst => {
+                if i > 0 {
+                    filter.predict()?;
+                    filter.update(z)?;
+                }
+                i > 0
+            }
+        };
+        if i >= scenario.eval_from {
+            let e = &run.states[i] - filter.mean();
+            let k = if updated { kappa(&filter) } else { None };
+            out.push((e, filter.covariance().clone(), k));
+        }
+    }
+    Ok(out)
+}
+
+/// Runs filter number `which` of [`FILTERS`] over `run`.
+fn run_filter<N: Dim>(
+    scenario: &BotScenario<N>,
+    run: &BotRun<N>,
+    which: usize,
+) -> Result<Track<N>, FilterError>
+where
+    DefaultAllocator: Alloc<N, U1> + Alloc<N, U2>,
+{
+    let (f, h) = (&scenario.dynamics, &scenario.measurement);
+    let (x0, p0) = (run.init_mean.clone(), run.init_cov.clone());
+    let n = f.state_dim().value();
+    let ukf = || -> Result<_, FilterError> {
+        Ok(
+            Ukf::new(f, h, x0.clone(), p0.clone(), SigmaSet::recommended(n))?
+                .with_prediction(UkfPrediction::Linearised),
+        )
+    };
+    let adaptive = |criterion| -> Result<_, FilterError> {
+        ukf()?.with_adaptive_kappa(criterion, kappa_grid(n)?)
+    };
+    let kappa = |u: &Ukf<N, U1, _, _>| u.last_kappa();
+    match FILTERS[which] {
+        "EKF" => track(scenario, run, Ekf::new(f, h, x0, p0)?, |_| None),
+        "UKF" => track(scenario, run, ukf()?, kappa),
+        "UKF-ML" => track(
+            scenario,
+            run,
+            adaptive(KappaCriterion::MaximumLikelihood)?,
+            kappa,
+        ),
+        "UKF-MPP" => track(
+            scenario,
+            run,
+            adaptive(KappaCriterion::MaximumPosterior)?,
+            kappa,
+        ),
+        "UKF-MAP" => track(scenario, run, adaptive(KappaCriterion::PureMap)?, kappa),
+        _ => track(scenario, run, Srf::new(f, h, x0, p0)?, |_| None),
+    }
+}
+
+/// Pushes one filter's track into the accumulators, or counts a failure if the filter failed
+/// or left a covariance that is not positive definite.
+fn push_track<N: Dim>(acc: &mut Acc, which: usize, track: Result<Track<N>, FilterError>)
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let Ok(track) = track else {
+        acc.failed[which] += 1;
+        return;
+    };
+    let Ok(nees) = track
+        .iter()
+        .map(|(e, p, _)| nees(e, p))
+        .collect::<Result<Vec<f64>, _>>()
+    else {
+        acc.failed[which] += 1;
+        return;
+    };
+    for (step, ((e, _, kappa), nees)) in track.iter().zip(nees).enumerate() {
+        // Shapes are the accumulators' own: these cannot fail.
+        let _ = acc.errors[which].push(step, e);
+        let _ = acc.credibility[which].push_nees(step, e.as_slice(), nees);
+        if let Some(kappa) = kappa {
+            let _ = acc.kappa[which].push(step, *kappa);
+        }
+    }
+}
+
+/// Runs one problem at one seed.
+fn study<N: Dim>(
+    scenario: &BotScenario<N>,
+    runs: usize,
+    seed: u64,
+    threads: usize,
+) -> Result<Acc, StudyError>
+where
+    DefaultAllocator: Alloc<N, U1> + Alloc<N, U2>,
+    BotScenario<N>: Sync,
+{
+    let steps = scenario.steps - scenario.eval_from;
+    let n = scenario.dynamics.state_dim().value();
+    let mc = MonteCarlo::new(runs, seed).threads(threads);
+    Ok(mc.accumulate(
+        || Acc::new(steps, n),
+        |_, rng, acc| -> Result<(), StudyError> {
+            let run = scenario.simulate(rng)?;
+            for which in 0..FILTERS.len() {
+                push_track(acc, which, run_filter(scenario, &run, which));
+            }
+            Ok(())
+        },
+    )?)
+}
+
+/// The time averages of one filter from its accumulators.
+fn averages<N: Dim>(
+    scenario: &BotScenario<N>,
+    acc: &Acc,
+    which: usize,
+) -> Result<BTreeMap<&'static str, f64>, StudyError>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let steps = acc.errors[which].steps();
+    let pos = acc.errors[which].rmse_series(scenario.position_indices())?;
+    let cred = acc.credibility[which].over_time(0..steps)?;
+    let mut out = BTreeMap::from([
+        ("rmse_pos", time_average(&pos)),
+        ("nci", cred.nci),
+        ("anees", cred.anees),
+        ("anees_median", cred.median_nees),
+    ]);
+    if let Some(vel) = scenario.velocity_indices() {
+        out.insert(
+            "rmse_vel",
+            time_average(&acc.errors[which].rmse_series(vel)?),
+        );
+    }
+    Ok(out)
+}
+
+/// Runs one problem: the main seed in full, the extra seeds for the spread.
+fn problem<N: Dim>(scenario: &BotScenario<N>, config: &Config) -> Result<ProblemResult, StudyError>
+where
+    DefaultAllocator: Alloc<N, U1> + Alloc<N, U2>,
+    BotScenario<N>: Sync,
+{
+    let n = scenario.dynamics.state_dim().value();
+    let main = study(scenario, config.runs, config.seed, config.threads)?;
+    let mut seeds = vec![main.clone()];
+    for s in 1..=config.extra_seeds {
+        seeds.push(study(
+            scenario,
+            config.runs,
+            config.seed + s,
+            config.threads,
+        )?);
+    }
+    let band = ChiSquareBand::for_normalized_mean(n as f64, config.runs, 0.95)?;
+    let mut filters = BTreeMap::new();
+    for (which, &name) in FILTERS.iter().enumerate() {
+        let avg = averages(scenario, &main, which)?;
+        let mut per_seed: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
+        for acc in &seeds {
+            for (k, v) in averages(scenario, acc, which)? {
+                per_seed.entry(k).or_default().push(v);
+            }
+        }
+        let spread = per_seed
+            .into_iter()
+            .map(|(k, v)| {
+                let (m, s) = crate::mean_std(v.iter().copied());
+                let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+                let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (
+                    k,
+                    Spread {
+                        mean: m,
+                        std: s,
+                        min,
+                        max,
+                    },
+                )
+            })
+            .collect();
+        let summaries = main.credibility[which].summaries()?;
+        let errors = &main.errors[which];
+        let kappa = &main.kappa[which];
+        let steps = errors.steps();
+        filters.insert(
+            name,
+            FilterResult {
+                rmse_pos: avg["rmse_pos"],
+                rmse_vel: avg.get("rmse_vel").copied(),
+                nci: avg["nci"],
+                anees: avg["anees"],
+                anees_median: avg["anees_median"],
+                failed_runs: main.failed[which],
+                rmse_pos_steps: errors.rmse_series(scenario.position_indices())?,
+                rmse_vel_steps: match scenario.velocity_indices() {
+                    Some(v) => errors.rmse_series(v)?,
+                    None => Vec::new(),
+                },
+                nci_steps: summaries.iter().map(|s| s.nci).collect(),
+                anees_steps: summaries.iter().map(|s| s.anees).collect(),
+                anees_median_steps: summaries.iter().map(|s| s.median_nees).collect(),
+                mean_kappa_steps: if (0..steps).any(|k| kappa.count(k) > 0) {
+                    kappa.means()
+                } else {
+                    Vec::new()
+                },
+                spread,
+            },
+        );
+    }
+    let first = scenario.first_label + scenario.eval_from;
+    Ok(ProblemResult {
+        labels: (first..first + main.errors[0].steps()).collect(),
+        dim: n,
+        runs: config.runs,
+        anees_band: (band.lower, band.upper),
+        consistent_median: consistent_median_nees(n)?,
+        filters,
+    })
+}
+
+/// Wall time per filter step of each filter on `runs` pre-simulated runs of problem II, on the
+/// calling thread (ns).
+fn measure_costs(
+    scenario: &BotScenario<U4>,
+    runs: usize,
+    seed: u64,
+) -> Result<BTreeMap<&'static str, f64>, StudyError> {
+    let mc = MonteCarlo::new(runs, seed);
+    let truths = (0..runs)
+        .map(|i| scenario.simulate(&mut mc.rng(i)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let steps = (truths.len() * (scenario.steps - 1)) as f64;
+    let mut out = BTreeMap::new();
+    for (which, &name) in FILTERS.iter().enumerate() {
+        // One untimed pass to warm caches, then the best of three timed passes: the minimum
+        // is the least disturbed by other processes.
+        let mut best = f64::INFINITY;
+        for pass in 0..4 {
+            let start = Instant::now();
+            let mut sink = 0.0;
+            for run in &truths {
+                if let Ok(t) = run_filter(scenario, run, which) {
+                    sink += t.last().map_or(0.0, |(e, _, _)| e[0]);
+                }
+            }
+            let elapsed = start.elapsed().as_secs_f64();
+            std::hint::black_box(sink);
+            if pass > 0 {
+                best = best.min(elapsed);
+            }
+        }
+        out.insert(name, best / steps * 1e9);
+    }
+    Ok(out)
+}
+
+/// Runs one problem alone (all filters, the main seed and the extra seeds of `config`).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_problem(problem: BotProblem, config: &Config) -> Result<ProblemResult, StudyError> {
+    if config.runs < 2 {
+        return Err(StudyError::Harness("need at least two runs".into()));
+    }
+    match problem {
+        BotProblem::I => self::problem(&BotScenario::problem_i()?, config),
+        BotProblem::II => self::problem(&BotScenario::problem_ii()?, config),
+        _ => self::problem(&BotScenario::problem_iii()?, config),
+    }
+}
+
+/// Runs the study.
+///
+/// # Errors
+/// [`StudyError`] if a scenario cannot be built or simulated, or the harness fails. Filter
+/// failures inside runs are counted, not errors.
+pub fn run(config: &Config) -> Result<Report, StudyError> {
+    if config.runs < 2 {
+        return Err(StudyError::Harness("need at least two runs".into()));
+    }
+    let s1 = BotScenario::problem_i()?;
+    let s2 = BotScenario::problem_ii()?;
+    let s3 = BotScenario::problem_iii()?;
+    let mut problems = BTreeMap::new();
+    problems.insert("I", problem(&s1, config)?);
+    problems.insert("II", problem(&s2, config)?);
+    problems.insert("III", problem(&s3, config)?);
+    let (cost_ns_per_step, cost_relative_to_srf) = if config.cost_runs > 0 {
+        let ns = measure_costs(&s2, config.cost_runs, config.seed)?;
+        let srf = ns["SRF"];
+        let rel = ns.iter().map(|(&k, &v)| (k, v / srf)).collect();
+        (ns, rel)
+    } else {
+        (BTreeMap::new(), BTreeMap::new())
+    };
+    let mut report = Report {
+        config: config.clone(),
+        problems,
+        cost_relative_to_srf,
+        cost_ns_per_step,
+        claims: Vec::new(),
+    };
+    report.claims = claims(&report);
+    Ok(report)
+}
+
+/// The time average of `metric` (one of [`super::METRICS`]); `None` for the velocity RMSE of a
+/// state without velocity.
+pub(super) fn value(result: &FilterResult, metric: &str) -> Option<f64> {
+    match metric {
+        "nci" => Some(result.nci),
+        "anees" => Some(result.anees),
+        "rmse_pos" => Some(result.rmse_pos),
+        _ => result.rmse_vel,
+    }
+}
+
+impl Report {
+    /// The first claim with this id.
+    pub fn claim(&self, id: &str) -> Option<&Claim> {
+        self.claims.iter().find(|c| c.id == id)
+    }
+}
