@@ -41,6 +41,8 @@ fn crate_dependencies_follow_the_design() {
         ("kalibra-filters", &["kalibra-linalg", "kalibra-models"]),
         ("kalibra-metrics", &["kalibra-linalg"]),
         ("kalibra-bounds", &["kalibra-linalg"]),
+        // The log evaluation takes data, like the metrics: never filters, models or studies.
+        ("kalibra-eval", &["kalibra-linalg", "kalibra-metrics"]),
         (
             "kalibra-sim",
             &[

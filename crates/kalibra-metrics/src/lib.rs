@@ -24,6 +24,9 @@
 //!   estimate minus the truth, eq. 14), [`rmse`] and [`rmse_per_state`] over time (eq. 15), and
 //!   [`sliding_window`]: the RMSE, bias and local standard deviation of every forward window of
 //!   `W` samples ([`WindowStats`], eqs. 16-18), in `O(N)` and robust to large offsets.
+//! * Whiteness of one run's normalised innovations ([`whiteness`], [`normalized_innovation`]):
+//!   the sample autocorrelation at lags `1..=L` with its band (Bar-Shalom's test) and the
+//!   Box-Pierce statistic over all lags ([`Whiteness`], [`LagCorrelation`]).
 //! * Hypothesis tests on a series ([`hypothesis`], re-exported here): [`batch_means`] after a
 //!   burn-in, the Wald-Wolfowitz [`runs_test`] about the median, the matched-pair
 //!   [`paired_t_test`] and the two-sample Kolmogorov-Smirnov test [`ks_two_sample`] (exact
@@ -66,6 +69,7 @@ mod error;
 pub mod hypothesis;
 mod innovation;
 mod itse;
+mod whiteness;
 mod window;
 
 pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
@@ -80,4 +84,5 @@ pub use hypothesis::{
 };
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
 pub use itse::itse;
+pub use whiteness::{LagCorrelation, Whiteness, normalized_innovation, whiteness};
 pub use window::{WindowStats, instantaneous_errors, rmse, rmse_per_state, sliding_window};
