@@ -15,6 +15,7 @@
 //! | [`filters`] | `kalibra-filters` | the `Filter` trait, KF, EKF, UKF (adaptive kappa), shifted Rayleigh filter, constant-gain KF, step records |
 //! | [`metrics`] | `kalibra-metrics` | NEES, NIS, chi-square bands, NCI, RMSE accumulators, sliding windows, J1/J2/nq, ITSE, hypothesis tests |
 //! | [`bounds`] | `kalibra-bounds` | posterior Cramér-Rao bound, observability, Spall-Wei surrogate bounds |
+//! | [`eval`] | `kalibra-eval` | any filter's logged estimates, covariances and innovations judged: bands, NCI, RMSE, whiteness, J1/J2, a verdict |
 //! | [`sim`] | `kalibra-sim` | seeded parallel Monte Carlo, identical for any thread count; Q sweeps, initial tuning |
 //!
 //! The reproduced papers are not part of the library: they live beside it in the
@@ -37,6 +38,7 @@
 //! ```
 
 pub use kalibra_bounds as bounds;
+pub use kalibra_eval as eval;
 pub use kalibra_filters as filters;
 pub use kalibra_linalg as linalg;
 pub use kalibra_metrics as metrics;
@@ -78,6 +80,9 @@ pub enum Error {
     /// A bound (CRLB, surrogate) could not be computed.
     #[error(transparent)]
     Bounds(#[from] kalibra_bounds::BoundsError),
+    /// A filter log could not be evaluated (its arrays are malformed).
+    #[error(transparent)]
+    Eval(#[from] kalibra_eval::EvalError),
     /// A tuning helper (grid, initial tuning) failed.
     #[error(transparent)]
     Tuning(#[from] kalibra_sim::TuningError),
