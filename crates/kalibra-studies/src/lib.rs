@@ -1,17 +1,31 @@
-//! The studies `cargo xtask reproduce` runs, as tested library code.
+//! The reproduced studies, beside the library: what `cargo xtask reproduce` runs, as tested
+//! code.
 //!
 //! # What this crate is for
-//! One module per study. Each has a `Config` (with `paper()` for the published size and
-//! `quick()` for tests), `run(&Config) -> Result<Report, StudyError>`, and a `Report` that
-//! serialises to JSON (serde) and renders as Markdown. The crate computes and formats; it
-//! writes no files (xtask does).
+//! The five papers that specify kalibra, and the W1 consistency workload, each re-run end to
+//! end and set beside the published numbers. The library crates carry no paper; a paper's
+//! scenario, published values, grids and readings of its typos live here, in its folder.
 //!
-//! Until the paper modules land, one study is here:
-//! * [`w1`]: the consistency study of workload W1 (a 2-D constant-velocity target, positions
-//!   measured), ANEES and average NIS per step with their 95% chi-square bands.
+//! | id | module | study |
+//! |---|---|---|
+//! | `w1` | [`w1`] | a correctly tuned KF is consistent: ANEES and NIS per step in their bands |
+//! | `000` | [`paper000`] | Saha, Goswami, Ghosh 2012: J1/J2 of a KF and an EKF along `Q = 10^p Q_nom` (Table I) |
+//! | `001` | [`paper001`] | local filters in bearings-only tracking: EKF, UKF, adaptive UKF, SRF on three problems |
+//! | `002` | [`paper002`] | Minh et al.: an EKF tracking a manoeuvring angle under three Q sets, sliding windows |
+//! | `003` | [`paper003`] | Saha, Ghosh, Goswami 2014: J1/J2 for the EKF, the crossover, initial tuning, CRLB |
+//! | `004` | [`paper004`] | Spall and Wei 2023: surrogate bounds from one trajectory, batch-means tests |
 //!
-//! Every module documents the decisions its paper leaves open, and every report records its
-//! seed, run count and thread-independent results.
+//! # How a study is built
+//! Every study implements [`study::Study`] (identifier, title, citation, configuration for the
+//! published or quick size, run, claims, highlight, Markdown report, figures) and is listed
+//! once in [`REGISTRY`]. A study's folder holds `scenario.rs` (the paper's set-up), `run.rs`
+//! (configuration, report types, the run), `claims.rs` (each published claim beside ours with
+//! a verdict), `report.md` (the report's prose as a template, rendered by [`template`]) with
+//! `report.rs` (what the template needs beyond the report's fields), `figures.rs` (figure data,
+//! [`figure::Figure`]) and `mod.rs` (the module docs, where every reading of the paper is
+//! recorded, and the `Study` impl). The crate computes and renders text; it writes no files
+//! (xtask does). Every report records its seed and size, and its numbers do not depend on the
+//! thread count.
 
 pub mod claims;
 pub mod figure;
