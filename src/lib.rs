@@ -83,6 +83,9 @@ pub enum Error {
     /// A filter log could not be evaluated (its arrays are malformed).
     #[error(transparent)]
     Eval(#[from] kalibra_eval::EvalError),
+    /// A tuning problem from recorded measurements could not be built or tuned.
+    #[error(transparent)]
+    Tune(#[from] kalibra_eval::TuneError),
     /// A tuning helper (grid, initial tuning) failed.
     #[error(transparent)]
     Tuning(#[from] kalibra_sim::TuningError),

