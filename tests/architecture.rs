@@ -41,6 +41,8 @@ fn crate_dependencies_follow_the_design() {
         ("kalibra-filters", &["kalibra-linalg", "kalibra-models"]),
         ("kalibra-metrics", &["kalibra-linalg"]),
         ("kalibra-bounds", &["kalibra-linalg"]),
+        // Figures are data and their SVG writer: nothing of the filters or the studies.
+        ("kalibra-plot", &[]),
         // The log evaluation takes data, like the metrics: never filters, models or studies.
         ("kalibra-eval", &["kalibra-linalg", "kalibra-metrics"]),
         (
@@ -61,6 +63,7 @@ fn crate_dependencies_follow_the_design() {
                 "kalibra-metrics",
                 "kalibra-bounds",
                 "kalibra-sim",
+                "kalibra-plot",
             ],
         ),
     ];
