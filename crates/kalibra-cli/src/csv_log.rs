@@ -271,6 +271,25 @@ fn layouts(columns: &[Column]) -> Result<Vec<Layout>, String> {
             columns: cols,
         });
     }
+    // The state arrays share n, the innovation arrays m: a smaller one lacks columns.
+    for group in [[0, 1, 3], [2, 4, 4]] {
+        let in_group = || out.iter().filter(|l| group.contains(&l.array));
+        let Some(widest) = in_group().max_by_key(|l| l.dim) else {
+            continue;
+        };
+        if let Some(short) = in_group().find(|l| l.dim < widest.dim) {
+            let array = ARRAYS[short.array];
+            let missing = if short.array >= FIRST_MATRIX {
+                format!("{array}_{0}_{0}", short.dim)
+            } else {
+                format!("{array}_{}", short.dim)
+            };
+            return Err(format!(
+                "missing column `{missing}` ({} has {} components, {array} {})",
+                ARRAYS[widest.array], widest.dim, short.dim
+            ));
+        }
+    }
     Ok(out)
 }
 

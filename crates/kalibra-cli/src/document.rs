@@ -475,7 +475,12 @@ impl Document {
                 }
                 Block::Figure(i) => {
                     let (_, fig) = &self.figures[*i];
-                    let _ = writeln!(out, "<figure>\n{}\n</figure>", fig.to_svg().trim_end());
+                    // Each SVG names its clip path `kalibra-plot-area`; inline in one page the
+                    // ids must differ, or every figure would clip to the first one's area.
+                    let svg = fig
+                        .to_svg()
+                        .replace("kalibra-plot-area", &format!("kalibra-plot-area-{i}"));
+                    let _ = writeln!(out, "<figure>\n{}\n</figure>", svg.trim_end());
                 }
             }
         }
