@@ -14,7 +14,6 @@
 
 mod bench;
 mod bench_w2;
-mod plot;
 mod reproduce;
 
 use clap::{Parser, Subcommand};

@@ -9,7 +9,7 @@ use kalibra_studies::REGISTRY;
 use kalibra_studies::claims::{Claim, Verdict};
 use kalibra_studies::study::{Options, Outcome, Reproduce, Size};
 
-use crate::plot::ToSvg;
+use kalibra_plot::ToSvg;
 
 /// `cargo xtask reproduce` arguments.
 #[derive(Debug, clap::Args)]

@@ -1,7 +1,7 @@
-//! The SVG renderer of the studies' figure data (`kalibra_studies::figure::Figure`): axes with
-//! "nice" ticks (linear or log10), title and axis labels, series as lines and/or markers (gaps
-//! where a point cannot be drawn), a legend placed where it covers the least data, and
-//! reference lines and points with labels that avoid each other.
+//! The SVG renderer of [`Figure`] data: axes with "nice" ticks (linear or log10), title and
+//! axis labels, series as lines and/or markers (gaps where a point cannot be drawn), a legend
+//! placed where it covers the least data, and reference lines and points with labels that avoid
+//! each other.
 //!
 //! It is our own, about 900 lines of rendering and 400 of tests, rather than a plotting crate
 //! (the reasons are in `docs/ARCHITECTURE.md`, Decisions). Two properties matter more than
@@ -10,19 +10,10 @@
 //! by the viewer rather than measured from system fonts; only a platform `log10` differing in
 //! the last bit could move a log-axis coordinate by 0.01), and no input data can make it panic
 //! or write an invalid document.
-//!
-//! ```ignore
-//! let svg = Figure::new("Position error", "time [s]", "RMSE [m]")
-//!     .log_y()
-//!     .series(Series::line("EKF", ekf_points))
-//!     .series(Series::markers("UKF", ukf_points).dashed())
-//!     .annotate(Annotation::VLine { x: 30.0, label: "manoeuvre".into() })
-//!     .to_svg();
-//! ```
 
 use std::fmt::Write as _;
 
-pub use kalibra_studies::figure::{Annotation, Figure, Series};
+use crate::figure::{Annotation, Figure, Series};
 
 /// Smallest width actually drawn; below it the margins would leave no plot area.
 const MIN_WIDTH: u32 = 160;
@@ -68,7 +59,7 @@ impl ToSvg for Figure {
     }
 }
 
-/// The renderer's view of a figure (the figure itself is data owned by the studies crate).
+/// The renderer's view of a figure (the figure itself is plain data, [`crate::figure`]).
 struct Plot<'a>(&'a Figure);
 
 impl std::ops::Deref for Plot<'_> {

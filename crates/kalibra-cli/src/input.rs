@@ -1,0 +1,151 @@
+//! Reading a filter log: the format by extension, and the arrays both readers produce.
+
+use std::path::Path;
+
+use kalibra_eval::{FilterLog, Matrices, Vectors};
+
+/// The formats, as `kalibra eval --help` shows them.
+pub const FORMATS_HELP: &str = "\
+LOG FORMATS (chosen by the extension; R runs, K steps, n states, m measurements):
+  .json  An object of arrays named as numpy's: truth (R,K,n), estimate (R,K,n),
+         covariance (R,K,n,n), innovation (R,K,m), innovation_cov (R,K,m,m), optional
+         time (K), and for J1/J2 all of F (n,n), H (m,n), Q (n,n), R (m,m), each one
+         matrix for all steps, one per step (K,..) or one per run and step (R,K,..).
+         A single run may drop the R axis. A cell (one run and step) that is null was
+         not logged. Matrices are lists of rows.
+  .csv   One row per run and step. Columns: run, step, optional time, truth_i,
+         estimate_i, covariance_i_j (every i, j; or the diagonal covariance_i_i alone),
+         innovation_i, innovation_cov_i_j (or its diagonal), i and j from 0. An empty
+         cell means not logged; a vector or matrix is logged whole or not at all.
+         Rows and columns in messages count from 1, the header being row 1.
+Truth, estimate and covariance give NEES/ANEES, NCI, RMSE and sliding windows;
+innovation and innovation_cov give NIS/ANIS and whiteness; both give both.
+
+EXIT CODES: 0 success, 1 bad input (the message names the file and the row and
+column, or the array and index), 2 bad usage.";
+
+/// One array of vectors: `dim` values per cell, cells in run-major order, `None` where not
+/// logged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VectorArray {
+    pub dim: usize,
+    pub cells: Vec<Option<Vec<f64>>>,
+}
+
+/// One array of square matrices per run and step: full (`dim * dim` values, row by row) or
+/// diagonal (`dim` values).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatrixArray {
+    pub dim: usize,
+    pub diagonal: bool,
+    pub cells: Vec<Option<Vec<f64>>>,
+}
+
+/// A model matrix array: constant, per step or per run and step, every cell present.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelArray {
+    pub rows: usize,
+    pub cols: usize,
+    pub scope: kalibra_eval::Scope,
+    pub data: Vec<f64>,
+}
+
+impl ModelArray {
+    fn matrices(self) -> Matrices {
+        match self.scope {
+            kalibra_eval::Scope::Constant => Matrices::constant(self.rows, self.cols, self.data),
+            kalibra_eval::Scope::PerStep => Matrices::per_step(self.rows, self.cols, self.data),
+            kalibra_eval::Scope::PerRunStep => Matrices::dense(self.rows, self.cols, self.data),
+        }
+    }
+}
+
+/// What a reader found, before `kalibra_eval` checks it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RawLog {
+    pub runs: usize,
+    pub steps: usize,
+    pub time: Option<Vec<f64>>,
+    pub truth: Option<VectorArray>,
+    pub estimate: Option<VectorArray>,
+    pub covariance: Option<MatrixArray>,
+    pub innovation: Option<VectorArray>,
+    pub innovation_cov: Option<MatrixArray>,
+    /// `F`, `H`, `Q`, `R`.
+    pub model: Option<[ModelArray; 4]>,
+}
+
+fn matrices(m: MatrixArray) -> Matrices {
+    if m.diagonal {
+        Matrices::diagonal_cells(m.dim, m.cells)
+    } else {
+        Matrices::cells(m.dim, m.dim, m.cells)
+    }
+}
+
+impl RawLog {
+    /// The checked log; an error names the file and the array at fault.
+    pub fn build(self, file: &Path) -> Result<FilterLog, String> {
+        let fail = |e: kalibra_eval::EvalError| format!("{}: {e}", file.display());
+        let mut log = FilterLog::new(self.runs, self.steps).map_err(fail)?;
+        if let Some(t) = self.time {
+            log = log.with_times(t).map_err(fail)?;
+        }
+        if let Some(a) = self.truth {
+            log = log
+                .with_truth(Vectors::cells(a.dim, a.cells))
+                .map_err(fail)?;
+        }
+        if let Some(a) = self.estimate {
+            log = log
+                .with_estimate(Vectors::cells(a.dim, a.cells))
+                .map_err(fail)?;
+        }
+        if let Some(a) = self.covariance {
+            log = log.with_covariance(matrices(a)).map_err(fail)?;
+        }
+        if let Some(a) = self.innovation {
+            log = log
+                .with_innovation(Vectors::cells(a.dim, a.cells))
+                .map_err(fail)?;
+        }
+        if let Some(a) = self.innovation_cov {
+            log = log.with_innovation_cov(matrices(a)).map_err(fail)?;
+        }
+        if let Some([f, h, q, r]) = self.model {
+            log = log
+                .with_model(f.matrices(), h.matrices(), q.matrices(), r.matrices())
+                .map_err(fail)?;
+        }
+        Ok(log)
+    }
+}
+
+/// Reads `path` in the format its extension names.
+pub fn read_log(path: &Path) -> Result<FilterLog, String> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
+    let raw = match ext.as_str() {
+        "json" => crate::json_log::read(path, &read_bytes(path)?)?,
+        "csv" => crate::csv_log::read(path, &read_bytes(path)?)?,
+        "" => {
+            return Err(format!(
+                "{}: no file extension; name the log .json or .csv",
+                path.display()
+            ));
+        }
+        other => {
+            return Err(format!(
+                "{}: unknown extension `.{other}`; kalibra eval reads .json and .csv logs",
+                path.display()
+            ));
+        }
+    };
+    raw.build(path)
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, String> {
+    std::fs::read(path).map_err(|e| format!("{}: cannot read the file: {e}", path.display()))
+}

@@ -1,0 +1,437 @@
+//! End to end: the built `kalibra` binary on the committed fixtures and on bad inputs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use kalibra_eval::{Evaluation, FilterLog, Matrices, Report, Vectors};
+use serde::Deserialize;
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
+}
+
+/// A fresh, empty scratch directory for one test.
+fn scratch(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("kalibra-cli-{test}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn kalibra(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_kalibra"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// The JSON fixture read independently of the binary's reader (serde into typed arrays).
+#[derive(Deserialize)]
+struct Fixture {
+    time: Vec<f64>,
+    truth: Vec<Vec<Vec<f64>>>,
+    estimate: Vec<Vec<Vec<f64>>>,
+    covariance: Vec<Vec<Vec<Vec<f64>>>>,
+    innovation: Vec<Vec<Option<Vec<f64>>>>,
+    innovation_cov: Vec<Vec<Option<Vec<Vec<f64>>>>>,
+    #[serde(rename = "F")]
+    f: Vec<Vec<f64>>,
+    #[serde(rename = "H")]
+    h: Vec<Vec<f64>>,
+    #[serde(rename = "Q")]
+    q: Vec<Vec<f64>>,
+    #[serde(rename = "R")]
+    r: Vec<Vec<f64>>,
+}
+
+/// The evaluation of the fixture's arrays in-process, with the options the tests pass.
+fn in_process(with_model: bool) -> Report {
+    let text = std::fs::read_to_string(fixture("kf.json")).unwrap();
+    let fx: Fixture = serde_json::from_str(&text).unwrap();
+    let flat =
+        |v: &Vec<Vec<Vec<f64>>>| -> Vec<f64> { v.iter().flatten().flatten().copied().collect() };
+    let flat_m = |v: &Vec<Vec<Vec<Vec<f64>>>>| -> Vec<f64> {
+        v.iter().flatten().flatten().flatten().copied().collect()
+    };
+    let mat = |m: &Vec<Vec<f64>>| -> Vec<f64> { m.iter().flatten().copied().collect() };
+    let (runs, steps) = (fx.truth.len(), fx.truth[0].len());
+    let mut log = FilterLog::new(runs, steps)
+        .unwrap()
+        .with_times(fx.time.clone())
+        .unwrap()
+        .with_truth(Vectors::dense(4, flat(&fx.truth)))
+        .unwrap()
+        .with_estimate(Vectors::dense(4, flat(&fx.estimate)))
+        .unwrap()
+        .with_covariance(Matrices::dense(4, 4, flat_m(&fx.covariance)))
+        .unwrap()
+        .with_innovation(Vectors::cells(
+            2,
+            fx.innovation.iter().flatten().cloned().collect(),
+        ))
+        .unwrap()
+        .with_innovation_cov(Matrices::cells(
+            2,
+            2,
+            fx.innovation_cov
+                .iter()
+                .flatten()
+                .map(|c| c.as_ref().map(mat))
+                .collect(),
+        ))
+        .unwrap();
+    if with_model {
+        log = log
+            .with_model(
+                Matrices::constant(4, 4, mat(&fx.f)),
+                Matrices::constant(2, 4, mat(&fx.h)),
+                Matrices::constant(4, 4, mat(&fx.q)),
+                Matrices::constant(2, 2, mat(&fx.r)),
+            )
+            .unwrap();
+    }
+    Evaluation::new()
+        .group("position", vec![0, 1])
+        .unwrap()
+        .evaluate(&log)
+        .unwrap()
+}
+
+fn good_log(test: &str, log: &str, with_model: bool) {
+    let dir = scratch(test);
+    let out = dir.join("report");
+    let input = fixture(log);
+    let run = kalibra(&[
+        "eval",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--group",
+        "position=0,1",
+    ]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    assert!(
+        text(&run.stdout).contains("verdict: consistent"),
+        "{}",
+        text(&run.stdout)
+    );
+    let mut files = vec![
+        "report.json",
+        "report.md",
+        "report.html",
+        "anees.svg",
+        "anis.svg",
+        "nci.svg",
+        "rmse.svg",
+        "whiteness.svg",
+    ];
+    if with_model {
+        files.push("j1j2.svg");
+    }
+    for f in &files {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let listed = std::fs::read_dir(&out).unwrap().count();
+    assert_eq!(listed, files.len(), "unexpected files in the report");
+    // Nothing left beside the report.
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+
+    let report: Report =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let expected = in_process(with_model);
+    assert_eq!(report.summary, expected.summary);
+    assert_eq!(report, expected);
+
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let mut lines = md.lines().filter(|l| !l.is_empty());
+    assert!(lines.next().unwrap().starts_with("# kalibra report"));
+    assert!(
+        lines.next().unwrap().starts_with("**Verdict: consistent"),
+        "{md}"
+    );
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert_eq!(html.matches("<svg").count(), files.len() - 3);
+    // Inline figures clip to their own areas (ids are unique in a page).
+    assert!(html.contains("kalibra-plot-area-0") && html.contains("kalibra-plot-area-4"));
+    // Self-contained: no links, scripts or images from elsewhere.
+    for banned in ["src=", "href=", "<link", "<script", "url(http", "@import"] {
+        assert!(!html.contains(banned), "report.html contains {banned}");
+    }
+}
+
+#[test]
+fn json_log_gives_the_in_process_report() {
+    good_log("good-json", "kf.json", true);
+}
+
+#[test]
+fn csv_log_gives_the_in_process_report() {
+    good_log("good-csv", "kf.csv", false);
+}
+
+/// A small single-run CSV with diagonal covariances works, and a second run replaces the
+/// first report.
+#[test]
+fn diagonal_single_run_csv_and_replacing_a_report() {
+    let dir = scratch("diagonal");
+    let log = dir.join("small.csv");
+    std::fs::write(
+        &log,
+        "run,step,truth_0,truth_1,estimate_0,estimate_1,covariance_0_0,covariance_1_1\n\
+         0,0,0,0,0.1,-0.2,1,1\n0,1,1,1,1.2,0.9,1,1\n0,2,2,2,,,,\n0,3,3,3,2.5,3.4,1,1\n",
+    )
+    .unwrap();
+    let out = dir.join("report");
+    for _ in 0..2 {
+        let run = kalibra(&[
+            "eval",
+            log.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    }
+    let report: Report =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report.runs, 1);
+    assert_eq!(report.nees_runs_per_step, vec![1, 1, 0, 1]);
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        2,
+        "leftovers beside the report"
+    );
+}
+
+/// Runs `kalibra eval` on `content` saved as `name`; asserts exit code 1, a message naming
+/// the file and every one of `needles`, and no report directory (nor temporary one) left.
+fn bad_input(test: &str, name: &str, content: &[u8], needles: &[&str]) {
+    let dir = scratch(test);
+    let log = dir.join(name);
+    std::fs::write(&log, content).unwrap();
+    let out = dir.join("report");
+    let run = kalibra(&[
+        "eval",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    assert!(err.contains(name), "message does not name the file: {err}");
+    for n in needles {
+        assert!(err.contains(n), "message lacks `{n}`: {err}");
+    }
+    assert_eq!(err.trim_end().lines().count(), 1, "one message: {err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("backtrace"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a report was written");
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "leftovers");
+}
+
+const SMALL_CSV: &str = "run,step,truth_0,truth_1,estimate_0,estimate_1,covariance_0_0,covariance_1_1\n\
+                         0,0,0,0,0.1,-0.2,1,1\n\
+                         0,1,1,1,1.2,0.9,1,1\n";
+
+#[test]
+fn csv_missing_column() {
+    // The column is gone from the header and from every row.
+    let csv: String = SMALL_CSV
+        .lines()
+        .map(|l| {
+            let mut cells: Vec<&str> = l.split(',').collect();
+            cells.remove(5);
+            cells.join(",") + "\n"
+        })
+        .collect();
+    bad_input(
+        "missing-column",
+        "missing.csv",
+        csv.as_bytes(),
+        &["row 1", "missing column `estimate_1`"],
+    );
+}
+
+#[test]
+fn csv_misnamed_column() {
+    let csv = SMALL_CSV.replacen("estimate_1", "estimat_1", 1);
+    bad_input(
+        "misnamed-column",
+        "misnamed.csv",
+        csv.as_bytes(),
+        &["row 1, column 6", "unknown column `estimat_1`"],
+    );
+}
+
+#[test]
+fn csv_ragged_row() {
+    let csv = SMALL_CSV.replacen("1.2,0.9,", "1.2,", 1);
+    bad_input(
+        "ragged",
+        "ragged.csv",
+        csv.as_bytes(),
+        &["row 3", "7 fields, but the header has 8"],
+    );
+}
+
+#[test]
+fn csv_non_numeric_cell() {
+    let csv = SMALL_CSV.replacen("-0.2", "abc", 1);
+    bad_input(
+        "non-numeric",
+        "text.csv",
+        csv.as_bytes(),
+        &["row 2, column 6 (estimate_1)", "`abc` is not a number"],
+    );
+}
+
+#[test]
+fn csv_truncated_file() {
+    let full = std::fs::read(fixture("kf.csv")).unwrap();
+    // Cut inside a row: the last row is short.
+    let cut = &full[..full.len() / 2];
+    let cut = &cut[..cut.iter().rposition(|&b| b == b',').unwrap()];
+    bad_input(
+        "truncated-csv",
+        "cut.csv",
+        cut,
+        &["row ", "is the file truncated?"],
+    );
+}
+
+#[test]
+fn csv_missing_rows() {
+    let full = std::fs::read_to_string(fixture("kf.csv")).unwrap();
+    // Cut at a row boundary inside run 3: its last steps have no row.
+    let keep: Vec<&str> = full.lines().take(1 + 3 * 25 + 10).collect();
+    bad_input(
+        "missing-rows",
+        "short.csv",
+        (keep.join("\n") + "\n").as_bytes(),
+        &["no row for run 3, step 10", "truncated"],
+    );
+}
+
+#[test]
+fn json_wrong_shape() {
+    let json = r#"{"truth": [[0, 0], [1, 1], [2, 2]],
+                   "estimate": [[0.1, 0.2], [1.1, 0.9, 3.0], [2.0, 2.1]],
+                   "covariance": [[[1, 0], [0, 1]], [[1, 0], [0, 1]], [[1, 0], [0, 1]]]}"#;
+    bad_input(
+        "wrong-shape",
+        "shape.json",
+        json.as_bytes(),
+        &["array estimate[1]", "expected 2 values, found 3"],
+    );
+}
+
+#[test]
+fn json_runs_disagree() {
+    let json = r#"{"truth": [[[0], [1]], [[0], [1]]],
+                   "estimate": [[[0.1], [1.1]]],
+                   "covariance": [[[[1]], [[1]]], [[[1]], [[1]]]]}"#;
+    bad_input(
+        "runs-disagree",
+        "runs.json",
+        json.as_bytes(),
+        &["array estimate has 1 runs of 2 steps, but array truth has 2 runs"],
+    );
+}
+
+#[test]
+fn json_non_numeric_value() {
+    let json = r#"{"innovation": [[0.5], ["x"]], "innovation_cov": [[[1]], [[1]]]}"#;
+    bad_input(
+        "json-text",
+        "text.json",
+        json.as_bytes(),
+        &[
+            "array innovation[1][0]",
+            "expected a number, found a string",
+        ],
+    );
+}
+
+#[test]
+fn json_misnamed_array() {
+    let json = r#"{"innovations": [[0.5], [1.0]], "innovation_cov": [[[1]], [[1]]]}"#;
+    bad_input(
+        "json-misnamed",
+        "names.json",
+        json.as_bytes(),
+        &["unknown array `innovations`"],
+    );
+}
+
+#[test]
+fn json_truncated_file() {
+    let full = std::fs::read(fixture("kf.json")).unwrap();
+    bad_input(
+        "truncated-json",
+        "cut.json",
+        &full[..full.len() / 2],
+        &["line ", "column ", "ends early (truncated?)"],
+    );
+}
+
+#[test]
+fn unknown_extension() {
+    bad_input(
+        "extension",
+        "log.npy",
+        b"\x93NUMPY",
+        &["unknown extension `.npy`"],
+    );
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let log = fixture("kf.json");
+    for args in [
+        vec!["eval", log.to_str().unwrap(), "--confidence", "2"],
+        vec!["eval", log.to_str().unwrap(), "--group", "position"],
+        vec!["eval", log.to_str().unwrap(), "--window", "1"],
+        vec!["eval"],
+        vec!["judge"],
+    ] {
+        let run = kalibra(&args);
+        assert_eq!(
+            run.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            text(&run.stderr)
+        );
+    }
+    let help = kalibra(&["eval", "--help"]);
+    assert_eq!(help.status.code(), Some(0));
+    assert!(text(&help.stdout).contains("LOG FORMATS"));
+}
+
+#[test]
+fn an_existing_directory_that_is_no_report_is_left_alone() {
+    let dir = scratch("foreign-dir");
+    let out = dir.join("mine");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "keep me").unwrap();
+    let log = fixture("kf.json");
+    let run = kalibra(&[
+        "eval",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(1));
+    assert!(text(&run.stderr).contains("holds no earlier report"));
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "keep me"
+    );
+}
