@@ -8,7 +8,7 @@ use kalibra_eval::{Band, ConsistencyTest, FindingCount, Report, TestMethod, Verd
 use kalibra_plot::{Annotation, Figure, Series, ToSvg};
 
 /// A block of the report.
-enum Block {
+pub(crate) enum Block {
     Heading(String),
     /// A paragraph, with an optional bold lead.
     Paragraph(Option<String>, String),
@@ -43,7 +43,7 @@ fn verdict_words(kind: VerdictKind) -> &'static str {
     }
 }
 
-fn fmt(v: Option<f64>) -> String {
+pub(crate) fn fmt(v: Option<f64>) -> String {
     match v {
         Some(v) if v.is_finite() => {
             if v != 0.0 && (v.abs() < 1e-3 || v.abs() >= 1e5) {
@@ -380,6 +380,21 @@ impl Document {
             headline,
             blocks,
             figures: figs,
+        }
+    }
+
+    /// A document from its parts (the title is the first heading's text).
+    pub(crate) fn from_parts(
+        title: String,
+        headline: String,
+        blocks: Vec<Block>,
+        figures: Vec<(String, Figure)>,
+    ) -> Self {
+        Self {
+            title,
+            headline,
+            blocks,
+            figures,
         }
     }
 

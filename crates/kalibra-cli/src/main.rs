@@ -4,6 +4,9 @@
 //!   [--lags L]` reads a filter log (JSON or CSV, chosen by the extension), evaluates it with
 //!   `kalibra_eval::Evaluation` and writes `report.json`, `report.md`, SVG figures and a
 //!   self-contained `report.html` into DIR.
+//! * `kalibra tune MODEL.toml MEASUREMENTS.csv [--p FROM:TO:STEP] [--truth TRUTH.csv]
+//!   [--out DIR] [--threads N]` sweeps `Q = 10^p Q_nom` with `kalibra_eval::Tuning` and writes
+//!   the crossover, the recommended `Q` and the sweep's figures the same way.
 //!
 //! This binary is a thin layer: it parses arguments, reads files into a
 //! `kalibra_eval::FilterLog`, and writes what `kalibra_eval` and `kalibra_plot` return. Exit
@@ -18,12 +21,14 @@ mod document;
 mod input;
 mod json_log;
 mod output;
+mod tune_document;
+mod tune_input;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use kalibra_eval::Evaluation;
+use kalibra_eval::{Evaluation, Tuning};
 
 /// Judge a Kalman-type filter from its logs: is its covariance telling the truth?
 #[derive(Debug, Parser)]
@@ -37,6 +42,53 @@ struct Cli {
 enum Command {
     /// Evaluate a filter log: ANEES, ANIS, NCI, RMSE, whiteness, J1/J2 and a verdict.
     Eval(EvalArgs),
+    /// Tune the process noise Q of a linear model from recorded measurements (J1/J2 crossover).
+    Tune(TuneArgs),
+}
+
+/// Arguments of `kalibra tune`.
+#[derive(Debug, clap::Args)]
+#[command(after_long_help = tune_input::TUNE_HELP, after_help = tune_input::TUNE_HELP)]
+struct TuneArgs {
+    /// The linear model: F, H, the nominal Q, R, x0 and P0 (see below).
+    model: PathBuf,
+    /// The measurements: columns step, z_0, ..., z_{m-1} (see below).
+    measurements: PathBuf,
+    /// The grid of exponents p of Q = 10^p Q_nom, as FROM:TO:STEP (TO included).
+    #[arg(
+        long = "p",
+        value_name = "FROM:TO:STEP",
+        default_value = "-6:6:0.5",
+        allow_hyphen_values = true,
+        value_parser = parse_grid
+    )]
+    grid: (f64, f64, f64),
+    /// The true states (columns step, x_0, ..., x_{n-1}), for the RMSE at every p.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Directory the report is written to (replaced if it holds an earlier report).
+    #[arg(long, short, default_value = "kalibra-tune")]
+    out: PathBuf,
+    /// Threads for the sweep (0: one per core). The results do not depend on it.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+fn parse_grid(s: &str) -> Result<(f64, f64, f64), String> {
+    let parts: Vec<&str> = s.split(':').collect();
+    let [from, to, step] = parts[..] else {
+        return Err(format!("`{s}` is not FROM:TO:STEP (for instance -6:6:0.5)"));
+    };
+    let number = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("`{t}` in `{s}` is not a number"))
+    };
+    let grid = (number(from)?, number(to)?, number(step)?);
+    Tuning::new()
+        .exponents(grid.0, grid.1, grid.2)
+        .map_err(|e| format!("`{s}`: {e} (STEP must be positive and TO at least FROM)"))?;
+    Ok(grid)
 }
 
 /// Arguments of `kalibra eval`.
@@ -98,6 +150,7 @@ fn main() -> ExitCode {
     }));
     let result = match Cli::parse().command {
         Command::Eval(args) => eval(&args),
+        Command::Tune(args) => tune(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -115,6 +168,39 @@ fn eval(args: &EvalArgs) -> Result<(), String> {
         .and_then(|e| e.evaluate(&log))
         .map_err(|e| format!("{}: cannot evaluate the log: {e}", args.log.display()))?;
     let doc = document::Document::new(&args.log, &report);
+    output::write_report(&args.out, &report, &doc)?;
+    println!("{}", doc.headline());
+    println!("report written to {}", args.out.display());
+    Ok(())
+}
+
+/// `kalibra tune`: read the model and the sequences, sweep, write.
+fn tune(args: &TuneArgs) -> Result<(), String> {
+    let model = tune_input::read_model(&args.model)?;
+    let m = model.meas_dim();
+    let measurements =
+        tune_input::read_series(&args.measurements, "z", m, &format!("H has {m} row(s)"))?;
+    let truth = match &args.truth {
+        Some(path) => {
+            let n = model.state_dim();
+            let t = tune_input::read_series(path, "x", n, &format!("F has {n} row(s)"))?;
+            Some((path.as_path(), t))
+        }
+        None => None,
+    };
+    let problem = model.problem(&args.model, measurements, truth)?;
+    let (from, to, step) = args.grid;
+    let mut tuning = Tuning::new()
+        .exponents(from, to, step)
+        .map_err(|e| format!("--p: {e}"))?
+        .threads(args.threads);
+    if let Some(position) = &model.position {
+        tuning = tuning.position(position.clone());
+    }
+    let report = tuning
+        .tune(&problem)
+        .map_err(|e| format!("{}: cannot tune: {e}", args.model.display()))?;
+    let doc = document::Document::tune(&args.model, &args.measurements, &report);
     output::write_report(&args.out, &report, &doc)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());

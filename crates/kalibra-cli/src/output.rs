@@ -4,7 +4,6 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use kalibra_eval::Report;
 use kalibra_plot::ToSvg;
 
 use crate::document::Document;
@@ -32,7 +31,12 @@ fn sibling(out: &Path, tag: &str) -> PathBuf {
 ///
 /// `out` is replaced if it holds an earlier report (a `report.json`); a directory holding
 /// anything else is left alone and refused.
-pub fn write_report(out: &Path, report: &Report, doc: &Document) -> Result<(), String> {
+/// `report` is the serialisable report (`kalibra eval`'s or `kalibra tune`'s).
+pub fn write_report(
+    out: &Path,
+    report: &impl serde::Serialize,
+    doc: &Document,
+) -> Result<(), String> {
     let shown = out.display();
     let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
     if out.exists() {

@@ -86,6 +86,11 @@ mod tune;
 
 pub use error::EvalError;
 pub use evaluate::{Evaluation, Group};
+/// The types a [`TuneProblem`] is built from, re-exported so that a caller (the `kalibra`
+/// executable) needs no other kalibra crate.
+pub use kalibra_filters::Start;
+/// The matrix and vector types of a [`TuneProblem`].
+pub use kalibra_linalg::{DMatrix, DVector};
 pub use log::{FilterLog, Matrices, Scope, Vectors};
 pub use report::{
     Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, Findings, JReport, LagReport,

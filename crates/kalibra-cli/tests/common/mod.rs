@@ -172,3 +172,95 @@ pub fn to_csv(runs: &[Vec<Cell>]) -> String {
     }
     out
 }
+
+/// The tuning fixtures: a seeded scalar-axis constant-velocity target (n = 2, m = 1) whose
+/// true process noise is a hundredth of the model's nominal `Q`, seen for `TUNE_STEPS` steps
+/// with no measurement at every seventh step.
+pub const TUNE_STEPS: usize = 60;
+pub const TUNE_F: [[f64; 2]; 2] = [[1.0, 1.0], [0.0, 1.0]];
+pub const TUNE_H: [[f64; 2]; 1] = [[1.0, 0.0]];
+pub const TUNE_Q_NOM: [[f64; 2]; 2] = [[0.5, 0.5], [0.5, 1.0]];
+/// The true `Q` is `TUNE_Q_TRUE_SCALE * Q_nom`.
+pub const TUNE_Q_TRUE_SCALE: f64 = 0.01;
+pub const TUNE_R: f64 = 4.0;
+pub const TUNE_X0: [f64; 2] = [0.0, 1.0];
+pub const TUNE_P0: [[f64; 2]; 2] = [[10.0, 0.0], [0.0, 1.0]];
+
+/// `(measurements, truth)`: the true state at each step of the sequence and its measurement
+/// (`None` at every seventh step). The truth starts one step after `TUNE_X0` (predict first).
+pub fn simulate_tune() -> (Vec<Option<f64>>, Vec<[f64; 2]>) {
+    use kalibra_linalg::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector2};
+    use kalibra_models::{LinearGaussian, LinearObservation};
+    let m2 = |a: [[f64; 2]; 2]| Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1]);
+    let f = LinearGaussian::new(m2(TUNE_F), m2(TUNE_Q_NOM) * TUNE_Q_TRUE_SCALE).unwrap();
+    let h = LinearObservation::new(
+        Matrix1x2::new(TUNE_H[0][0], TUNE_H[0][1]),
+        Matrix1::new(TUNE_R),
+    )
+    .unwrap();
+    let l0 = m2(TUNE_P0).map(f64::sqrt);
+    let runs = MonteCarlo::new(1, SEED)
+        .map(|_, rng| {
+            let x0 = Vector2::new(TUNE_X0[0], TUNE_X0[1]) + sample_with_factor(&l0, rng);
+            let mut sim = Simulator::new(&f, &h, x0, 0).unwrap();
+            // x0 is the state one step before the first measurement.
+            sim.step(rng).unwrap();
+            let mut zs = Vec::new();
+            let mut xs = Vec::new();
+            for k in 0..TUNE_STEPS {
+                let (x, z) = sim.step(rng).unwrap();
+                zs.push((k % 7 != 6).then_some(z[0]));
+                xs.push([x[0], x[1]]);
+            }
+            Ok::<_, std::fmt::Error>((zs, xs))
+        })
+        .unwrap();
+    runs.into_iter().next().unwrap()
+}
+
+fn toml_matrix<const C: usize>(rows: &[[f64; C]]) -> String {
+    let rows: Vec<String> = rows
+        .iter()
+        .map(|r| {
+            let cells: Vec<String> = r.iter().map(|v| format!("{v:?}")).collect();
+            format!("[{}]", cells.join(", "))
+        })
+        .collect();
+    format!("[{}]", rows.join(", "))
+}
+
+/// `tune_model.toml`: the nominal model.
+pub fn tune_model_toml() -> String {
+    format!(
+        "# The model of the tuning fixtures (tests/common/mod.rs writes it).\n\
+         F = {}\nH = {}\nQ = {}\nR = [[{:?}]]\nx0 = [{:?}, {:?}]\nP0 = {}\nposition = [0]\n",
+        toml_matrix(&TUNE_F),
+        toml_matrix(&TUNE_H),
+        toml_matrix(&TUNE_Q_NOM),
+        TUNE_R,
+        TUNE_X0[0],
+        TUNE_X0[1],
+        toml_matrix(&TUNE_P0)
+    )
+}
+
+/// `tune_measurements.csv`: `step,z_0`, an empty cell where there is no measurement.
+pub fn tune_measurements_csv(zs: &[Option<f64>]) -> String {
+    let mut out = "step,z_0\n".to_string();
+    for (k, z) in zs.iter().enumerate() {
+        out.push_str(&format!(
+            "{k},{}\n",
+            z.map_or(String::new(), |z| format!("{z:?}"))
+        ));
+    }
+    out
+}
+
+/// `tune_truth.csv`: `step,x_0,x_1`.
+pub fn tune_truth_csv(xs: &[[f64; 2]]) -> String {
+    let mut out = "step,x_0,x_1\n".to_string();
+    for (k, x) in xs.iter().enumerate() {
+        out.push_str(&format!("{k},{:?},{:?}\n", x[0], x[1]));
+    }
+    out
+}
