@@ -13,6 +13,9 @@ LOG FORMATS (chosen by the extension; R runs, K steps, n states, m measurements)
          matrix for all steps, one per step (K,..) or one per run and step (R,K,..).
          A single run may drop the R axis. A cell (one run and step) that is null was
          not logged. Matrices are lists of rows.
+  .npz   numpy's np.savez (or np.savez_compressed) with the same array names and
+         shapes as .json; a cell whose values are all NaN was not logged. float64,
+         float32, int64 or int32, C order.
   .csv   One row per run and step. Columns: run, step, optional time, truth_i,
          estimate_i, covariance_i_j (every i, j; or the diagonal covariance_i_i alone),
          innovation_i, innovation_cov_i_j (or its diagonal), i and j from 0. An empty
@@ -130,15 +133,16 @@ pub fn read_log(path: &Path) -> Result<FilterLog, String> {
     let raw = match ext.as_str() {
         "json" => crate::json_log::read(path, &read_bytes(path)?)?,
         "csv" => crate::csv_log::read(path, &read_bytes(path)?)?,
+        "npz" => crate::npz_log::read(path, &read_bytes(path)?)?,
         "" => {
             return Err(format!(
-                "{}: no file extension; name the log .json or .csv",
+                "{}: no file extension; name the log .json, .csv or .npz",
                 path.display()
             ));
         }
         other => {
             return Err(format!(
-                "{}: unknown extension `.{other}`; kalibra eval reads .json and .csv logs",
+                "{}: unknown extension `.{other}`; kalibra eval reads .json, .csv and .npz logs",
                 path.display()
             ));
         }

@@ -20,6 +20,7 @@ mod csv_log;
 mod document;
 mod input;
 mod json_log;
+mod npz_log;
 mod output;
 mod tune_document;
 mod tune_input;

@@ -176,6 +176,34 @@ fn csv_log_gives_the_in_process_report() {
     good_log("good-csv", "kf.csv", false);
 }
 
+/// `kf.npz` holds kf.json's arrays as numpy's `np.savez` wrote them (`make_npz.py`), NaN
+/// cells where the JSON has null: the report is the same.
+#[test]
+fn npz_log_gives_the_in_process_report() {
+    good_log("good-npz", "kf.npz", true);
+}
+
+#[test]
+fn npz_truncated_file() {
+    let full = std::fs::read(fixture("kf.npz")).unwrap();
+    bad_input(
+        "truncated-npz",
+        "cut.npz",
+        &full[..full.len() / 2],
+        &["not an NPZ archive"],
+    );
+}
+
+#[test]
+fn npz_not_an_archive() {
+    bad_input(
+        "not-npz",
+        "log.npz",
+        b"{\"truth\": []}",
+        &["not an NPZ archive", "np.savez"],
+    );
+}
+
 /// A small single-run CSV with diagonal covariances works, and a second run replaces the
 /// first report.
 #[test]
