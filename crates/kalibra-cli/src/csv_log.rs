@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use crate::csv_rows::Rows;
 use crate::input::{MatrixArray, RawLog, VectorArray};
 
 /// The per-cell arrays, vectors first.
@@ -72,14 +73,8 @@ fn parse_column(name: &str) -> Option<Column> {
 /// Reads the CSV log in `bytes` (from `file`, named in errors).
 pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
     let name = file.display();
-    let mut reader = csv::ReaderBuilder::new()
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(bytes);
-    let header = reader
-        .headers()
-        .map_err(|e| format!("{name}: row 1: cannot read the header: {e}"))?
-        .clone();
+    let mut rows_in = Rows::new(&name, bytes)?;
+    let header = rows_in.header.clone();
     let columns = header
         .iter()
         .enumerate()
@@ -120,38 +115,8 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
 
     let mut rows = Vec::new();
     let mut record = csv::StringRecord::new();
-    loop {
-        match reader.read_record(&mut record) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => {
-                let row = e
-                    .position()
-                    .map(|p| format!("row {}: ", p.line()))
-                    .unwrap_or_default();
-                return Err(format!("{name}: {row}cannot read the file: {e}"));
-            }
-        }
-        let line = record.position().map_or(0, |p| p.line());
-        if record.len() != header.len() {
-            return Err(format!(
-                "{name}: row {line}: {} fields, but the header has {} (a ragged row{})",
-                record.len(),
-                header.len(),
-                if record.len() < header.len() {
-                    "; is the file truncated?"
-                } else {
-                    ""
-                }
-            ));
-        }
-        let cell_error = |c: usize, msg: String| {
-            format!(
-                "{name}: row {line}, column {} ({}): {msg}",
-                c + 1,
-                &header[c]
-            )
-        };
+    while let Some(line) = rows_in.next_row(&mut record)? {
+        let cell_error = |c: usize, msg: String| rows_in.cell_error(line, c, msg);
         let number = |c: usize| -> Result<Option<f64>, String> {
             let text = &record[c];
             if text.is_empty() {

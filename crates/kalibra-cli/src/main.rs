@@ -17,6 +17,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod csv_log;
+mod csv_rows;
 mod document;
 mod input;
 mod json_log;

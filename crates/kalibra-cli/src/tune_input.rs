@@ -6,6 +6,8 @@ use std::path::Path;
 use kalibra_eval::{DMatrix, DVector, Start, TuneProblem, matrix_from_rows};
 use serde::Deserialize;
 
+use crate::csv_rows::Rows;
+
 /// The formats, as `kalibra tune --help` shows them.
 pub const TUNE_HELP: &str = "\
 MODEL.toml (n states, m measurements; matrices are arrays of rows):
@@ -192,14 +194,8 @@ pub fn read_series(
 ) -> Result<Vec<Option<DVector<f64>>>, String> {
     let name = path.display();
     let bytes = std::fs::read(path).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
-    let mut reader = csv::ReaderBuilder::new()
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(bytes.as_slice());
-    let header = reader
-        .headers()
-        .map_err(|e| format!("{name}: row 1: cannot read the header: {e}"))?
-        .clone();
+    let mut rows_in = Rows::new(&name, bytes.as_slice())?;
+    let header = rows_in.header.clone();
     let expected: Vec<String> = std::iter::once("step".to_string())
         .chain((0..dim).map(|i| format!("{prefix}_{i}")))
         .collect();
@@ -230,38 +226,8 @@ pub fn read_series(
     }
     let mut out = Vec::new();
     let mut record = csv::StringRecord::new();
-    loop {
-        match reader.read_record(&mut record) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => {
-                let row = e
-                    .position()
-                    .map(|p| format!("row {}: ", p.line()))
-                    .unwrap_or_default();
-                return Err(format!("{name}: {row}cannot read the file: {e}"));
-            }
-        }
-        let line = record.position().map_or(0, |p| p.line());
-        if record.len() != header.len() {
-            return Err(format!(
-                "{name}: row {line}: {} fields, but the header has {} (a ragged row{})",
-                record.len(),
-                header.len(),
-                if record.len() < header.len() {
-                    "; is the file truncated?"
-                } else {
-                    ""
-                }
-            ));
-        }
-        let cell = |c: usize, msg: String| {
-            format!(
-                "{name}: row {line}, column {} ({}): {msg}",
-                c + 1,
-                &header[c]
-            )
-        };
+    while let Some(line) = rows_in.next_row(&mut record)? {
+        let cell = |c: usize, msg: String| rows_in.cell_error(line, c, msg);
         let step_text = &record[0];
         let step: usize = step_text.parse().map_err(|_| {
             cell(

@@ -1,35 +1,11 @@
 //! End to end: the built `kalibra` binary on the committed fixtures and on bad inputs.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
 use kalibra_eval::{Evaluation, FilterLog, Matrices, Report, Vectors};
 use serde::Deserialize;
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
-/// A fresh, empty scratch directory for one test.
-fn scratch(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("kalibra-cli-{test}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn kalibra(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_kalibra"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use common::{fixture, kalibra, scratch, text};
 
 /// The JSON fixture read independently of the binary's reader (serde into typed arrays).
 #[derive(Deserialize)]

@@ -2,36 +2,12 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
 
 use kalibra_eval::{TuneProblem, TuneReport, Tuning};
 use kalibra_linalg::{DMatrix, DVector};
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name)
-}
-
-/// A fresh, empty scratch directory for one test.
-fn scratch(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("kalibra-tune-{test}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn kalibra(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_kalibra"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+use common::{fixture, kalibra, scratch, text};
 
 fn m2(a: [[f64; 2]; 2]) -> DMatrix<f64> {
     DMatrix::from_fn(2, 2, |i, j| a[i][j])
