@@ -214,16 +214,20 @@ fn thread_count_does_not_change_a_bit() {
     }
 }
 
+/// `values` with the entries at indices `i % period == offset` left out (not logged).
+fn with_gaps(values: &[DVector<f64>], period: usize, offset: usize) -> Vec<Option<DVector<f64>>> {
+    values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (i % period != offset).then(|| v.clone()))
+        .collect()
+}
+
 #[test]
 fn gaps_are_skipped_and_counted() {
     let cv = cv();
     // Every third measurement missing.
-    let zs: Vec<Option<DVector<f64>>> = cv
-        .zs
-        .iter()
-        .enumerate()
-        .map(|(i, z)| (i % 3 != 1).then(|| z.clone()))
-        .collect();
+    let zs: Vec<Option<DVector<f64>>> = with_gaps(&cv.zs, 3, 1);
     let present = zs.iter().flatten().count();
     assert!(present < STEPS);
     let problem = problem(&cv, zs.clone()).unwrap();
@@ -588,18 +592,8 @@ fn every_bad_input_is_a_typed_error() {
 fn rmse_per_p_equals_a_direct_computation() {
     let cv = cv();
     // Gaps in both the measurements and the truth.
-    let zs: Vec<Option<DVector<f64>>> = cv
-        .zs
-        .iter()
-        .enumerate()
-        .map(|(i, z)| (i % 5 != 2).then(|| z.clone()))
-        .collect();
-    let truth: Vec<Option<DVector<f64>>> = cv
-        .truth
-        .iter()
-        .enumerate()
-        .map(|(i, x)| (i % 7 != 0).then(|| x.clone()))
-        .collect();
+    let zs: Vec<Option<DVector<f64>>> = with_gaps(&cv.zs, 5, 2);
+    let truth: Vec<Option<DVector<f64>>> = with_gaps(&cv.truth, 7, 0);
     let problem = problem(&cv, zs.clone())
         .unwrap()
         .with_truth(truth.clone())
