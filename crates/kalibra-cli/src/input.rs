@@ -76,6 +76,32 @@ pub struct RawLog {
     pub innovation_cov: Option<MatrixArray>,
     /// `F`, `H`, `Q`, `R`.
     pub model: Option<[ModelArray; 4]>,
+    /// The per-cell array that fixed `runs` and `steps` (for the error when another disagrees).
+    pub shape_from: Option<&'static str>,
+}
+
+/// The per-cell arrays, in the order the readers take them.
+pub const PER_CELL: [&str; 5] = [
+    "truth",
+    "estimate",
+    "covariance",
+    "innovation",
+    "innovation_cov",
+];
+
+/// Whether the model arrays `F`, `H`, `Q`, `R` are given; all four go together, so a log
+/// with only some of them (`present`) is an error naming one that is missing.
+pub fn model_given(present: &[&str]) -> Result<bool, String> {
+    if present.is_empty() {
+        return Ok(false);
+    }
+    match ["F", "H", "Q", "R"].iter().find(|m| !present.contains(m)) {
+        Some(missing) => Err(format!(
+            "arrays F, H, Q and R go together (for J1/J2); the log has {} but not {missing}",
+            present.join(", ")
+        )),
+        None => Ok(true),
+    }
 }
 
 fn matrices(m: MatrixArray) -> Matrices {
@@ -87,6 +113,65 @@ fn matrices(m: MatrixArray) -> Matrices {
 }
 
 impl RawLog {
+    /// Stores the per-cell array `array` (one of [`PER_CELL`]) of `runs x steps` cells of
+    /// `rows x cols` values (`cols` is ignored for vectors). The first such array fixes the
+    /// runs and steps; another that disagrees, or a non-square covariance, is an error.
+    pub fn put_cells(
+        &mut self,
+        array: &'static str,
+        (runs, steps): (usize, usize),
+        (rows, cols): (usize, usize),
+        cells: Vec<Option<Vec<f64>>>,
+    ) -> Result<(), String> {
+        match self.shape_from {
+            None => {
+                self.shape_from = Some(array);
+                (self.runs, self.steps) = (runs, steps);
+            }
+            Some(first) if (self.runs, self.steps) != (runs, steps) => {
+                return Err(format!(
+                    "array {array} has {runs} runs of {steps} steps, but array {first} has {} \
+                     runs of {} steps",
+                    self.runs, self.steps
+                ));
+            }
+            Some(_) => {}
+        }
+        let matrix = |cells| {
+            if rows == cols {
+                Ok(MatrixArray {
+                    dim: rows,
+                    diagonal: false,
+                    cells,
+                })
+            } else {
+                Err(format!(
+                    "array {array} holds {rows}x{cols} matrices; a covariance is square"
+                ))
+            }
+        };
+        let vector = |cells| VectorArray { dim: rows, cells };
+        match array {
+            "covariance" => self.covariance = Some(matrix(cells)?),
+            "innovation_cov" => self.innovation_cov = Some(matrix(cells)?),
+            "truth" => self.truth = Some(vector(cells)),
+            "estimate" => self.estimate = Some(vector(cells)),
+            _ => self.innovation = Some(vector(cells)),
+        }
+        Ok(())
+    }
+
+    /// The runs and steps, or the error of a log without any per-cell array.
+    pub fn require_cells(&self) -> Result<(usize, usize), String> {
+        match self.shape_from {
+            Some(_) => Ok((self.runs, self.steps)),
+            None => Err(
+                "the log holds none of truth, estimate, covariance, innovation, innovation_cov"
+                    .to_string(),
+            ),
+        }
+    }
+
     /// The checked log; an error names the file and the array at fault.
     pub fn build(self, file: &Path) -> Result<FilterLog, String> {
         let fail = |e: kalibra_eval::EvalError| format!("{}: {e}", file.display());

@@ -8,7 +8,7 @@ use std::path::Path;
 use kalibra_eval::Scope;
 use serde_json::Value;
 
-use crate::input::{MatrixArray, ModelArray, RawLog, VectorArray};
+use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
 
 const VECTORS: [&str; 3] = ["truth", "estimate", "innovation"];
 const MATRICES: [&str; 2] = ["covariance", "innovation_cov"];
@@ -52,70 +52,13 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
     let fail = |msg: String| format!("{name}: {msg}");
 
     let mut log = RawLog::default();
-    // The first per-cell array fixes the runs and steps; every other must agree.
-    let mut shape: Option<(&str, usize, usize)> = None;
-    let mut agree = |array: &'static str, c: &Cells| -> Result<(), String> {
-        match shape {
-            None => {
-                shape = Some((array, c.runs, c.steps));
-                Ok(())
-            }
-            Some((first, runs, steps)) if (runs, steps) != (c.runs, c.steps) => Err(format!(
-                "array {array} has {} runs of {} steps, but array {first} has {runs} runs of \
-                 {steps} steps",
-                c.runs, c.steps
-            )),
-            Some(_) => Ok(()),
-        }
-    };
-    for array in [
-        "truth",
-        "estimate",
-        "covariance",
-        "innovation",
-        "innovation_cov",
-    ] {
+    for array in PER_CELL {
         let Some(v) = map.get(array) else { continue };
-        let matrix = MATRICES.contains(&array);
-        let c = per_cell(array, v, matrix).map_err(fail)?;
-        agree(array, &c).map_err(fail)?;
-        if matrix {
-            if c.rows != c.cols {
-                return Err(fail(format!(
-                    "array {array} holds {}x{} matrices; a covariance is square",
-                    c.rows, c.cols
-                )));
-            }
-            let m = MatrixArray {
-                dim: c.rows,
-                diagonal: false,
-                cells: c.cells,
-            };
-            if array == "covariance" {
-                log.covariance = Some(m);
-            } else {
-                log.innovation_cov = Some(m);
-            }
-        } else {
-            let a = VectorArray {
-                dim: c.rows,
-                cells: c.cells,
-            };
-            match array {
-                "truth" => log.truth = Some(a),
-                "estimate" => log.estimate = Some(a),
-                _ => log.innovation = Some(a),
-            }
-        }
+        let c = per_cell(array, v, MATRICES.contains(&array)).map_err(fail)?;
+        log.put_cells(array, (c.runs, c.steps), (c.rows, c.cols), c.cells)
+            .map_err(fail)?;
     }
-    let Some((_, runs, steps)) = shape else {
-        return Err(fail(
-            "the log holds none of truth, estimate, covariance, innovation, innovation_cov"
-                .to_string(),
-        ));
-    };
-    log.runs = runs;
-    log.steps = steps;
+    let (runs, steps) = log.require_cells().map_err(fail)?;
     if let Some(v) = map.get("time") {
         let times = numbers("time", v, &mut vec![]).map_err(fail)?;
         log.time = Some(times);
@@ -125,13 +68,7 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
         .copied()
         .filter(|m| map.contains_key(*m))
         .collect();
-    if !present.is_empty() {
-        if let Some(missing) = MODEL.iter().find(|m| !map.contains_key(**m)) {
-            return Err(fail(format!(
-                "arrays F, H, Q and R go together (for J1/J2); the log has {} but not {missing}",
-                present.join(", ")
-            )));
-        }
+    if model_given(&present).map_err(fail)? {
         let mut model = Vec::with_capacity(4);
         for array in MODEL {
             model.push(model_array(array, &map[array], runs, steps).map_err(fail)?);

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use kalibra_eval::Scope;
 
-use crate::input::{MatrixArray, ModelArray, RawLog, VectorArray};
+use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
 
 const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
 
@@ -175,71 +175,16 @@ fn build(mut arrays: std::collections::BTreeMap<String, Array>) -> Result<RawLog
         return Err(format!("unknown array `{unknown}`; the arrays are {KNOWN}"));
     }
     let mut log = RawLog::default();
-    let mut shape: Option<(&str, usize, usize)> = None;
-    for array in [
-        "truth",
-        "estimate",
-        "covariance",
-        "innovation",
-        "innovation_cov",
-    ] {
+    for array in PER_CELL {
         let Some(a) = arrays.remove(array) else {
             continue;
         };
-        let matrix = array.ends_with("cov") || array == "covariance";
-        let Cells {
-            runs,
-            steps,
-            shape: cell_shape,
-            cells,
-        } = cells(array, a, if matrix { 2 } else { 1 })?;
-        match shape {
-            None => shape = Some((array, runs, steps)),
-            Some((first, r, k)) if (r, k) != (runs, steps) => {
-                return Err(format!(
-                    "array {array} has {runs} runs of {steps} steps, but array {first} has {r} \
-                     runs of {k} steps"
-                ));
-            }
-            Some(_) => {}
-        }
-        if matrix {
-            if cell_shape[0] != cell_shape[1] {
-                return Err(format!(
-                    "array {array} holds {}x{} matrices; a covariance is square",
-                    cell_shape[0], cell_shape[1]
-                ));
-            }
-            let m = MatrixArray {
-                dim: cell_shape[0],
-                diagonal: false,
-                cells,
-            };
-            if array == "covariance" {
-                log.covariance = Some(m);
-            } else {
-                log.innovation_cov = Some(m);
-            }
-        } else {
-            let v = VectorArray {
-                dim: cell_shape[0],
-                cells,
-            };
-            match array {
-                "truth" => log.truth = Some(v),
-                "estimate" => log.estimate = Some(v),
-                _ => log.innovation = Some(v),
-            }
-        }
+        let matrix = array == "covariance" || array == "innovation_cov";
+        let c = cells(array, a, if matrix { 2 } else { 1 })?;
+        let cols = c.shape.get(1).copied().unwrap_or(0);
+        log.put_cells(array, (c.runs, c.steps), (c.shape[0], cols), c.cells)?;
     }
-    let Some((_, runs, steps)) = shape else {
-        return Err(
-            "the log holds none of truth, estimate, covariance, innovation, innovation_cov"
-                .to_string(),
-        );
-    };
-    log.runs = runs;
-    log.steps = steps;
+    let (runs, steps) = log.require_cells()?;
     if let Some(t) = arrays.remove("time") {
         if t.shape.len() != 1 {
             return Err(format!("array time has shape {:?}; expected (K,)", t.shape));
@@ -252,13 +197,7 @@ fn build(mut arrays: std::collections::BTreeMap<String, Array>) -> Result<RawLog
         .copied()
         .filter(|m| arrays.contains_key(*m))
         .collect();
-    if !present.is_empty() {
-        if let Some(missing) = model.iter().find(|m| !arrays.contains_key(**m)) {
-            return Err(format!(
-                "arrays F, H, Q and R go together (for J1/J2); the log has {} but not {missing}",
-                present.join(", ")
-            ));
-        }
+    if model_given(&present)? {
         let mut out = Vec::with_capacity(4);
         for name in model {
             let a = arrays.remove(name).unwrap_or(Array {
