@@ -1,13 +1,19 @@
-//! The CSV log: one row per run and step (see `input::FORMATS_HELP`).
+//! The CSV log: one row per run and step (see `input::FORMATS_HELP`), evaluated as it is
+//! read. Each row goes to a `kalibra_eval::Evaluator` as soon as it is parsed, so memory holds
+//! the statistics (per step, and the `n + 1` numbers per valid cell that NCI needs), never the
+//! file; a large file shows a progress bar when stderr is a terminal.
 //!
 //! Rows and columns in messages count from 1, the header being row 1, as a spreadsheet shows
-//! them. The whole file is read before the log is built (streaming is a later step).
+//! them. Rows may come in any order (run after run is the usual one); every (run, step) of the
+//! runs-by-steps rectangle needs exactly one row.
 
+use std::fs::File;
+use std::io::{IsTerminal, Read};
 use std::path::Path;
 
-use crate::csv_rows::Rows;
-use crate::input::{MatrixArray, RawLog, VectorArray};
+use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, Report};
 
+use crate::csv_rows::Rows;
 /// The per-cell arrays, vectors first.
 const ARRAYS: [&str; 5] = [
     "truth",
@@ -39,15 +45,6 @@ struct Layout {
     columns: Vec<usize>,
 }
 
-/// One data row, as read.
-struct Row {
-    line: u64,
-    run: usize,
-    step: usize,
-    time: Option<f64>,
-    cells: Vec<Option<Vec<f64>>>,
-}
-
 fn parse_column(name: &str) -> Option<Column> {
     match name {
         "run" => return Some(Column::Run),
@@ -70,11 +67,43 @@ fn parse_column(name: &str) -> Option<Column> {
     None
 }
 
-/// Reads the CSV log in `bytes` (from `file`, named in errors).
-pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
+/// Files from this size on show a progress bar (when stderr is a terminal): about a second
+/// of reading.
+const PROGRESS_FROM_BYTES: u64 = 64 << 20;
+
+/// Evaluates the CSV log `file` with `evaluation`, reading it once from start to end.
+pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> {
     let name = file.display();
-    let mut rows_in = Rows::new(&name, bytes)?;
-    let header = rows_in.header.clone();
+    let opened = File::open(file).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
+    let size = opened.metadata().map_or(0, |m| m.len());
+    let progress = (size >= PROGRESS_FROM_BYTES && std::io::stderr().is_terminal()).then(|| {
+        let bar = indicatif::ProgressBar::new(size);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec}, {eta} left)",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar.set_message(format!("reading {name}"));
+        bar
+    });
+    let source: Box<dyn Read> = match &progress {
+        Some(bar) => Box::new(bar.wrap_read(opened)),
+        None => Box::new(opened),
+    };
+    let result = stream(file, source, evaluation);
+    if let Some(bar) = progress {
+        bar.finish_and_clear();
+    }
+    result
+}
+
+/// The header's columns and the arrays' layouts, or the error naming the column at fault.
+fn header<R: Read>(
+    name: &impl std::fmt::Display,
+    rows: &Rows<impl std::fmt::Display, R>,
+) -> Result<(Vec<Column>, Vec<Layout>), String> {
+    let header = &rows.header;
     let columns = header
         .iter()
         .enumerate()
@@ -99,12 +128,11 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
             ));
         }
     }
-    let find = |want: Column| columns.iter().position(|c| *c == want);
-    let run_col =
-        find(Column::Run).ok_or_else(|| format!("{name}: row 1: missing column `run`"))?;
-    let step_col =
-        find(Column::Step).ok_or_else(|| format!("{name}: row 1: missing column `step`"))?;
-    let time_col = find(Column::Time);
+    for (want, label) in [(Column::Run, "run"), (Column::Step, "step")] {
+        if !columns.contains(&want) {
+            return Err(format!("{name}: row 1: missing column `{label}`"));
+        }
+    }
     let layouts = layouts(&columns).map_err(|e| format!("{name}: row 1: {e}"))?;
     if layouts.is_empty() {
         return Err(format!(
@@ -112,68 +140,188 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
              innovation_cov_i_j)"
         ));
     }
+    Ok((columns, layouts))
+}
 
-    let mut rows = Vec::new();
-    let mut record = csv::StringRecord::new();
-    while let Some(line) = rows_in.next_row(&mut record)? {
-        let cell_error = |c: usize, msg: String| rows_in.cell_error(line, c, msg);
-        let number = |c: usize| -> Result<Option<f64>, String> {
-            let text = &record[c];
-            if text.is_empty() {
-                return Ok(None);
-            }
-            text.parse::<f64>()
-                .map(Some)
-                .map_err(|_| cell_error(c, format!("`{text}` is not a number")))
-        };
+/// A cell's text as a number; `None` for an empty cell.
+fn number(text: &[u8]) -> Result<Option<f64>, ()> {
+    if text.is_empty() {
+        return Ok(None);
+    }
+    std::str::from_utf8(text)
+        .ok()
+        .and_then(|t| t.parse::<f64>().ok())
+        .map(Some)
+        .ok_or(())
+}
+
+/// Reads the rows of `source` (the file `file`) into an evaluator and finishes it.
+fn stream(file: &Path, source: impl Read, evaluation: &Evaluation) -> Result<Report, String> {
+    let name = file.display();
+    let mut rows = Rows::new(&name, source)?;
+    let (columns, layouts) = header(&name, &rows)?;
+    let find = |want: Column| columns.iter().position(|c| *c == want);
+    let (run_col, step_col) = match (find(Column::Run), find(Column::Step)) {
+        (Some(r), Some(s)) => (r, s),
+        _ => return Err(format!("{name}: row 1: missing column `run` or `step`")),
+    };
+    let time_col = find(Column::Time);
+    let mut contents = Contents::default();
+    for l in &layouts {
+        *match ARRAYS[l.array] {
+            "truth" => &mut contents.truth,
+            "estimate" => &mut contents.estimate,
+            "covariance" => &mut contents.covariance,
+            "innovation" => &mut contents.innovation,
+            _ => &mut contents.innovation_cov,
+        } = Some(l.dim);
+    }
+    let fail = |e: EvalError| format!("{name}: cannot evaluate the log: {e}");
+    let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
+    // Per array, the current row's values (reused from row to row) and whether logged.
+    let mut values: Vec<Vec<f64>> = vec![Vec::new(); ARRAYS.len()];
+    let mut logged = [false; ARRAYS.len()];
+    // Per step, the time and the row that gave it first.
+    let mut times: Vec<Option<(f64, u64)>> = Vec::new();
+    let mut record = csv::ByteRecord::new();
+    let mut any = false;
+    while let Some(line) = rows.next_byte_row(&mut record)? {
+        any = true;
+        let text = |c: usize| String::from_utf8_lossy(&record[c]).into_owned();
+        let not_number =
+            |c: usize| rows.cell_error(line, c, format!("`{}` is not a number", text(c)));
         let index = |c: usize| -> Result<usize, String> {
-            let text = &record[c];
-            if text.is_empty() {
-                return Err(cell_error(
+            if record[c].is_empty() {
+                return Err(rows.cell_error(
+                    line,
                     c,
                     "empty; every row names its run and step".into(),
                 ));
             }
-            text.parse::<usize>()
-                .map_err(|_| cell_error(c, format!("`{text}` is not a whole number (0, 1, ...)")))
+            std::str::from_utf8(&record[c])
+                .ok()
+                .and_then(|t| t.parse::<usize>().ok())
+                .ok_or_else(|| {
+                    rows.cell_error(
+                        line,
+                        c,
+                        format!("`{}` is not a whole number (0, 1, ...)", text(c)),
+                    )
+                })
         };
         let run = index(run_col)?;
         let step = index(step_col)?;
-        let time = time_col.map(number).transpose()?.flatten();
-        let mut cells = vec![None; ARRAYS.len()];
         for layout in &layouts {
-            let values = layout
-                .columns
-                .iter()
-                .map(|&c| number(c))
-                .collect::<Result<Vec<_>, _>>()?;
-            let logged = values.iter().filter(|v| v.is_some()).count();
-            if logged == 0 {
-                continue;
+            let out = &mut values[layout.array];
+            out.clear();
+            let mut first_empty = None;
+            for &c in &layout.columns {
+                match number(&record[c]) {
+                    Ok(Some(v)) => out.push(v),
+                    Ok(None) => {
+                        first_empty.get_or_insert(c);
+                    }
+                    Err(()) => return Err(not_number(c)),
+                }
             }
-            if let Some(k) = values.iter().position(Option::is_none) {
-                let full = layout.columns[values.iter().position(Option::is_some).unwrap_or(0)];
-                return Err(cell_error(
-                    layout.columns[k],
+            logged[layout.array] = !out.is_empty();
+            if let (Some(empty), false) = (first_empty, out.is_empty()) {
+                let full = layout
+                    .columns
+                    .iter()
+                    .copied()
+                    .find(|&c| !record[c].is_empty())
+                    .unwrap_or(empty);
+                return Err(rows.cell_error(
+                    line,
+                    empty,
                     format!(
                         "empty, but column {} ({}) is not; {} is logged whole or not at all",
                         full + 1,
-                        &header[full],
+                        &rows.header[full],
                         ARRAYS[layout.array]
                     ),
                 ));
             }
-            cells[layout.array] = Some(values.into_iter().flatten().collect());
         }
-        rows.push(Row {
-            line,
-            run,
-            step,
-            time,
-            cells,
-        });
+        if let Some(c) = time_col {
+            let t = number(&record[c]).map_err(|()| not_number(c))?;
+            if let Some(t) = t {
+                if step >= times.len() {
+                    times.resize(step + 1, None);
+                }
+                match times[step] {
+                    None => times[step] = Some((t, line)),
+                    Some((first, first_line)) if first.to_bits() != t.to_bits() => {
+                        return Err(rows.cell_error(
+                            line,
+                            c,
+                            format!(
+                                "{t} differs from row {first_line}'s time {first} for step \
+                                 {step} (the times are per step, the same in every run)"
+                            ),
+                        ));
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+        let vector = |a: usize| logged[a].then(|| values[a].as_slice());
+        let matrix = |a: usize, diagonal: bool| {
+            logged[a].then(|| {
+                if diagonal {
+                    MatrixCell::Diagonal(values[a].as_slice())
+                } else {
+                    MatrixCell::Full(values[a].as_slice())
+                }
+            })
+        };
+        let diagonal = |a: usize| layouts.iter().any(|l| l.array == a && l.diagonal);
+        let cell = Cell {
+            truth: vector(0),
+            estimate: vector(1),
+            innovation: vector(2),
+            covariance: matrix(3, diagonal(3)),
+            innovation_cov: matrix(4, diagonal(4)),
+            model: None,
+        };
+        evaluator.push(run, step, &cell).map_err(|e| match e {
+            EvalError::DuplicateCell { run, step } => rows.row_error(
+                line,
+                format!("run {run}, step {step} already given in an earlier row"),
+            ),
+            other => rows.row_error(line, format!("cannot evaluate the log: {other}")),
+        })?;
     }
-    assemble(&name.to_string(), rows, &layouts, time_col.is_some())
+    if !any {
+        return Err(format!("{name}: no data rows after the header"));
+    }
+    let times = match time_col {
+        None => None,
+        Some(_) => {
+            let steps = evaluator.steps();
+            Some(
+                (0..steps)
+                    .map(|k| {
+                        times
+                            .get(k)
+                            .copied()
+                            .flatten()
+                            .map(|(t, _)| t)
+                            .ok_or_else(|| format!("{name}: column time: no time for step {k}"))
+                    })
+                    .collect::<Result<Vec<_>, _>>()?,
+            )
+        }
+    };
+    evaluator.finish(times).map_err(|e| match e {
+        EvalError::MissingCell { run, step, steps } => format!(
+            "{name}: no row for run {run}, step {step} (every run needs a row for every step \
+             0..{}; is the file truncated?)",
+            steps - 1
+        ),
+        other => fail(other),
+    })
 }
 
 /// The arrays' layouts from the header: every component of a vector, every entry of a full
@@ -256,107 +404,4 @@ fn layouts(columns: &[Column]) -> Result<Vec<Layout>, String> {
         }
     }
     Ok(out)
-}
-
-/// Orders the rows by run and step, checks that every (run, step) appears exactly once and
-/// that the times agree across runs, and builds the arrays.
-fn assemble(
-    name: &str,
-    mut rows: Vec<Row>,
-    layouts: &[Layout],
-    has_time: bool,
-) -> Result<RawLog, String> {
-    if rows.is_empty() {
-        return Err(format!("{name}: no data rows after the header"));
-    }
-    rows.sort_by_key(|r| (r.run, r.step, r.line));
-    for pair in rows.windows(2) {
-        if (pair[0].run, pair[0].step) == (pair[1].run, pair[1].step) {
-            let (first, second) = if pair[0].line < pair[1].line {
-                (&pair[0], &pair[1])
-            } else {
-                (&pair[1], &pair[0])
-            };
-            return Err(format!(
-                "{name}: row {}: run {}, step {} already given in row {}",
-                second.line, second.run, second.step, first.line
-            ));
-        }
-    }
-    let runs = rows.iter().map(|r| r.run).max().unwrap_or(0) + 1;
-    let steps = rows.iter().map(|r| r.step).max().unwrap_or(0) + 1;
-    if runs.checked_mul(steps) != Some(rows.len()) {
-        let missing = (0..)
-            .map(|i| (i / steps, i % steps))
-            .zip(&rows)
-            .find(|((r, k), row)| (row.run, row.step) != (*r, *k))
-            .map(|(rk, _)| rk)
-            .unwrap_or((rows.len() / steps, rows.len() % steps));
-        return Err(format!(
-            "{name}: no row for run {}, step {} (every run needs a row for every step 0..{}; \
-             is the file truncated?)",
-            missing.0,
-            missing.1,
-            steps - 1
-        ));
-    }
-    let mut log = RawLog {
-        runs,
-        steps,
-        ..RawLog::default()
-    };
-    if has_time {
-        let mut times: Vec<Option<(f64, u64)>> = vec![None; steps];
-        for row in &rows {
-            let Some(t) = row.time else { continue };
-            match times[row.step] {
-                None => times[row.step] = Some((t, row.line)),
-                Some((first, line)) if first.to_bits() != t.to_bits() => {
-                    return Err(format!(
-                        "{name}: row {}, column time: {t} differs from row {line}'s time {first} \
-                         for step {} (the times are per step, the same in every run)",
-                        row.line, row.step
-                    ));
-                }
-                Some(_) => {}
-            }
-        }
-        let mut out = Vec::with_capacity(steps);
-        for (k, t) in times.into_iter().enumerate() {
-            out.push(
-                t.map(|(t, _)| t)
-                    .ok_or_else(|| format!("{name}: column time: no time for step {k}"))?,
-            );
-        }
-        log.time = Some(out);
-    }
-    for layout in layouts {
-        let cells: Vec<Option<Vec<f64>>> = rows
-            .iter_mut()
-            .map(|r| r.cells[layout.array].take())
-            .collect();
-        if layout.array >= FIRST_MATRIX {
-            let m = MatrixArray {
-                dim: layout.dim,
-                diagonal: layout.diagonal,
-                cells,
-            };
-            if ARRAYS[layout.array] == "covariance" {
-                log.covariance = Some(m);
-            } else {
-                log.innovation_cov = Some(m);
-            }
-        } else {
-            let v = VectorArray {
-                dim: layout.dim,
-                cells,
-            };
-            match ARRAYS[layout.array] {
-                "truth" => log.truth = Some(v),
-                "estimate" => log.estimate = Some(v),
-                _ => log.innovation = Some(v),
-            }
-        }
-    }
-    Ok(log)
 }

@@ -3,23 +3,25 @@
 //! column.
 
 use std::fmt::Display;
+use std::io::Read;
 
-/// A CSV file's header and a reader positioned after it.
-pub struct Rows<'a, N: Display> {
+/// A CSV file's header and a reader positioned after it, over any byte source (a file read
+/// as it goes, or bytes in memory).
+pub struct Rows<N: Display, R: Read> {
     /// The file, as errors name it.
     name: N,
-    reader: csv::Reader<&'a [u8]>,
+    reader: csv::Reader<R>,
     /// The header's cells, trimmed.
     pub header: csv::StringRecord,
 }
 
-impl<'a, N: Display> Rows<'a, N> {
-    /// Reads the header of `bytes` (from the file `name`).
-    pub fn new(name: N, bytes: &'a [u8]) -> Result<Self, String> {
+impl<N: Display, R: Read> Rows<N, R> {
+    /// Reads the header of `source` (the file `name`).
+    pub fn new(name: N, source: R) -> Result<Self, String> {
         let mut reader = csv::ReaderBuilder::new()
             .flexible(true)
             .trim(csv::Trim::All)
-            .from_reader(bytes);
+            .from_reader(source);
         let header = reader
             .headers()
             .map_err(|e| format!("{name}: row 1: cannot read the header: {e}"))?
@@ -34,8 +36,28 @@ impl<'a, N: Display> Rows<'a, N> {
     /// Reads the next row into `record` and returns its row number, `None` at the end. A row
     /// whose length differs from the header's is an error (a ragged or truncated file).
     pub fn next_row(&mut self, record: &mut csv::StringRecord) -> Result<Option<u64>, String> {
+        let read = self.reader.read_record(record);
+        let line = record.position().map_or(0, |p| p.line());
+        self.checked(read, line, record.len())
+    }
+
+    /// As [`Rows::next_row`], into a byte record: no UTF-8 check of every cell, for the large
+    /// logs where that check costs (numbers are ASCII; a cell that is not is reported when
+    /// parsed).
+    pub fn next_byte_row(&mut self, record: &mut csv::ByteRecord) -> Result<Option<u64>, String> {
+        let read = self.reader.read_byte_record(record);
+        let line = record.position().map_or(0, |p| p.line());
+        self.checked(read, line, record.len())
+    }
+
+    fn checked(
+        &self,
+        read: csv::Result<bool>,
+        line: u64,
+        fields: usize,
+    ) -> Result<Option<u64>, String> {
         let name = &self.name;
-        match self.reader.read_record(record) {
+        match read {
             Ok(false) => return Ok(None),
             Ok(true) => {}
             Err(e) => {
@@ -46,13 +68,11 @@ impl<'a, N: Display> Rows<'a, N> {
                 return Err(format!("{name}: {row}cannot read the file: {e}"));
             }
         }
-        let line = record.position().map_or(0, |p| p.line());
-        if record.len() != self.header.len() {
+        if fields != self.header.len() {
             return Err(format!(
-                "{name}: row {line}: {} fields, but the header has {} (a ragged row{})",
-                record.len(),
+                "{name}: row {line}: {fields} fields, but the header has {} (a ragged row{})",
                 self.header.len(),
-                if record.len() < self.header.len() {
+                if fields < self.header.len() {
                     "; is the file truncated?"
                 } else {
                     ""
@@ -70,5 +90,10 @@ impl<'a, N: Display> Rows<'a, N> {
             c + 1,
             &self.header[c]
         )
+    }
+
+    /// An error about row `line`.
+    pub fn row_error(&self, line: u64, msg: impl Display) -> String {
+        format!("{}: row {line}: {msg}", self.name)
     }
 }

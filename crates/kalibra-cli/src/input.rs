@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use kalibra_eval::{FilterLog, Matrices, Vectors};
+use kalibra_eval::{Evaluation, FilterLog, Matrices, Report, Vectors};
 
 /// The formats, as `kalibra eval --help` shows them.
 pub const FORMATS_HELP: &str = "\
@@ -209,15 +209,17 @@ impl RawLog {
     }
 }
 
-/// Reads `path` in the format its extension names.
-pub fn read_log(path: &Path) -> Result<FilterLog, String> {
+/// Evaluates the log `path` in the format its extension names: a CSV file streams through
+/// the evaluation row by row; JSON and NPZ logs are read whole into a `FilterLog` (their
+/// arrays are stored whole in the file).
+pub fn evaluate_log(path: &Path, evaluation: &Evaluation) -> Result<Report, String> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_lowercase())
         .unwrap_or_default();
     let raw = match ext.as_str() {
+        "csv" => return crate::csv_log::evaluate(path, evaluation),
         "json" => crate::json_log::read(path, &read_bytes(path)?)?,
-        "csv" => crate::csv_log::read(path, &read_bytes(path)?)?,
         "npz" => crate::npz_log::read(path, &read_bytes(path)?)?,
         "" => {
             return Err(format!(
@@ -232,7 +234,10 @@ pub fn read_log(path: &Path) -> Result<FilterLog, String> {
             ));
         }
     };
-    raw.build(path)
+    let log = raw.build(path)?;
+    evaluation
+        .evaluate(&log)
+        .map_err(|e| format!("{}: cannot evaluate the log: {e}", path.display()))
 }
 
 fn read_bytes(path: &Path) -> Result<Vec<u8>, String> {

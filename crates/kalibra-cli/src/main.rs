@@ -165,10 +165,9 @@ fn main() -> ExitCode {
 
 /// `kalibra eval`: read, evaluate, write. The error is the one message to print.
 fn eval(args: &EvalArgs) -> Result<(), String> {
-    let log = input::read_log(&args.log)?;
-    let report = evaluation(args)
-        .and_then(|e| e.evaluate(&log))
+    let evaluation = evaluation(args)
         .map_err(|e| format!("{}: cannot evaluate the log: {e}", args.log.display()))?;
+    let report = input::evaluate_log(&args.log, &evaluation)?;
     let doc = document::Document::new(&args.log, &report);
     output::write_report(&args.out, &report, &doc)?;
     println!("{}", doc.headline());

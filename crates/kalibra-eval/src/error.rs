@@ -88,6 +88,25 @@ pub enum EvalError {
         /// The state dimension.
         dim: usize,
     },
+    /// A cell fed to an [`crate::Evaluator`] a second time.
+    #[error("run {run}, step {step} is given twice")]
+    DuplicateCell {
+        /// Run index.
+        run: usize,
+        /// Step index.
+        step: usize,
+    },
+    /// A cell of the runs-by-steps rectangle that was never fed to an [`crate::Evaluator`]
+    /// (every run needs every step, logged or not).
+    #[error("run {run}, step {step} is missing (every run needs every step 0..{steps})")]
+    MissingCell {
+        /// Run index.
+        run: usize,
+        /// Step index (the first missing in the run).
+        step: usize,
+        /// Number of steps of the log.
+        steps: usize,
+    },
     /// The log holds nothing to evaluate: neither truth, estimate and covariance, nor
     /// innovation and innovation covariance.
     #[error("log holds neither truth, estimate and covariance nor innovation and its covariance")]

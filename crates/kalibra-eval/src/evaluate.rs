@@ -2,17 +2,15 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use kalibra_linalg::{Covariance, DMatrix, DVector, LinalgError};
+use kalibra_linalg::{DVector, LinalgError};
 use kalibra_metrics::{
-    ChiSquareBand, Credibility, JHorizon, MetricsError, SquaredErrors, StepMean, j_step, nees, nis,
-    normalized_innovation, paired_t_test, sliding_window, whiteness,
+    ChiSquareBand, Credibility, MetricsError, SquaredErrors, StepMean, paired_t_test,
+    sliding_window, whiteness,
 };
 
-use crate::log::Array;
 use crate::report::{
-    Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, Findings, JReport, LagReport,
-    Reason, Report, RmseSeries, SCHEMA_VERSION, Summary, TestMethod, Verdict, VerdictKind,
-    WhitenessReport, WindowReport,
+    Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, LagReport, Reason, Report,
+    RmseSeries, Summary, TestMethod, Verdict, VerdictKind, WhitenessReport, WindowReport,
 };
 use crate::{EvalError, FilterLog};
 
@@ -43,11 +41,11 @@ pub struct Group {
 /// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct Evaluation {
-    confidence: f64,
+    pub(crate) confidence: f64,
     window: Option<usize>,
-    groups: Vec<Group>,
+    pub(crate) groups: Vec<Group>,
     lags: usize,
-    run: usize,
+    pub(crate) run: usize,
 }
 
 impl Default for Evaluation {
@@ -143,7 +141,8 @@ impl Evaluation {
         self
     }
 
-    /// Evaluates `log` (definitions in the crate documentation).
+    /// Evaluates `log` (definitions in the crate documentation): feeds its cells run after
+    /// run to an [`crate::Evaluator`], the one implementation of the evaluation.
     ///
     /// # Errors
     /// [`EvalError::NothingToEvaluate`] if the log holds neither truth, estimate and
@@ -152,141 +151,37 @@ impl Evaluation {
     /// diagnostic run beyond the log; [`EvalError::Metrics`] if a metric fails on data that
     /// passed the checks (not expected).
     pub fn evaluate(&self, log: &FilterLog) -> Result<Report, EvalError> {
-        let state = match (&log.truth, &log.estimate, &log.covariance) {
-            (Some(t), Some(e), Some(p)) => Some((t, e, p)),
-            _ => None,
-        };
-        let innov = match (&log.innovation, &log.innovation_cov) {
-            (Some(v), Some(s)) => Some((v, s)),
-            _ => None,
-        };
-        if state.is_none() && innov.is_none() {
-            return Err(EvalError::NothingToEvaluate);
+        let mut evaluator = self.evaluator(log.contents())?;
+        for run in 0..log.runs() {
+            for step in 0..log.steps() {
+                evaluator.push(run, step, &log.cell(run, step))?;
+            }
         }
-        if self.run >= log.runs() {
-            return Err(EvalError::InvalidOption {
-                name: "diagnostic run",
-                value: self.run as f64,
-            });
-        }
-        let steps = log.steps();
-        let mut report = Report {
-            schema_version: SCHEMA_VERSION,
-            runs: log.runs(),
-            steps: (0..steps).collect(),
-            times: log.times.clone(),
-            state_dim: log.state_dim(),
-            measurement_dim: log.measurement_dim(),
-            confidence: self.confidence,
-            anees_per_step: Vec::new(),
-            anees_band: Vec::new(),
-            nees_runs_per_step: Vec::new(),
-            anis_per_step: Vec::new(),
-            anis_band: Vec::new(),
-            nis_runs_per_step: Vec::new(),
-            nci_per_step: Vec::new(),
-            rmse_per_step: Vec::new(),
-            window: None,
-            whiteness: None,
-            j: None,
-            findings: Findings::default(),
-            summary: Summary {
-                anees: None,
-                anis: None,
-                nci: None,
-                anees_fraction_inside: None,
-                anis_fraction_inside: None,
-                whiteness_fraction_inside: None,
-                anees_test: None,
-                anis_test: None,
-                verdict: Verdict {
-                    kind: VerdictKind::Undetermined,
-                    statistic: None,
-                    evidence: String::new(),
-                    test: String::new(),
-                },
-            },
-        };
-        let mut bands = BandCache::new(self.confidence);
-        let mut state_valid = None;
-        if let Some((t, e, p)) = state {
-            state_valid = Some(self.state(log, t, e, p, &mut bands, &mut report)?);
-        }
-        if let Some((v, s)) = innov {
-            self.innovation(log, v, s, &mut bands, &mut report)?;
-        }
-        if let (Some(model), Some(p), Some(valid)) = (&log.model, &log.covariance, &state_valid) {
-            report.j = self.j(log, model, p, valid)?;
-        }
-        report.summary.verdict = verdict(&report.summary, self.confidence, &report);
-        Ok(report)
+        evaluator.finish(log.times.clone())
     }
 
-    /// NEES, NCI, RMSE and windows; returns which cells had a valid covariance.
-    fn state(
+    /// The state side of the report: NEES, NCI, RMSE and windows, from the accumulators.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn state_report(
         &self,
-        log: &FilterLog,
-        truth: &Array,
-        estimate: &Array,
-        cov: &Array,
+        n: usize,
+        (runs, steps): (usize, usize),
+        means: &StepMean,
+        cred: &Credibility,
+        squared: &SquaredErrors,
+        per_run: &[(f64, usize)],
+        findings: FindingTally,
+        mut window_series: Vec<(usize, Vec<f64>)>,
         bands: &mut BandCache,
         report: &mut Report,
-    ) -> Result<Vec<bool>, EvalError> {
-        let (runs, steps, n) = (log.runs(), log.steps(), truth.rows);
-        for g in &self.groups {
-            if let Some(&index) = g.components.iter().find(|&&i| i >= n) {
-                return Err(EvalError::GroupIndex {
-                    group: g.name.clone(),
-                    index,
-                    dim: n,
-                });
-            }
-        }
-        let mut means = StepMean::new(steps);
-        let mut cred = Credibility::new(steps, n);
-        let mut squared = SquaredErrors::new(steps, n);
-        let mut per_run = vec![(0.0, 0usize); runs];
-        let mut valid = vec![false; runs * steps];
-        let mut findings = FindingTally::default();
-        let mut window_series: Vec<(usize, DVector<f64>)> = Vec::new();
-        for run in 0..runs {
-            for step in 0..steps {
-                let (Some(x), Some(xhat)) = (truth.vector(run, step), estimate.vector(run, step))
-                else {
-                    continue;
-                };
-                if !xhat.iter().all(|v| v.is_finite()) {
-                    findings.add("estimate", run, step, Reason::NonFiniteVector);
-                    continue;
-                }
-                // RMSE and windows need no covariance: estimate minus truth (paper 002's sign).
-                let error = &xhat - &x;
-                squared.push_slice(step, error.as_slice())?;
-                if run == self.run {
-                    window_series.push((step, error.clone()));
-                }
-                let Some(p) = cov.matrix(run, step) else {
-                    continue;
-                };
-                match nees(&error, &p) {
-                    Ok(value) => {
-                        means.push(step, value / n as f64)?;
-                        cred.push_nees(step, error.as_slice(), value)?;
-                        per_run[run].0 += value / n as f64;
-                        per_run[run].1 += 1;
-                        valid[run * steps + step] = true;
-                    }
-                    Err(err) => findings.add("covariance", run, step, reason(err)?),
-                }
-            }
-        }
+    ) -> Result<(), EvalError> {
         report.findings.state = findings.finish();
-        let (per_step, band, counts) = per_step_stats(&means, n, bands)?;
+        let (per_step, band, counts) = per_step_stats(means, n, bands)?;
         report.summary.anees_fraction_inside = fraction_inside(&per_step, &band);
         report.anees_per_step = per_step;
         report.anees_band = band;
         report.nees_runs_per_step = counts;
-        report.summary.anees_test = consistency_test("anees", n, &per_run, self.confidence)?;
+        report.summary.anees_test = consistency_test("anees", n, per_run, self.confidence)?;
         report.summary.anees = report.summary.anees_test.as_ref().map(|t| t.value);
         if runs >= 2 {
             report.nci_per_step = (0..steps)
@@ -337,6 +232,8 @@ impl Evaluation {
                 })
             })
             .collect::<Result<_, EvalError>>()?;
+        // Cells may have come in any order; the windows run along the steps.
+        window_series.sort_by_key(|(k, _)| *k);
         let window = self.window.unwrap_or((steps / 10).max(2));
         if window_series.len() >= window {
             let components = (0..n)
@@ -361,61 +258,33 @@ impl Evaluation {
                 components,
             });
         }
-        Ok(valid)
+        Ok(())
     }
 
-    /// NIS and whiteness.
-    fn innovation(
+    /// The innovation side of the report: NIS and whiteness, from the accumulators.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn innovation_report(
         &self,
-        log: &FilterLog,
-        innovation: &Array,
-        s_array: &Array,
+        m: usize,
+        steps: usize,
+        means: &StepMean,
+        per_run: &[(f64, usize)],
+        findings: FindingTally,
+        diagnostic: Vec<(usize, DVector<f64>)>,
         bands: &mut BandCache,
         report: &mut Report,
     ) -> Result<(), EvalError> {
-        let (steps, m) = (log.steps(), innovation.rows);
-        let runs = log.runs();
-        let mut means = StepMean::new(steps);
-        let mut per_run = vec![(0.0, 0usize); runs];
-        let mut findings = FindingTally::default();
         let mut normalized: Vec<Option<DVector<f64>>> = vec![None; steps];
-        let mut diagnostic = Vec::new();
-        for (run, totals) in per_run.iter_mut().enumerate() {
-            for step in 0..steps {
-                let (Some(nu), Some(s)) = (innovation.vector(run, step), s_array.matrix(run, step))
-                else {
-                    continue;
-                };
-                if !nu.iter().all(|v| v.is_finite()) {
-                    findings.add("innovation", run, step, Reason::NonFiniteVector);
-                    continue;
-                }
-                let s = match Covariance::named(s, "innovation covariance S") {
-                    Ok(s) => s,
-                    Err(err) => {
-                        findings.add("innovation_cov", run, step, reason(err.into())?);
-                        continue;
-                    }
-                };
-                let value = nis(&nu, &s)?;
-                means.push(step, value / m as f64)?;
-                totals.0 += value / m as f64;
-                totals.1 += 1;
-                if run == self.run {
-                    diagnostic.push((step, normalized_innovation(&nu, &s)?));
-                }
-            }
-        }
         for (step, w) in diagnostic {
             normalized[step] = Some(w);
         }
         report.findings.innovation = findings.finish();
-        let (per_step, band, counts) = per_step_stats(&means, m, bands)?;
+        let (per_step, band, counts) = per_step_stats(means, m, bands)?;
         report.summary.anis_fraction_inside = fraction_inside(&per_step, &band);
         report.anis_per_step = per_step;
         report.anis_band = band;
         report.nis_runs_per_step = counts;
-        report.summary.anis_test = consistency_test("anis", m, &per_run, self.confidence)?;
+        report.summary.anis_test = consistency_test("anis", m, per_run, self.confidence)?;
         report.summary.anis = report.summary.anis_test.as_ref().map(|t| t.value);
         let present = normalized.iter().flatten().count();
         let lags = self.lags.min(present.saturating_sub(2));
@@ -450,81 +319,16 @@ impl Evaluation {
         }
         Ok(())
     }
-
-    /// `J1`/`J2` over every update whose two posterior covariances are valid.
-    fn j(
-        &self,
-        log: &FilterLog,
-        model: &crate::log::Model,
-        cov: &Array,
-        valid: &[bool],
-    ) -> Result<Option<JReport>, EvalError> {
-        let (runs, steps) = (log.runs(), log.steps());
-        let mut horizon = JHorizon::new();
-        let (mut j1, mut j2) = (StepMean::new(steps), StepMean::new(steps));
-        let mut failed = 0;
-        for run in 0..runs {
-            for step in 1..steps {
-                if !(valid[run * steps + step - 1] && valid[run * steps + step]) {
-                    continue;
-                }
-                let cells = (
-                    cov.matrix(run, step - 1),
-                    cov.matrix(run, step),
-                    model.f.matrix(run, step),
-                    model.h.matrix(run, step),
-                    model.q.matrix(run, step),
-                    model.r.matrix(run, step),
-                );
-                let (Some(p0), Some(p1), Some(f), Some(h), Some(q), Some(r)) = cells else {
-                    continue;
-                };
-                let ht = h.transpose();
-                let hf = &h * &f;
-                let a: DMatrix<f64> = &hf * &p0 * hf.transpose();
-                let b: DMatrix<f64> = &h * &q * &ht;
-                let c: DMatrix<f64> = &h * &p1 * &ht;
-                match j_step(&a, &b, &r, &c) {
-                    Ok(js) => {
-                        horizon.push(&js);
-                        j1.push(step, js.j1)?;
-                        j2.push(step, js.j2)?;
-                    }
-                    Err(_) => failed += 1,
-                }
-            }
-        }
-        if horizon.updates() == 0 {
-            return Ok(None);
-        }
-        let summary = horizon.summary(horizon.updates())?;
-        let series = |s: &StepMean| -> Vec<Option<f64>> {
-            (0..steps)
-                .map(|k| (s.count(k) > 0).then(|| s.mean(k)))
-                .collect()
-        };
-        Ok(Some(JReport {
-            j1_per_step: series(&j1),
-            j2_per_step: series(&j2),
-            j1: summary.j1,
-            j2: summary.j2,
-            nq_mean_log10: summary.nq_mean_log10,
-            nq_log10_mean: summary.nq_log10_mean,
-            updates: summary.updates,
-            indefinite_updates: summary.indefinite_updates,
-            failed_updates: failed,
-        }))
-    }
 }
 
 /// Chi-square bands for the mean of `samples` normalised values, computed once per count.
-struct BandCache {
+pub(crate) struct BandCache {
     confidence: f64,
     cache: BTreeMap<(usize, usize), Band>,
 }
 
 impl BandCache {
-    fn new(confidence: f64) -> Self {
+    pub(crate) fn new(confidence: f64) -> Self {
         Self {
             confidence,
             cache: BTreeMap::new(),
@@ -652,7 +456,7 @@ fn consistency_test(
     }))
 }
 
-fn verdict(summary: &Summary, confidence: f64, report: &Report) -> Verdict {
+pub(crate) fn verdict(summary: &Summary, confidence: f64, report: &Report) -> Verdict {
     let Some(test) = summary.anees_test.as_ref().or(summary.anis_test.as_ref()) else {
         return Verdict {
             kind: VerdictKind::Undetermined,
@@ -719,7 +523,7 @@ fn verdict(summary: &Summary, confidence: f64, report: &Report) -> Verdict {
     }
 }
 
-fn reason(err: MetricsError) -> Result<Reason, EvalError> {
+pub(crate) fn reason(err: MetricsError) -> Result<Reason, EvalError> {
     match err {
         MetricsError::Linalg(LinalgError::NonFinite { .. }) => Ok(Reason::NonFinite),
         MetricsError::Linalg(LinalgError::NotSymmetric { .. }) => Ok(Reason::NotSymmetric),
@@ -730,14 +534,15 @@ fn reason(err: MetricsError) -> Result<Reason, EvalError> {
     }
 }
 
+/// Findings of one side, counted as cells come.
 #[derive(Default)]
-struct FindingTally {
+pub(crate) struct FindingTally {
     count: FindingCount,
     steps: BTreeSet<usize>,
 }
 
 impl FindingTally {
-    fn add(&mut self, array: &str, run: usize, step: usize, reason: Reason) {
+    pub(crate) fn add(&mut self, array: &str, run: usize, step: usize, reason: Reason) {
         let c = &mut self.count;
         c.cells += 1;
         match reason {
@@ -747,16 +552,21 @@ impl FindingTally {
             Reason::NonFiniteVector => c.non_finite_vector += 1,
         }
         self.steps.insert(step);
-        // Cells arrive in run-major order, so the first recorded is the first.
-        c.first.get_or_insert(Finding {
-            array: array.into(),
-            run,
-            step,
-            reason,
-        });
+        // Cells may come in any order: the first is the one of the lowest (run, step).
+        if c.first
+            .as_ref()
+            .is_none_or(|f| (run, step) < (f.run, f.step))
+        {
+            c.first = Some(Finding {
+                array: array.into(),
+                run,
+                step,
+                reason,
+            });
+        }
     }
 
-    fn finish(mut self) -> FindingCount {
+    pub(crate) fn finish(mut self) -> FindingCount {
         self.count.steps = self.steps.len();
         self.count
     }

@@ -82,6 +82,7 @@ mod error;
 mod evaluate;
 mod log;
 mod report;
+mod stream;
 mod tune;
 
 pub use error::EvalError;
@@ -97,6 +98,7 @@ pub use report::{
     Reason, Report, RmseSeries, SCHEMA_VERSION, Summary, TestMethod, Verdict, VerdictKind,
     WhitenessReport, WindowReport,
 };
+pub use stream::{Cell, Contents, Evaluator, MatrixCell, ModelCell};
 pub use tune::{
     InitialCovariance, JDivisor, NoCrossover, PointRmse, RmseMinimum, TUNE_SCHEMA_VERSION,
     TuneCrossover, TuneError, TuneFindings, TunePoint, TuneProblem, TuneReport, Tuning,

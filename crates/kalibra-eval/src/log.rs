@@ -1,8 +1,7 @@
 //! A filter log held as arrays: `R` runs by `K` steps, each cell optional.
 
-use kalibra_linalg::{DMatrix, DVector};
-
 use crate::EvalError;
+use crate::stream::{Cell, Contents, MatrixCell, ModelCell};
 
 /// Vectors per run and step, not yet checked against a log (see [`FilterLog`]).
 ///
@@ -237,16 +236,11 @@ impl Array {
         self.present[i].then(|| &self.data[i * self.width..(i + 1) * self.width])
     }
 
-    /// The vector at (run, step), if logged.
-    pub(crate) fn vector(&self, run: usize, step: usize) -> Option<DVector<f64>> {
-        self.slice(run, step).map(DVector::from_column_slice)
-    }
-
-    /// The matrix at (run, step), if logged.
-    pub(crate) fn matrix(&self, run: usize, step: usize) -> Option<DMatrix<f64>> {
+    /// The cell at (run, step) as a matrix cell, if logged.
+    fn matrix_cell(&self, run: usize, step: usize) -> Option<MatrixCell<'_>> {
         self.slice(run, step).map(|v| match self.layout {
-            Layout::Full => DMatrix::from_row_slice(self.rows, self.cols, v),
-            Layout::Diagonal => DMatrix::from_diagonal(&DVector::from_column_slice(v)),
+            Layout::Full => MatrixCell::Full(v),
+            Layout::Diagonal => MatrixCell::Diagonal(v),
         })
     }
 
@@ -276,6 +270,29 @@ fn position(scope: Scope, steps: usize, i: usize) -> (usize, usize) {
         Scope::PerStep => (0, i),
         Scope::PerRunStep => (i / steps, i % steps),
     }
+}
+
+/// Checks the times of `steps` steps: as many, finite, strictly increasing.
+pub(crate) fn check_times(times: &[f64], steps: usize) -> Result<(), EvalError> {
+    if times.len() != steps {
+        return Err(EvalError::Shape {
+            array: "time",
+            unit: "values",
+            expected: steps,
+            found: times.len(),
+        });
+    }
+    if let Some(step) = times.iter().position(|t| !t.is_finite()) {
+        return Err(EvalError::NonFinite {
+            array: "time",
+            run: 0,
+            step,
+        });
+    }
+    if let Some(step) = (1..times.len()).find(|&k| times[k] <= times[k - 1]) {
+        return Err(EvalError::TimesNotIncreasing { step });
+    }
+    Ok(())
 }
 
 /// The model matrices of a linear(ised) filter, for `J1`/`J2`: `F[k]` and `Q[k]` are those of
@@ -388,6 +405,48 @@ impl FilterLog {
         self.times.as_deref()
     }
 
+    /// Which arrays the log holds, as an [`crate::Evaluator`] is told them.
+    pub fn contents(&self) -> Contents {
+        let dim = |a: &Option<Array>| a.as_ref().map(|a| a.rows);
+        Contents {
+            truth: dim(&self.truth),
+            estimate: dim(&self.estimate),
+            covariance: dim(&self.covariance),
+            innovation: dim(&self.innovation),
+            innovation_cov: dim(&self.innovation_cov),
+            model: self.model.as_ref().map(|m| (m.f.rows, m.h.rows)),
+        }
+    }
+
+    /// The cell of `run` and `step`, borrowed (every array `None` beyond the log).
+    pub fn cell(&self, run: usize, step: usize) -> Cell<'_> {
+        if run >= self.runs || step >= self.steps {
+            return Cell::default();
+        }
+        fn vector(a: &Option<Array>, run: usize, step: usize) -> Option<&[f64]> {
+            a.as_ref().and_then(|a| a.slice(run, step))
+        }
+        fn matrix(a: &Option<Array>, run: usize, step: usize) -> Option<MatrixCell<'_>> {
+            a.as_ref().and_then(|a| a.matrix_cell(run, step))
+        }
+        let model = self.model.as_ref().and_then(|m| {
+            Some(ModelCell {
+                f: m.f.slice(run, step)?,
+                h: m.h.slice(run, step)?,
+                q: m.q.slice(run, step)?,
+                r: m.r.slice(run, step)?,
+            })
+        });
+        Cell {
+            truth: vector(&self.truth, run, step),
+            estimate: vector(&self.estimate, run, step),
+            covariance: matrix(&self.covariance, run, step),
+            innovation: vector(&self.innovation, run, step),
+            innovation_cov: matrix(&self.innovation_cov, run, step),
+            model,
+        }
+    }
+
     fn vectors(&self, array: &'static str, v: Vectors) -> Result<Array, EvalError> {
         Array::check(
             array,
@@ -439,24 +498,7 @@ impl FilterLog {
     /// [`EvalError::Shape`] for a length other than `K`, [`EvalError::NonFinite`] or
     /// [`EvalError::TimesNotIncreasing`] for bad values.
     pub fn with_times(mut self, times: Vec<f64>) -> Result<Self, EvalError> {
-        if times.len() != self.steps {
-            return Err(EvalError::Shape {
-                array: "time",
-                unit: "values",
-                expected: self.steps,
-                found: times.len(),
-            });
-        }
-        if let Some(step) = times.iter().position(|t| !t.is_finite()) {
-            return Err(EvalError::NonFinite {
-                array: "time",
-                run: 0,
-                step,
-            });
-        }
-        if let Some(step) = (1..times.len()).find(|&k| times[k] <= times[k - 1]) {
-            return Err(EvalError::TimesNotIncreasing { step });
-        }
+        check_times(&times, self.steps)?;
         self.times = Some(times);
         Ok(self)
     }

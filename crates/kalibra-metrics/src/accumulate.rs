@@ -63,6 +63,15 @@ impl StepMean {
         self.sum.len()
     }
 
+    /// Extends the horizon to `steps` steps, the new ones empty; no change if it is already
+    /// that long. For a stream whose length is learnt as it is read (a log read row by row).
+    pub fn extend_steps(&mut self, steps: usize) {
+        if steps > self.steps() {
+            self.sum.resize(steps, 0.0);
+            self.count.resize(steps, 0);
+        }
+    }
+
     /// Adds one run's value at `step`.
     ///
     /// # Errors
@@ -140,6 +149,15 @@ impl SquaredErrors {
     /// Number of steps held.
     pub fn steps(&self) -> usize {
         self.count.len()
+    }
+
+    /// Extends the horizon to `steps` steps, the new ones empty; no change if it is already
+    /// that long (see [`StepMean::extend_steps`]).
+    pub fn extend_steps(&mut self, steps: usize) {
+        if steps > self.steps() {
+            self.sum.resize(steps * self.dim, 0.0);
+            self.count.resize(steps, 0);
+        }
     }
 
     /// Number of components.
@@ -279,4 +297,46 @@ impl Merge for SquaredErrors {
 /// Plain mean of a series, ignoring nothing: a NaN in the series gives NaN.
 pub fn time_average(series: &[f64]) -> f64 {
     series.iter().sum::<f64>() / series.len() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Credibility;
+
+    /// A horizon learnt while reading gives what the full horizon from the start gives.
+    #[test]
+    fn extending_the_horizon_equals_building_it_whole() {
+        let pushes = [
+            (0, [1.0, -2.0]),
+            (2, [0.5, 0.25]),
+            (1, [3.0, 1.0]),
+            (2, [-1.0, 2.0]),
+        ];
+        let mut whole = (
+            StepMean::new(3),
+            SquaredErrors::new(3, 2),
+            Credibility::new(3, 2),
+        );
+        let mut grown = (
+            StepMean::new(0),
+            SquaredErrors::new(0, 2),
+            Credibility::new(0, 2),
+        );
+        for (step, e) in pushes {
+            grown.0.extend_steps(step + 1);
+            grown.1.extend_steps(step + 1);
+            grown.2.extend_steps(step + 1);
+            for acc in [&mut whole, &mut grown] {
+                acc.0.push(step, e[0]).unwrap();
+                acc.1.push_slice(step, &e).unwrap();
+                acc.2.push_nees(step, &e, e[0].abs()).unwrap();
+            }
+        }
+        // Shrinking is never done: a shorter request leaves the horizon as it is.
+        grown.0.extend_steps(1);
+        grown.1.extend_steps(1);
+        grown.2.extend_steps(1);
+        assert_eq!(whole, grown);
+    }
 }

@@ -183,6 +183,15 @@ impl Credibility {
         self.nees.len()
     }
 
+    /// Extends the horizon to `steps` steps, the new ones empty; no change if it is already
+    /// that long (see [`crate::StepMean::extend_steps`]).
+    pub fn extend_steps(&mut self, steps: usize) {
+        if steps > self.steps() {
+            self.errors.resize(steps, Vec::new());
+            self.nees.resize(steps, Vec::new());
+        }
+    }
+
     /// Number of state components `n`.
     pub fn dim(&self) -> usize {
         self.dim
