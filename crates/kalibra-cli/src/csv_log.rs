@@ -7,9 +7,11 @@
 //! them. Rows may come in any order (run after run is the usual one); every (run, step) of the
 //! runs-by-steps rectangle needs exactly one row.
 
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{IsTerminal, Read};
 use std::path::Path;
+use std::sync::{Mutex, mpsc};
 
 use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, Report};
 
@@ -87,7 +89,7 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
         bar.set_message(format!("reading {name}"));
         bar
     });
-    let source: Box<dyn Read> = match &progress {
+    let source: Box<dyn Read + Send> = match &progress {
         Some(bar) => Box::new(bar.wrap_read(opened)),
         None => Box::new(opened),
     };
@@ -144,29 +146,260 @@ fn header<R: Read>(
 }
 
 /// A cell's text as a number; `None` for an empty cell.
-fn number(text: &[u8]) -> Result<Option<f64>, ()> {
+fn number(text: &str) -> Result<Option<f64>, ()> {
     if text.is_empty() {
         return Ok(None);
     }
-    std::str::from_utf8(text)
-        .ok()
-        .and_then(|t| t.parse::<f64>().ok())
-        .map(Some)
-        .ok_or(())
+    text.parse::<f64>().map(Some).map_err(|_| ())
+}
+
+/// The fields of one data row as trimmed text. The row's bytes are checked as UTF-8 once,
+/// not field by field (the per-call cost of that check on short numbers was a tenth of the
+/// reading time); a row that is not UTF-8 is read field by field, lossily, so the message
+/// names the field at fault.
+struct Fields<'a> {
+    record: &'a csv::ByteRecord,
+    text: Option<&'a str>,
+}
+
+impl<'a> Fields<'a> {
+    fn new(record: &'a csv::ByteRecord) -> Self {
+        Self {
+            record,
+            text: std::str::from_utf8(record.as_slice()).ok(),
+        }
+    }
+
+    /// Field `c`, trimmed; a field that is not UTF-8 is marked by U+FFFD, which no number
+    /// holds.
+    fn get(&self, c: usize) -> std::borrow::Cow<'a, str> {
+        match (self.text, self.record.range(c)) {
+            (Some(text), Some(range)) => text.get(range).unwrap_or("\u{fffd}").trim().into(),
+            _ => String::from_utf8_lossy(self.record.get(c).unwrap_or(b""))
+                .trim()
+                .to_string()
+                .into(),
+        }
+    }
+}
+
+/// Bytes of the file handed to a parsing thread at a time: large enough that the hand-over
+/// costs nothing, small enough that the blocks in flight hold a few megabytes.
+const BLOCK_BYTES: usize = 1 << 20;
+
+/// What every parsing thread needs to know of the header.
+struct Plan {
+    name: String,
+    header: csv::StringRecord,
+    layouts: Vec<Layout>,
+    run_col: usize,
+    step_col: usize,
+    time_col: Option<usize>,
+    /// Per array, where its values start in a parsed row (`None` if not in the file).
+    offsets: [Option<usize>; ARRAYS.len()],
+    /// Values per parsed row: every array's cell side by side.
+    width: usize,
+}
+
+/// One parsed row of a block.
+struct RowMeta {
+    line: u64,
+    run: usize,
+    step: usize,
+    time: Option<f64>,
+    /// Per array, whether this row logs it.
+    logged: [bool; ARRAYS.len()],
+}
+
+/// A parsed block: its rows, and their values `width` per row.
+struct Parsed {
+    rows: Vec<RowMeta>,
+    values: Vec<f64>,
+}
+
+/// A block's place in the file and its parse.
+type BlockResult = (usize, Result<Parsed, String>);
+
+impl Plan {
+    /// Parses the rows of `block`, whose first line is row `first_row` of the file.
+    fn parse(&self, block: &[u8], first_row: u64) -> Result<Parsed, String> {
+        let mut rows = Rows::continuing(&self.name, block, self.header.clone(), first_row);
+        let mut parsed = Parsed {
+            rows: Vec::new(),
+            values: Vec::new(),
+        };
+        let mut record = csv::ByteRecord::new();
+        while let Some(line) = rows.next_byte_row(&mut record)? {
+            let fields = Fields::new(&record);
+            let not_number =
+                |c: usize| rows.cell_error(line, c, format!("`{}` is not a number", fields.get(c)));
+            let index = |c: usize| -> Result<usize, String> {
+                let text = fields.get(c);
+                if text.is_empty() {
+                    return Err(rows.cell_error(
+                        line,
+                        c,
+                        "empty; every row names its run and step".into(),
+                    ));
+                }
+                text.parse::<usize>().map_err(|_| {
+                    rows.cell_error(
+                        line,
+                        c,
+                        format!("`{text}` is not a whole number (0, 1, ...)"),
+                    )
+                })
+            };
+            let run = index(self.run_col)?;
+            let step = index(self.step_col)?;
+            let time = match self.time_col {
+                Some(c) => number(&fields.get(c)).map_err(|()| not_number(c))?,
+                None => None,
+            };
+            let mut logged = [false; ARRAYS.len()];
+            for layout in &self.layouts {
+                let (mut present, mut empty) = (None, None);
+                for &c in &layout.columns {
+                    match number(&fields.get(c)) {
+                        Ok(Some(v)) => {
+                            parsed.values.push(v);
+                            present.get_or_insert(c);
+                        }
+                        Ok(None) => {
+                            parsed.values.push(f64::NAN);
+                            empty.get_or_insert(c);
+                        }
+                        Err(()) => return Err(not_number(c)),
+                    }
+                }
+                if let (Some(full), Some(empty)) = (present, empty) {
+                    return Err(rows.cell_error(
+                        line,
+                        empty,
+                        format!(
+                            "empty, but column {} ({}) is not; {} is logged whole or not at all",
+                            full + 1,
+                            &self.header[full],
+                            ARRAYS[layout.array]
+                        ),
+                    ));
+                }
+                logged[layout.array] = present.is_some();
+            }
+            parsed.rows.push(RowMeta {
+                line,
+                run,
+                step,
+                time,
+                logged,
+            });
+        }
+        Ok(parsed)
+    }
+
+    /// The cell of a parsed row whose values are `values`.
+    fn cell<'a>(&self, row: &RowMeta, values: &'a [f64]) -> Cell<'a> {
+        let slice = |a: usize| -> Option<&'a [f64]> {
+            let start = self.offsets[a]?;
+            let layout = self.layouts.iter().find(|l| l.array == a)?;
+            row.logged[a].then(|| &values[start..start + layout.columns.len()])
+        };
+        let matrix = |a: usize| {
+            let diagonal = self.layouts.iter().any(|l| l.array == a && l.diagonal);
+            slice(a).map(|v| {
+                if diagonal {
+                    MatrixCell::Diagonal(v)
+                } else {
+                    MatrixCell::Full(v)
+                }
+            })
+        };
+        Cell {
+            truth: slice(0),
+            estimate: slice(1),
+            innovation: slice(2),
+            covariance: matrix(3),
+            innovation_cov: matrix(4),
+            model: None,
+        }
+    }
+}
+
+/// Where `buf` (starting at a record) can be cut after a whole record: just after its last
+/// newline outside quotes, `None` if it has none.
+fn last_record_end(buf: &[u8]) -> Option<usize> {
+    if !buf.contains(&b'"') {
+        return buf.iter().rposition(|&b| b == b'\n').map(|i| i + 1);
+    }
+    // A quoted field may hold a newline; quotes toggle (an escaped "" toggles twice).
+    let mut quoted = false;
+    let mut end = None;
+    for (i, &b) in buf.iter().enumerate() {
+        match b {
+            b'"' => quoted = !quoted,
+            b'\n' if !quoted => end = Some(i + 1),
+            _ => {}
+        }
+    }
+    end
+}
+
+/// Reads `source` until `buf` holds at least `want` bytes or the end; returns whether the end
+/// was reached.
+fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Result<bool> {
+    while buf.len() < want {
+        let start = buf.len();
+        buf.resize(want, 0);
+        match source.read(&mut buf[start..]) {
+            Ok(0) => {
+                buf.truncate(start);
+                return Ok(true);
+            }
+            Ok(got) => buf.truncate(start + got),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => buf.truncate(start),
+            Err(e) => {
+                buf.truncate(start);
+                return Err(e);
+            }
+        }
+    }
+    Ok(false)
 }
 
 /// Reads the rows of `source` (the file `file`) into an evaluator and finishes it.
-fn stream(file: &Path, source: impl Read, evaluation: &Evaluation) -> Result<Report, String> {
-    let name = file.display();
-    let mut rows = Rows::new(&name, source)?;
+///
+/// The file is cut into blocks at record boundaries; parsing threads turn blocks into numbers
+/// while this thread feeds the rows to the evaluator in file order, so the report is the one a
+/// single thread would give, bit for bit, whatever the number of threads.
+fn stream(
+    file: &Path,
+    mut source: impl Read + Send,
+    evaluation: &Evaluation,
+) -> Result<Report, String> {
+    let name = file.display().to_string();
+    let read_error = |e: std::io::Error| format!("{name}: cannot read the file: {e}");
+    // The header: everything up to the first record end.
+    let mut buf = Vec::new();
+    let mut at_end = false;
+    let header_end = loop {
+        if let Some(end) = first_record_end(&buf) {
+            break end;
+        }
+        if at_end {
+            break buf.len();
+        }
+        let want = buf.len() + 64 * 1024;
+        at_end = fill(&mut source, &mut buf, want).map_err(read_error)?;
+    };
+    let rows = Rows::new(name.as_str(), &buf[..header_end])?;
     let (columns, layouts) = header(&name, &rows)?;
     let find = |want: Column| columns.iter().position(|c| *c == want);
-    let (run_col, step_col) = match (find(Column::Run), find(Column::Step)) {
-        (Some(r), Some(s)) => (r, s),
-        _ => return Err(format!("{name}: row 1: missing column `run` or `step`")),
+    let (Some(run_col), Some(step_col)) = (find(Column::Run), find(Column::Step)) else {
+        return Err(format!("{name}: row 1: missing column `run` or `step`"));
     };
-    let time_col = find(Column::Time);
     let mut contents = Contents::default();
+    let mut offsets = [None; ARRAYS.len()];
+    let mut width = 0;
     for l in &layouts {
         *match ARRAYS[l.array] {
             "truth" => &mut contents.truth,
@@ -175,144 +408,142 @@ fn stream(file: &Path, source: impl Read, evaluation: &Evaluation) -> Result<Rep
             "innovation" => &mut contents.innovation,
             _ => &mut contents.innovation_cov,
         } = Some(l.dim);
+        offsets[l.array] = Some(width);
+        width += l.columns.len();
     }
+    let plan = Plan {
+        name: name.clone(),
+        header: rows.header.clone(),
+        layouts,
+        run_col,
+        step_col,
+        time_col: find(Column::Time),
+        offsets,
+        width,
+    };
     let fail = |e: EvalError| format!("{name}: cannot evaluate the log: {e}");
     let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
-    // Per array, the current row's values (reused from row to row) and whether logged.
-    let mut values: Vec<Vec<f64>> = vec![Vec::new(); ARRAYS.len()];
-    let mut logged = [false; ARRAYS.len()];
-    // Per step, the time and the row that gave it first.
+    let first_data_row = 1 + buf[..header_end].iter().filter(|&&b| b == b'\n').count() as u64;
+    buf.drain(..header_end);
+
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get().clamp(1, 4));
+    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>)>(2 * workers);
+    let work_rx = Mutex::new(work_rx);
+    let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(2 * workers + 2);
     let mut times: Vec<Option<(f64, u64)>> = Vec::new();
-    let mut record = csv::ByteRecord::new();
     let mut any = false;
-    while let Some(line) = rows.next_byte_row(&mut record)? {
-        any = true;
-        let text = |c: usize| String::from_utf8_lossy(&record[c]).into_owned();
-        let not_number =
-            |c: usize| rows.cell_error(line, c, format!("`{}` is not a number", text(c)));
-        let index = |c: usize| -> Result<usize, String> {
-            if record[c].is_empty() {
-                return Err(rows.cell_error(
-                    line,
-                    c,
-                    "empty; every row names its run and step".into(),
-                ));
-            }
-            std::str::from_utf8(&record[c])
-                .ok()
-                .and_then(|t| t.parse::<usize>().ok())
-                .ok_or_else(|| {
-                    rows.cell_error(
-                        line,
-                        c,
-                        format!("`{}` is not a whole number (0, 1, ...)", text(c)),
-                    )
-                })
-        };
-        let run = index(run_col)?;
-        let step = index(step_col)?;
-        for layout in &layouts {
-            let out = &mut values[layout.array];
-            out.clear();
-            let mut first_empty = None;
-            for &c in &layout.columns {
-                match number(&record[c]) {
-                    Ok(Some(v)) => out.push(v),
-                    Ok(None) => {
-                        first_empty.get_or_insert(c);
+    let fed: Result<(), String> = std::thread::scope(|scope| {
+        // The reader: cuts the file into blocks of whole records, in order.
+        let reader_done = done_tx.clone();
+        scope.spawn(move || {
+            let (mut row, mut index, mut want) = (first_data_row, 0, BLOCK_BYTES);
+            loop {
+                let end = match fill(&mut source, &mut buf, want) {
+                    Ok(end) => end,
+                    Err(e) => {
+                        let _ = reader_done.send((index, Err(read_error(e))));
+                        return;
                     }
-                    Err(()) => return Err(not_number(c)),
+                };
+                let cut = match (end, last_record_end(&buf)) {
+                    (true, _) => buf.len(),
+                    (false, Some(cut)) => cut,
+                    // A record longer than the block: read on.
+                    (false, None) => {
+                        want = buf.len() + BLOCK_BYTES;
+                        continue;
+                    }
+                };
+                want = BLOCK_BYTES;
+                let rest = buf.split_off(cut);
+                let block = std::mem::replace(&mut buf, rest);
+                let lines = block.iter().filter(|&&b| b == b'\n').count() as u64;
+                if block.is_empty() || work_tx.send((index, row, block)).is_err() {
+                    return;
+                }
+                row += lines;
+                index += 1;
+                if end && buf.is_empty() {
+                    return;
                 }
             }
-            logged[layout.array] = !out.is_empty();
-            if let (Some(empty), false) = (first_empty, out.is_empty()) {
-                let full = layout
-                    .columns
-                    .iter()
-                    .copied()
-                    .find(|&c| !record[c].is_empty())
-                    .unwrap_or(empty);
-                return Err(rows.cell_error(
-                    line,
-                    empty,
-                    format!(
-                        "empty, but column {} ({}) is not; {} is logged whole or not at all",
-                        full + 1,
-                        &rows.header[full],
-                        ARRAYS[layout.array]
-                    ),
-                ));
-            }
+        });
+        for _ in 0..workers {
+            let done = done_tx.clone();
+            let (work_rx, plan) = (&work_rx, &plan);
+            scope.spawn(move || {
+                loop {
+                    let next = work_rx
+                        .lock()
+                        .map_err(|_| ())
+                        .and_then(|rx| rx.recv().map_err(|_| ()));
+                    let Ok((index, row, block)) = next else {
+                        return;
+                    };
+                    if done.send((index, plan.parse(&block, row))).is_err() {
+                        return;
+                    }
+                }
+            });
         }
-        if let Some(c) = time_col {
-            let t = number(&record[c]).map_err(|()| not_number(c))?;
-            if let Some(t) = t {
-                if step >= times.len() {
-                    times.resize(step + 1, None);
-                }
-                match times[step] {
-                    None => times[step] = Some((t, line)),
-                    Some((first, first_line)) if first.to_bits() != t.to_bits() => {
-                        return Err(rows.cell_error(
-                            line,
-                            c,
-                            format!(
-                                "{t} differs from row {first_line}'s time {first} for step \
-                                 {step} (the times are per step, the same in every run)"
+        drop(done_tx);
+        // This thread: the blocks in file order, each row to the evaluator.
+        let mut pending = BTreeMap::new();
+        let mut next = 0;
+        while let Ok((index, parsed)) = done_rx.recv() {
+            pending.insert(index, parsed);
+            while let Some(parsed) = pending.remove(&next) {
+                next += 1;
+                let parsed = parsed?;
+                for (i, row) in parsed.rows.iter().enumerate() {
+                    any = true;
+                    let values = &parsed.values[i * plan.width..(i + 1) * plan.width];
+                    evaluator
+                        .push(row.run, row.step, &plan.cell(row, values))
+                        .map_err(|e| match e {
+                            EvalError::DuplicateCell { run, step } => format!(
+                                "{name}: row {}: run {run}, step {step} already given in an \
+                                 earlier row",
+                                row.line
                             ),
-                        ));
+                            other => format!(
+                                "{name}: row {}: cannot evaluate the log: {other}",
+                                row.line
+                            ),
+                        })?;
+                    if let (Some(t), Some(c)) = (row.time, plan.time_col) {
+                        check_time(&mut times, row, t).map_err(|msg| {
+                            format!(
+                                "{name}: row {}, column {} ({}): {msg}",
+                                row.line,
+                                c + 1,
+                                &plan.header[c]
+                            )
+                        })?;
                     }
-                    Some(_) => {}
                 }
             }
         }
-        let vector = |a: usize| logged[a].then(|| values[a].as_slice());
-        let matrix = |a: usize, diagonal: bool| {
-            logged[a].then(|| {
-                if diagonal {
-                    MatrixCell::Diagonal(values[a].as_slice())
-                } else {
-                    MatrixCell::Full(values[a].as_slice())
-                }
-            })
-        };
-        let diagonal = |a: usize| layouts.iter().any(|l| l.array == a && l.diagonal);
-        let cell = Cell {
-            truth: vector(0),
-            estimate: vector(1),
-            innovation: vector(2),
-            covariance: matrix(3, diagonal(3)),
-            innovation_cov: matrix(4, diagonal(4)),
-            model: None,
-        };
-        evaluator.push(run, step, &cell).map_err(|e| match e {
-            EvalError::DuplicateCell { run, step } => rows.row_error(
-                line,
-                format!("run {run}, step {step} already given in an earlier row"),
-            ),
-            other => rows.row_error(line, format!("cannot evaluate the log: {other}")),
-        })?;
-    }
+        Ok(())
+    });
+    fed?;
     if !any {
         return Err(format!("{name}: no data rows after the header"));
     }
-    let times = match time_col {
+    let times = match plan.time_col {
         None => None,
-        Some(_) => {
-            let steps = evaluator.steps();
-            Some(
-                (0..steps)
-                    .map(|k| {
-                        times
-                            .get(k)
-                            .copied()
-                            .flatten()
-                            .map(|(t, _)| t)
-                            .ok_or_else(|| format!("{name}: column time: no time for step {k}"))
-                    })
-                    .collect::<Result<Vec<_>, _>>()?,
-            )
-        }
+        Some(_) => Some(
+            (0..evaluator.steps())
+                .map(|k| {
+                    times
+                        .get(k)
+                        .copied()
+                        .flatten()
+                        .map(|(t, _)| t)
+                        .ok_or_else(|| format!("{name}: column time: no time for step {k}"))
+                })
+                .collect::<Result<Vec<_>, _>>()?,
+        ),
     };
     evaluator.finish(times).map_err(|e| match e {
         EvalError::MissingCell { run, step, steps } => format!(
@@ -322,6 +553,38 @@ fn stream(file: &Path, source: impl Read, evaluation: &Evaluation) -> Result<Rep
         ),
         other => fail(other),
     })
+}
+
+/// Where the first record of `buf` ends (just after its newline outside quotes).
+fn first_record_end(buf: &[u8]) -> Option<usize> {
+    let mut quoted = false;
+    for (i, &b) in buf.iter().enumerate() {
+        match b {
+            b'"' => quoted = !quoted,
+            b'\n' if !quoted => return Some(i + 1),
+            _ => {}
+        }
+    }
+    None
+}
+
+/// Records the time of a row's step: the first row of a step gives it, the others must agree.
+fn check_time(times: &mut Vec<Option<(f64, u64)>>, row: &RowMeta, t: f64) -> Result<(), String> {
+    if row.step >= times.len() {
+        times.resize(row.step + 1, None);
+    }
+    match times[row.step] {
+        None => times[row.step] = Some((t, row.line)),
+        Some((first, line)) if first.to_bits() != t.to_bits() => {
+            return Err(format!(
+                "{t} differs from row {line}'s time {first} for step {} (the times are per \
+                 step, the same in every run)",
+                row.step
+            ));
+        }
+        Some(_) => {}
+    }
+    Ok(())
 }
 
 /// The arrays' layouts from the header: every component of a vector, every entry of a full

@@ -13,6 +13,8 @@ pub struct Rows<N: Display, R: Read> {
     reader: csv::Reader<R>,
     /// The header's cells, trimmed.
     pub header: csv::StringRecord,
+    /// The row number of the source's first line, less 1 (0 when the source holds the header).
+    offset: u64,
 }
 
 impl<N: Display, R: Read> Rows<N, R> {
@@ -30,14 +32,32 @@ impl<N: Display, R: Read> Rows<N, R> {
             name,
             reader,
             header,
+            offset: 0,
         })
+    }
+
+    /// Rows of `source`, a later piece of the file `name` whose header is `header`; the
+    /// piece's first line is row `first_row` of the file, and starts a record. Fields are
+    /// not trimmed: the caller trims the fields it reads (trimming every field of a byte
+    /// record copies the record).
+    pub fn continuing(name: N, source: R, header: csv::StringRecord, first_row: u64) -> Self {
+        let reader = csv::ReaderBuilder::new()
+            .flexible(true)
+            .has_headers(false)
+            .from_reader(source);
+        Self {
+            name,
+            reader,
+            header,
+            offset: first_row - 1,
+        }
     }
 
     /// Reads the next row into `record` and returns its row number, `None` at the end. A row
     /// whose length differs from the header's is an error (a ragged or truncated file).
     pub fn next_row(&mut self, record: &mut csv::StringRecord) -> Result<Option<u64>, String> {
         let read = self.reader.read_record(record);
-        let line = record.position().map_or(0, |p| p.line());
+        let line = self.offset + record.position().map_or(0, |p| p.line());
         self.checked(read, line, record.len())
     }
 
@@ -46,7 +66,7 @@ impl<N: Display, R: Read> Rows<N, R> {
     /// parsed).
     pub fn next_byte_row(&mut self, record: &mut csv::ByteRecord) -> Result<Option<u64>, String> {
         let read = self.reader.read_byte_record(record);
-        let line = record.position().map_or(0, |p| p.line());
+        let line = self.offset + record.position().map_or(0, |p| p.line());
         self.checked(read, line, record.len())
     }
 
@@ -63,7 +83,7 @@ impl<N: Display, R: Read> Rows<N, R> {
             Err(e) => {
                 let row = e
                     .position()
-                    .map(|p| format!("row {}: ", p.line()))
+                    .map(|p| format!("row {}: ", self.offset + p.line()))
                     .unwrap_or_default();
                 return Err(format!("{name}: {row}cannot read the file: {e}"));
             }
@@ -90,10 +110,5 @@ impl<N: Display, R: Read> Rows<N, R> {
             c + 1,
             &self.header[c]
         )
-    }
-
-    /// An error about row `line`.
-    pub fn row_error(&self, line: u64, msg: impl Display) -> String {
-        format!("{}: row {line}: {msg}", self.name)
     }
 }

@@ -28,8 +28,22 @@ struct Fixture {
 
 /// The evaluation of the fixture's arrays in-process, with the options the tests pass.
 fn in_process(with_model: bool) -> Report {
+    in_process_copies(with_model, 1)
+}
+
+/// As [`in_process`], for the fixture's runs repeated `copies` times (run `c R + r` is run
+/// `r` of the fixture).
+fn in_process_copies(with_model: bool, copies: usize) -> Report {
     let text = std::fs::read_to_string(fixture("kf.json")).unwrap();
-    let fx: Fixture = serde_json::from_str(&text).unwrap();
+    let mut fx: Fixture = serde_json::from_str(&text).unwrap();
+    fn repeat<T: Clone>(v: &mut Vec<T>, copies: usize) {
+        *v = (0..copies).flat_map(|_| v.iter().cloned()).collect();
+    }
+    repeat(&mut fx.truth, copies);
+    repeat(&mut fx.estimate, copies);
+    repeat(&mut fx.covariance, copies);
+    repeat(&mut fx.innovation, copies);
+    repeat(&mut fx.innovation_cov, copies);
     let flat =
         |v: &Vec<Vec<Vec<f64>>>| -> Vec<f64> { v.iter().flatten().flatten().copied().collect() };
     let flat_m = |v: &Vec<Vec<Vec<Vec<f64>>>>| -> Vec<f64> {
@@ -150,6 +164,58 @@ fn json_log_gives_the_in_process_report() {
 #[test]
 fn csv_log_gives_the_in_process_report() {
     good_log("good-csv", "kf.csv", false);
+}
+
+/// A CSV log larger than the blocks the reader hands to its parsing threads (1 MiB): the
+/// rows reach the evaluation in file order, so the report is the in-process one exactly, and
+/// an error in a later block names its row of the file.
+#[test]
+fn csv_log_of_several_blocks() {
+    let copies = 60;
+    let fixture_csv = std::fs::read_to_string(fixture("kf.csv")).unwrap();
+    let mut lines = fixture_csv.lines();
+    let header = lines.next().unwrap();
+    let rows: Vec<&str> = lines.collect();
+    let runs = 4;
+    let mut csv = format!("{header}\n");
+    for c in 0..copies {
+        for row in &rows {
+            let (run, rest) = row.split_once(',').unwrap();
+            let run: usize = run.parse().unwrap();
+            csv += &format!("{},{rest}\n", c * runs + run);
+        }
+    }
+    assert!(csv.len() > 2 << 20, "the log spans several blocks");
+    let dir = scratch("several-blocks");
+    let log = dir.join("big.csv");
+    std::fs::write(&log, &csv).unwrap();
+    let out = dir.join("report");
+    let run = kalibra(&[
+        "eval",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--group",
+        "position=0,1",
+    ]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let report: Report =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report.runs, copies * runs);
+    assert_eq!(report, in_process_copies(false, copies));
+
+    // A bad cell far into the file: row 5001 (the header is row 1).
+    let mut bad: Vec<String> = csv.lines().map(String::from).collect();
+    let cells: Vec<&str> = bad[5000].split(',').collect();
+    let mut cells: Vec<String> = cells.into_iter().map(String::from).collect();
+    cells[4] = "oops".into();
+    bad[5000] = cells.join(",");
+    bad_input(
+        "several-blocks-bad",
+        "big.csv",
+        (bad.join("\n") + "\n").as_bytes(),
+        &["row 5001, column 5 (truth_1)", "`oops` is not a number"],
+    );
 }
 
 /// `kf.npz` holds kf.json's arrays as numpy's `np.savez` wrote them (`make_npz.py`), NaN
