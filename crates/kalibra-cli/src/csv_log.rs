@@ -495,32 +495,48 @@ fn stream(
             while let Some(parsed) = pending.remove(&next) {
                 next += 1;
                 let parsed = parsed?;
-                for (i, row) in parsed.rows.iter().enumerate() {
-                    any = true;
-                    let values = &parsed.values[i * plan.width..(i + 1) * plan.width];
-                    evaluator
-                        .push(row.run, row.step, &plan.cell(row, values))
-                        .map_err(|e| match e {
-                            EvalError::DuplicateCell { run, step } => format!(
-                                "{name}: row {}: run {run}, step {step} already given in an \
-                                 earlier row",
-                                row.line
-                            ),
-                            other => format!(
-                                "{name}: row {}: cannot evaluate the log: {other}",
-                                row.line
-                            ),
-                        })?;
-                    if let (Some(t), Some(c)) = (row.time, plan.time_col) {
-                        check_time(&mut times, row, t).map_err(|msg| {
-                            format!(
-                                "{name}: row {}, column {} ({}): {msg}",
-                                row.line,
-                                c + 1,
-                                &plan.header[c]
-                            )
-                        })?;
+                any |= !parsed.rows.is_empty();
+                // The times first, up to the first row whose time disagrees: the rows before
+                // it go to the evaluator, so that the first error in file order is reported.
+                let mut time_error = None;
+                if let Some(c) = plan.time_col {
+                    for (i, row) in parsed.rows.iter().enumerate() {
+                        let Some(t) = row.time else { continue };
+                        if let Err(msg) = check_time(&mut times, row, t) {
+                            time_error = Some((
+                                i,
+                                format!(
+                                    "{name}: row {}, column {} ({}): {msg}",
+                                    row.line,
+                                    c + 1,
+                                    &plan.header[c]
+                                ),
+                            ));
+                            break;
+                        }
                     }
+                }
+                let upto = time_error.as_ref().map_or(parsed.rows.len(), |e| e.0);
+                let cells: Vec<_> = parsed.rows[..upto]
+                    .iter()
+                    .enumerate()
+                    .map(|(i, row)| {
+                        let values = &parsed.values[i * plan.width..(i + 1) * plan.width];
+                        (row.run, row.step, plan.cell(row, values))
+                    })
+                    .collect();
+                evaluator.push_batch(&cells).map_err(|(i, e)| {
+                    let line = parsed.rows[i].line;
+                    match e {
+                        EvalError::DuplicateCell { run, step } => format!(
+                            "{name}: row {line}: run {run}, step {step} already given in an \
+                             earlier row"
+                        ),
+                        other => format!("{name}: row {line}: cannot evaluate the log: {other}"),
+                    }
+                })?;
+                if let Some((_, message)) = time_error {
+                    return Err(message);
                 }
             }
         }

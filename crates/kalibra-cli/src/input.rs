@@ -220,7 +220,7 @@ pub fn evaluate_log(path: &Path, evaluation: &Evaluation) -> Result<Report, Stri
     let raw = match ext.as_str() {
         "csv" => return crate::csv_log::evaluate(path, evaluation),
         "json" => crate::json_log::read(path, &read_bytes(path)?)?,
-        "npz" => crate::npz_log::read(path, &read_bytes(path)?)?,
+        "npz" => return crate::npz_log::evaluate(path, evaluation),
         "" => {
             return Err(format!(
                 "{}: no file extension; name the log .json, .csv or .npz",

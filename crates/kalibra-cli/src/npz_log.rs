@@ -5,63 +5,54 @@
 //! no `null`; a cell with only some NaN values is kept as logged, so a NaN covariance is a
 //! finding about the filter under test, as in the other formats. Errors name the file and the
 //! array, and the cell index where one is at fault.
+//!
+//! The per-cell arrays stream: each is read from its own handle on the archive, all in step,
+//! run after run, by a reader thread that hands batches of cells to the evaluation; memory
+//! holds the statistics and a few batches, never the arrays. The small arrays (`time`, `F`,
+//! `H`, `Q`, `R`) are read whole.
 
-use std::io::{Cursor, Read};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufReader, Read};
 use std::path::Path;
+use std::sync::mpsc;
 
-use kalibra_eval::Scope;
+use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, ModelCell, Report, Scope};
 
-use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
+use crate::input::{ModelArray, PER_CELL, model_given};
 
 const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
 
-/// One array as stored: its shape and its values in C order, as f64.
-struct Array {
-    shape: Vec<usize>,
-    data: Vec<f64>,
-}
+/// Cells per batch handed from the reader thread to the evaluation.
+const BATCH_CELLS: usize = 4096;
 
-/// Reads the NPZ log in `bytes` (from `file`, named in errors).
-pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
+type Archive = zip::ZipArchive<BufReader<File>>;
+
+fn open(file: &Path) -> Result<Archive, String> {
     let name = file.display();
-    let fail = |msg: String| format!("{name}: {msg}");
-    let mut archive = zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| {
-        fail(format!(
-            "not an NPZ archive ({e}); write it with numpy's np.savez"
-        ))
-    })?;
-    let mut arrays = std::collections::BTreeMap::new();
-    for index in 0..archive.len() {
-        let mut entry = archive
-            .by_index(index)
-            .map_err(|e| fail(format!("entry {index} of the archive: {e} (truncated?)")))?;
-        let entry_name = entry
-            .name()
-            .map_err(|e| {
-                fail(format!(
-                    "entry {index} of the archive has no readable name ({e})"
-                ))
-            })?
-            .to_string();
-        let Some(array) = entry_name.strip_suffix(".npy") else {
-            return Err(fail(format!(
-                "entry `{entry_name}` is not a .npy array; the arrays are {KNOWN}"
-            )));
-        };
-        let array = array.to_string();
-        let mut raw = Vec::new();
-        entry
-            .read_to_end(&mut raw)
-            .map_err(|e| fail(format!("array {array}: cannot read it ({e}; truncated?)")))?;
-        let parsed = parse(&raw).map_err(|e| fail(format!("array {array}: {e}")))?;
-        arrays.insert(array, parsed);
-    }
-    build(arrays).map_err(fail)
+    let handle = File::open(file).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
+    zip::ZipArchive::new(BufReader::with_capacity(1 << 20, handle))
+        .map_err(|e| format!("{name}: not an NPZ archive ({e}); write it with numpy's np.savez"))
 }
 
-/// One `.npy` payload as f64 values in C order.
-fn parse(raw: &[u8]) -> Result<Array, String> {
-    let npy = npyz::NpyFile::new(raw).map_err(|e| format!("not a .npy array ({e})"))?;
+/// How an array's values are stored.
+#[derive(Clone, Copy, Debug)]
+enum Kind {
+    F8,
+    F4,
+    I8,
+    I4,
+}
+
+/// An array's header: shape, value type, byte order.
+struct Header {
+    shape: Vec<usize>,
+    kind: Kind,
+    big_endian: bool,
+}
+
+/// Checks a `.npy` header: C order, a number type kalibra reads.
+fn header(npy: &npyz::NpyFile<impl Read>) -> Result<Header, String> {
     if npy.order() == npyz::Order::Fortran {
         return Err(
             "stored in Fortran order; save a C-ordered array (np.ascontiguousarray)".to_string(),
@@ -70,30 +61,13 @@ fn parse(raw: &[u8]) -> Result<Array, String> {
     let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
     let descr = npy.dtype().descr();
     // numpy's type string: byte order, kind, size (`<f8`, `<f4`, `<i8`, ...).
-    let kind = descr
-        .trim_matches('\'')
-        .trim_start_matches(['<', '>', '|', '=']);
-    let read_error = |e: std::io::Error| format!("cannot read its values ({e}; truncated?)");
-    let data: Vec<f64> = match kind {
-        "f8" => npy.into_vec::<f64>().map_err(read_error)?,
-        "f4" => npy
-            .into_vec::<f32>()
-            .map_err(read_error)?
-            .into_iter()
-            .map(f64::from)
-            .collect(),
-        "i8" => npy
-            .into_vec::<i64>()
-            .map_err(read_error)?
-            .into_iter()
-            .map(|v| v as f64)
-            .collect(),
-        "i4" => npy
-            .into_vec::<i32>()
-            .map_err(read_error)?
-            .into_iter()
-            .map(f64::from)
-            .collect(),
+    let descr = descr.trim_matches('\'');
+    let big_endian = descr.starts_with('>');
+    let kind = match descr.trim_start_matches(['<', '>', '|', '=']) {
+        "f8" => Kind::F8,
+        "f4" => Kind::F4,
+        "i8" => Kind::I8,
+        "i4" => Kind::I4,
         other => {
             return Err(format!(
                 "dtype `{other}` is not a number type kalibra reads (float64, float32, int64, \
@@ -101,31 +75,88 @@ fn parse(raw: &[u8]) -> Result<Array, String> {
             ));
         }
     };
-    if data.len() != shape.iter().product::<usize>() {
+    Ok(Header {
+        shape,
+        kind,
+        big_endian,
+    })
+}
+
+impl Kind {
+    fn size(self) -> usize {
+        match self {
+            Kind::F8 | Kind::I8 => 8,
+            Kind::F4 | Kind::I4 => 4,
+        }
+    }
+
+    /// Appends the values of `bytes` to `out` as f64.
+    fn decode(self, big_endian: bool, bytes: &[u8], out: &mut Vec<f64>) {
+        macro_rules! each {
+            ($t:ty, $n:literal) => {
+                out.extend(bytes.chunks_exact($n).map(|c| {
+                    let b: [u8; $n] = c.try_into().unwrap_or([0; $n]);
+                    let v = if big_endian {
+                        <$t>::from_be_bytes(b)
+                    } else {
+                        <$t>::from_le_bytes(b)
+                    };
+                    v as f64
+                }))
+            };
+        }
+        match self {
+            Kind::F8 => each!(f64, 8),
+            Kind::F4 => each!(f32, 4),
+            Kind::I8 => each!(i64, 8),
+            Kind::I4 => each!(i32, 4),
+        }
+    }
+}
+
+/// An array read whole (`time`, `F`, `H`, `Q`, `R`): its shape and its values in C order.
+struct Array {
+    shape: Vec<usize>,
+    data: Vec<f64>,
+}
+
+/// Reads the array in `entry` whole.
+fn read_whole(archive: &mut Archive, entry: &str) -> Result<Array, String> {
+    let file = archive
+        .by_name(entry)
+        .map_err(|e| format!("cannot read it ({e}; truncated?)"))?;
+    let npy = npyz::NpyFile::new(file).map_err(|e| format!("not a .npy array ({e})"))?;
+    let h = header(&npy)?;
+    let mut bytes = Vec::new();
+    npy.into_inner()
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read its values ({e}; truncated?)"))?;
+    let count: usize = h.shape.iter().product();
+    if bytes.len() != count * h.kind.size() {
         return Err(format!(
-            "holds {} values for shape {shape:?} (truncated?)",
-            data.len()
+            "holds {} values for shape {:?} (truncated?)",
+            bytes.len() / h.kind.size(),
+            h.shape
         ));
     }
-    Ok(Array { shape, data })
+    let mut data = Vec::with_capacity(count);
+    h.kind.decode(h.big_endian, &bytes, &mut data);
+    Ok(Array {
+        shape: h.shape,
+        data,
+    })
 }
 
-/// A per-cell array cut into its cells.
-struct Cells {
-    runs: usize,
-    steps: usize,
-    /// The shape of one cell (`[n]` or `[n, n]`).
-    shape: Vec<usize>,
-    /// Run-major cells, `None` where every value is NaN (not logged).
-    cells: Vec<Option<Vec<f64>>>,
-}
-
-/// The cells of a per-cell array with `cell_dims` trailing dimensions; a single run may drop
-/// the leading R axis.
-fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
-    let (runs, rest) = match a.shape.len() - cell_dims.min(a.shape.len()) {
-        2 => (a.shape[0], &a.shape[1..]),
-        1 => (1, &a.shape[..]),
+/// The runs, steps and cell shape of a per-cell array with `cell_dims` trailing dimensions;
+/// a single run may drop the leading R axis.
+fn cell_shape(
+    array: &str,
+    shape: &[usize],
+    cell_dims: usize,
+) -> Result<(usize, usize, Vec<usize>), String> {
+    let (runs, rest) = match shape.len() - cell_dims.min(shape.len()) {
+        2 => (shape[0], &shape[1..]),
+        1 => (1, shape),
         _ => {
             let expected = if cell_dims == 1 {
                 "(R, K, dim) or (K, dim)"
@@ -133,32 +164,59 @@ fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
                 "(R, K, dim, dim) or (K, dim, dim)"
             };
             return Err(format!(
-                "array {array} has shape {:?}; expected {expected}",
-                a.shape
+                "array {array} has shape {shape:?}; expected {expected}"
             ));
         }
     };
-    let steps = rest[0];
-    let cell_shape = rest[1..].to_vec();
-    let size: usize = cell_shape.iter().product();
-    let cells = if size == 0 {
-        vec![None; runs * steps]
-    } else {
-        a.data
-            .chunks(size)
-            .map(|c| (!c.iter().all(|v| v.is_nan())).then(|| c.to_vec()))
-            .collect()
-    };
-    Ok(Cells {
-        runs,
-        steps,
-        shape: cell_shape,
-        cells,
-    })
+    Ok((runs, rest[0], rest[1..].to_vec()))
 }
 
-/// The log from the named arrays.
-fn build(mut arrays: std::collections::BTreeMap<String, Array>) -> Result<RawLog, String> {
+/// A per-cell array, read cell by cell from its own handle on the archive.
+struct Stream<R: Read> {
+    array: &'static str,
+    /// Values per cell.
+    width: usize,
+    kind: Kind,
+    big_endian: bool,
+    reader: R,
+    bytes: Vec<u8>,
+}
+
+impl<R: Read> Stream<R> {
+    /// Appends the next `cells` cells' values to `out`.
+    fn read(&mut self, cells: usize, out: &mut Vec<f64>) -> Result<(), String> {
+        self.bytes.resize(cells * self.width * self.kind.size(), 0);
+        self.reader.read_exact(&mut self.bytes).map_err(|e| {
+            format!(
+                "array {}: cannot read its values ({e}; truncated?)",
+                self.array
+            )
+        })?;
+        self.kind.decode(self.big_endian, &self.bytes, out);
+        Ok(())
+    }
+
+    /// Reads to the entry's end, which checks its checksum.
+    fn finish(&mut self) -> Result<(), String> {
+        std::io::copy(&mut self.reader, &mut std::io::sink())
+            .map(|_| ())
+            .map_err(|e| format!("array {}: cannot read it ({e}; truncated?)", self.array))
+    }
+}
+
+/// Consecutive cells, run-major, of every per-cell array.
+struct Batch {
+    first: usize,
+    cells: usize,
+    /// Per array, `cells * width` values.
+    values: Vec<Vec<f64>>,
+}
+
+/// Evaluates the NPZ log `file` with `evaluation`.
+pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> {
+    let name = file.display();
+    let fail = |msg: String| format!("{name}: {msg}");
+    let mut archive = open(file)?;
     let known = [
         "truth",
         "estimate",
@@ -171,62 +229,270 @@ fn build(mut arrays: std::collections::BTreeMap<String, Array>) -> Result<RawLog
         "Q",
         "R",
     ];
-    if let Some(unknown) = arrays.keys().find(|k| !known.contains(&k.as_str())) {
-        return Err(format!("unknown array `{unknown}`; the arrays are {KNOWN}"));
-    }
-    let mut log = RawLog::default();
-    for array in PER_CELL {
-        let Some(a) = arrays.remove(array) else {
-            continue;
+    // Array name -> entry name.
+    let mut entries = BTreeMap::new();
+    for index in 0..archive.len() {
+        let entry = match archive.name_for_index(index) {
+            Some(Ok(entry)) => entry.to_string(),
+            Some(Err(e)) => {
+                return Err(fail(format!(
+                    "entry {index} of the archive has no readable name ({e})"
+                )));
+            }
+            None => return Err(fail(format!("entry {index} of the archive (truncated?)"))),
         };
-        let matrix = array == "covariance" || array == "innovation_cov";
-        let c = cells(array, a, if matrix { 2 } else { 1 })?;
-        let cols = c.shape.get(1).copied().unwrap_or(0);
-        log.put_cells(array, (c.runs, c.steps), (c.shape[0], cols), c.cells)?;
-    }
-    let (runs, steps) = log.require_cells()?;
-    if let Some(t) = arrays.remove("time") {
-        if t.shape.len() != 1 {
-            return Err(format!("array time has shape {:?}; expected (K,)", t.shape));
+        let Some(array) = entry.strip_suffix(".npy") else {
+            return Err(fail(format!(
+                "entry `{entry}` is not a .npy array; the arrays are {KNOWN}"
+            )));
+        };
+        if !known.contains(&array) {
+            return Err(fail(format!(
+                "unknown array `{array}`; the arrays are {KNOWN}"
+            )));
         }
-        log.time = Some(t.data);
+        entries.insert(array.to_string(), entry.clone());
     }
-    let model = ["F", "H", "Q", "R"];
-    let present: Vec<&str> = model
-        .iter()
-        .copied()
-        .filter(|m| arrays.contains_key(*m))
+    let mut whole = |array: &str| -> Result<Option<Array>, String> {
+        match entries.get(array) {
+            None => Ok(None),
+            Some(entry) => read_whole(&mut archive, entry)
+                .map(Some)
+                .map_err(|e| fail(format!("array {array}: {e}"))),
+        }
+    };
+    let time = whole("time")?;
+    let model_arrays = [whole("F")?, whole("H")?, whole("Q")?, whole("R")?];
+
+    // The per-cell arrays' headers, each on its own handle so that all stream together.
+    let present: Vec<&'static str> = PER_CELL
+        .into_iter()
+        .filter(|a| entries.contains_key(*a))
         .collect();
-    if model_given(&present)? {
-        let mut out = Vec::with_capacity(4);
-        for name in model {
-            let a = arrays.remove(name).unwrap_or(Array {
-                shape: vec![],
-                data: vec![],
-            });
-            let (scope, rows, cols) = match a.shape.as_slice() {
-                [r, c] => (Scope::Constant, *r, *c),
-                [k, r, c] if *k == steps => (Scope::PerStep, *r, *c),
-                [rr, k, r, c] if (*rr, *k) == (runs, steps) => (Scope::PerRunStep, *r, *c),
-                other => {
-                    return Err(format!(
-                        "array {name} has shape {other:?}; expected one matrix (rows, cols), \
-                         one per step ({steps}, rows, cols) or one per run and step ({runs}, \
-                         {steps}, rows, cols)"
-                    ));
-                }
-            };
-            out.push(ModelArray {
-                rows,
-                cols,
-                scope,
-                data: a.data,
-            });
-        }
-        let [f, h, q, r]: [ModelArray; 4] = out
-            .try_into()
-            .map_err(|_| "arrays F, H, Q and R".to_string())?;
-        log.model = Some([f, h, q, r]);
+    if present.is_empty() {
+        return Err(fail(
+            "the log holds none of truth, estimate, covariance, innovation, innovation_cov"
+                .to_string(),
+        ));
     }
-    Ok(log)
+    let mut archives = present
+        .iter()
+        .map(|_| open(file))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut streams = Vec::new();
+    let mut contents = Contents::default();
+    let mut shape_from: Option<(&str, usize, usize)> = None;
+    for (archive, &array) in archives.iter_mut().zip(&present) {
+        let entry = archive
+            .by_name(&entries[array])
+            .map_err(|e| fail(format!("array {array}: cannot read it ({e}; truncated?)")))?;
+        let npy = npyz::NpyFile::new(entry)
+            .map_err(|e| fail(format!("array {array}: not a .npy array ({e})")))?;
+        let h = header(&npy).map_err(|e| fail(format!("array {array}: {e}")))?;
+        let matrix = array == "covariance" || array == "innovation_cov";
+        let (runs, steps, cell) =
+            cell_shape(array, &h.shape, if matrix { 2 } else { 1 }).map_err(fail)?;
+        match shape_from {
+            None => shape_from = Some((array, runs, steps)),
+            Some((first, r, k)) if (r, k) != (runs, steps) => {
+                return Err(fail(format!(
+                    "array {array} has {runs} runs of {steps} steps, but array {first} has {r} \
+                     runs of {k} steps"
+                )));
+            }
+            Some(_) => {}
+        }
+        if matrix && cell[0] != cell[1] {
+            return Err(fail(format!(
+                "array {array} holds {}x{} matrices; a covariance is square",
+                cell[0], cell[1]
+            )));
+        }
+        *match array {
+            "truth" => &mut contents.truth,
+            "estimate" => &mut contents.estimate,
+            "covariance" => &mut contents.covariance,
+            "innovation" => &mut contents.innovation,
+            _ => &mut contents.innovation_cov,
+        } = Some(cell[0]);
+        streams.push(Stream {
+            array,
+            width: cell.iter().product(),
+            kind: h.kind,
+            big_endian: h.big_endian,
+            reader: npy.into_inner(),
+            bytes: Vec::new(),
+        });
+    }
+    let (_, runs, steps) = shape_from.unwrap_or(("", 0, 0));
+    let times = match time {
+        None => None,
+        Some(t) if t.shape.len() == 1 => Some(t.data),
+        Some(t) => {
+            return Err(fail(format!(
+                "array time has shape {:?}; expected (K,)",
+                t.shape
+            )));
+        }
+    };
+    let model = model(model_arrays, runs, steps).map_err(fail)?;
+    if let Some([f, h, ..]) = &model {
+        contents.model = Some((f.rows, h.rows));
+    }
+    let evaluate_error = |e: EvalError| fail(format!("cannot evaluate the log: {e}"));
+    let mut evaluator = evaluation.evaluator(contents).map_err(evaluate_error)?;
+
+    let total = runs * steps;
+    let fed: Result<(), String> = std::thread::scope(|scope| {
+        // The reader: batches of cells, run-major, while this thread evaluates the last.
+        let (tx, rx) = mpsc::sync_channel::<Result<Batch, String>>(4);
+        scope.spawn(move || {
+            let mut first = 0;
+            while first < total {
+                let cells = BATCH_CELLS.min(total - first);
+                let mut values = Vec::with_capacity(streams.len());
+                for s in &mut streams {
+                    let mut out = Vec::with_capacity(cells * s.width);
+                    if let Err(e) = s.read(cells, &mut out) {
+                        let _ = tx.send(Err(e));
+                        return;
+                    }
+                    values.push(out);
+                }
+                if tx
+                    .send(Ok(Batch {
+                        first,
+                        cells,
+                        values,
+                    }))
+                    .is_err()
+                {
+                    return;
+                }
+                first += cells;
+            }
+            for s in &mut streams {
+                if let Err(e) = s.finish() {
+                    let _ = tx.send(Err(e));
+                    return;
+                }
+            }
+        });
+        while let Ok(batch) = rx.recv() {
+            let batch = batch.map_err(fail)?;
+            let cells: Vec<_> = (0..batch.cells)
+                .map(|i| {
+                    let (run, step) = ((batch.first + i) / steps, (batch.first + i) % steps);
+                    let mut cell = Cell::default();
+                    for (a, &array) in present.iter().enumerate() {
+                        let width = batch.values[a].len() / batch.cells;
+                        let v = &batch.values[a][i * width..(i + 1) * width];
+                        // A cell of all NaN was not logged (numpy has no null).
+                        if v.iter().all(|x| x.is_nan()) {
+                            continue;
+                        }
+                        match array {
+                            "truth" => cell.truth = Some(v),
+                            "estimate" => cell.estimate = Some(v),
+                            "innovation" => cell.innovation = Some(v),
+                            "covariance" => cell.covariance = Some(MatrixCell::Full(v)),
+                            _ => cell.innovation_cov = Some(MatrixCell::Full(v)),
+                        }
+                    }
+                    cell.model = model.as_ref().map(|[f, h, q, r]| ModelCell {
+                        f: f.cell(run, step, steps),
+                        h: h.cell(run, step, steps),
+                        q: q.cell(run, step, steps),
+                        r: r.cell(run, step, steps),
+                    });
+                    (run, step, cell)
+                })
+                .collect();
+            evaluator
+                .push_batch(&cells)
+                .map_err(|(_, e)| fail(e.to_string()))?;
+        }
+        Ok(())
+    });
+    fed?;
+    evaluator.finish(times).map_err(|e| match e {
+        EvalError::Empty { .. } => fail(e.to_string()),
+        other => evaluate_error(other),
+    })
+}
+
+impl ModelArray {
+    /// The matrix of `run` and `step` of a log of `steps` steps, row by row.
+    fn cell(&self, run: usize, step: usize, steps: usize) -> &[f64] {
+        let size = self.rows * self.cols;
+        let index = match self.scope {
+            Scope::Constant => 0,
+            Scope::PerStep => step,
+            Scope::PerRunStep => run * steps + step,
+        };
+        &self.data[index * size..(index + 1) * size]
+    }
+}
+
+/// The model arrays `F`, `H`, `Q`, `R`, all or none, with their shapes checked.
+fn model(
+    arrays: [Option<Array>; 4],
+    runs: usize,
+    steps: usize,
+) -> Result<Option<[ModelArray; 4]>, String> {
+    let names = ["F", "H", "Q", "R"];
+    let present: Vec<&str> = names
+        .iter()
+        .zip(&arrays)
+        .filter(|(_, a)| a.is_some())
+        .map(|(n, _)| *n)
+        .collect();
+    if !model_given(&present)? {
+        return Ok(None);
+    }
+    let mut out = Vec::with_capacity(4);
+    for (name, a) in names.into_iter().zip(arrays) {
+        let a = a.unwrap_or(Array {
+            shape: vec![],
+            data: vec![],
+        });
+        let (scope, rows, cols) = match a.shape.as_slice() {
+            [r, c] => (Scope::Constant, *r, *c),
+            [k, r, c] if *k == steps => (Scope::PerStep, *r, *c),
+            [rr, k, r, c] if (*rr, *k) == (runs, steps) => (Scope::PerRunStep, *r, *c),
+            other => {
+                return Err(format!(
+                    "array {name} has shape {other:?}; expected one matrix (rows, cols), one \
+                     per step ({steps}, rows, cols) or one per run and step ({runs}, {steps}, \
+                     rows, cols)"
+                ));
+            }
+        };
+        out.push(ModelArray {
+            rows,
+            cols,
+            scope,
+            data: a.data,
+        });
+    }
+    let [f, h, q, r]: [ModelArray; 4] = out
+        .try_into()
+        .map_err(|_| "arrays F, H, Q and R".to_string())?;
+    let n = f.rows;
+    let m = h.rows;
+    for (array, a, want) in [
+        ("F", &f, (n, n)),
+        ("H", &h, (m, n)),
+        ("Q", &q, (n, n)),
+        ("R", &r, (m, m)),
+    ] {
+        if (a.rows, a.cols) != want {
+            return Err(format!(
+                "array {array} holds {}x{} matrices; with F of {n}x{n} and H of {m} rows it \
+                 must be {}x{}",
+                a.rows, a.cols, want.0, want.1
+            ));
+        }
+    }
+    Ok(Some([f, h, q, r]))
 }

@@ -14,6 +14,9 @@ use crate::report::{
 };
 use crate::{EvalError, FilterLog};
 
+/// Cells handed to [`crate::Evaluator::push_batch`] at a time by [`Evaluation::evaluate`].
+const BATCH_CELLS: usize = 4096;
+
 /// A named group of state components (position = `[0, 1]`), whose RMSE is reported beside the
 /// components'.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -152,11 +155,16 @@ impl Evaluation {
     /// passed the checks (not expected).
     pub fn evaluate(&self, log: &FilterLog) -> Result<Report, EvalError> {
         let mut evaluator = self.evaluator(log.contents())?;
-        for run in 0..log.runs() {
-            for step in 0..log.steps() {
-                evaluator.push(run, step, &log.cell(run, step))?;
+        let cells = (0..log.runs()).flat_map(|run| (0..log.steps()).map(move |step| (run, step)));
+        let mut batch = Vec::with_capacity(BATCH_CELLS);
+        for (run, step) in cells {
+            batch.push((run, step, log.cell(run, step)));
+            if batch.len() == BATCH_CELLS {
+                evaluator.push_batch(&batch).map_err(|(_, e)| e)?;
+                batch.clear();
             }
         }
+        evaluator.push_batch(&batch).map_err(|(_, e)| e)?;
         evaluator.finish(log.times.clone())
     }
 

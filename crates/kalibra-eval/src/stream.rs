@@ -1,10 +1,10 @@
 //! The evaluation fed one cell at a time: [`Evaluator`], for logs too large to hold (a CSV
 //! read row by row) and as the one implementation behind [`Evaluation::evaluate`].
 
-use kalibra_linalg::{Covariance, DMatrix, DVector};
-use kalibra_metrics::{
-    Credibility, JHorizon, SquaredErrors, StepMean, j_step, nees, nis, normalized_innovation,
-};
+use kalibra_linalg::nalgebra::Cholesky;
+use kalibra_linalg::{DMatrix, DVector, LinalgError, check_symmetric, symmetrize};
+use kalibra_metrics::{Credibility, JHorizon, SquaredErrors, StepMean, j_step};
+use rayon::prelude::*;
 
 use crate::evaluate::{BandCache, FindingTally, reason};
 use crate::log::check_times;
@@ -121,6 +121,8 @@ impl Contents {
 /// `J1`/`J2` need of the previous step.
 struct StateSide {
     n: usize,
+    /// The current cell's error `xhat - x`.
+    error: Vec<f64>,
     means: StepMean,
     cred: Credibility,
     squared: SquaredErrors,
@@ -133,6 +135,8 @@ struct StateSide {
 /// The innovation side: NIS and the diagnostic run's normalised innovations.
 struct InnovationSide {
     m: usize,
+    /// For the diagnostic run's normalised innovations.
+    factor: Factor,
     means: StepMean,
     per_run: Vec<(f64, usize)>,
     findings: FindingTally,
@@ -233,6 +237,7 @@ impl Evaluation {
             contents,
             state: state.map(|n| StateSide {
                 n,
+                error: vec![0.0; n],
                 means: StepMean::new(0),
                 cred: Credibility::new(0, n),
                 squared: SquaredErrors::new(0, n),
@@ -242,6 +247,7 @@ impl Evaluation {
             }),
             innovation: innovation.map(|m| InnovationSide {
                 m,
+                factor: Factor::new(m),
                 means: StepMean::new(0),
                 per_run: Vec::new(),
                 findings: FindingTally::default(),
@@ -280,13 +286,13 @@ fn vector<'a>(
     }
 }
 
-/// Checks a square matrix cell's length and builds the matrix.
-fn square(
+/// Checks a square matrix cell's length.
+fn square<'a>(
     array: &'static str,
     (run, step): (usize, usize),
     dim: usize,
-    m: Option<MatrixCell<'_>>,
-) -> Result<Option<DMatrix<f64>>, EvalError> {
+    m: Option<MatrixCell<'a>>,
+) -> Result<Option<MatrixCell<'a>>, EvalError> {
     let (values, expected) = match m {
         None => return Ok(None),
         Some(MatrixCell::Full(v)) => (v, dim * dim),
@@ -301,10 +307,109 @@ fn square(
             found: values.len(),
         });
     }
-    Ok(Some(match m {
-        Some(MatrixCell::Diagonal(v)) => DMatrix::from_diagonal(&DVector::from_column_slice(v)),
-        _ => DMatrix::from_row_slice(dim, dim, values),
-    }))
+    Ok(m)
+}
+
+/// Reusable storage for the one factorisation each cell needs (NEES of `P`, NIS of `S`), so
+/// that evaluating a cell allocates nothing: a million-cell log spent more time in the
+/// allocator than in the arithmetic. The operations are those of
+/// `kalibra_linalg::quad_form_once` (NEES) and of `Covariance::named` with `nis` (NIS), in
+/// the same order, so the numbers are the same to the bit.
+struct Factor {
+    dim: usize,
+    /// The matrix, then its Cholesky factor in place (empty after a failed factorisation
+    /// until the next cell refills it).
+    matrix: DMatrix<f64>,
+    /// `L^-1 v`.
+    w: DVector<f64>,
+}
+
+impl Factor {
+    fn new(dim: usize) -> Self {
+        Self {
+            dim,
+            matrix: DMatrix::zeros(dim, dim),
+            w: DVector::zeros(dim),
+        }
+    }
+
+    /// Loads a cell's matrix (its length checked by [`square`]).
+    fn load(&mut self, cell: MatrixCell<'_>) {
+        let n = self.dim;
+        if self.matrix.nrows() != n {
+            self.matrix = DMatrix::zeros(n, n);
+        }
+        match cell {
+            MatrixCell::Full(v) => {
+                for i in 0..n {
+                    for j in 0..n {
+                        self.matrix[(i, j)] = v[i * n + j];
+                    }
+                }
+            }
+            MatrixCell::Diagonal(v) => {
+                self.matrix.fill(0.0);
+                self.matrix.set_diagonal(&DVector::from_column_slice(v));
+            }
+        }
+    }
+
+    /// Factors the loaded matrix in place; `false` if it is not positive definite.
+    fn factor(&mut self) -> bool {
+        let matrix = std::mem::replace(&mut self.matrix, DMatrix::zeros(0, 0));
+        match Cholesky::new(matrix) {
+            Some(chol) => {
+                self.matrix = chol.unpack_dirty();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// `w = L^-1 v` with the factor in place, and `|w|^2`.
+    fn solve(&mut self, v: &[f64]) -> f64 {
+        self.w.copy_from_slice(v);
+        self.matrix
+            .solve_lower_triangular_unchecked_mut(&mut self.w);
+        self.w.norm_squared()
+    }
+
+    /// `v^T M^-1 v` as `kalibra_metrics::nees` computes it.
+    fn nees(&mut self, v: &[f64], what: &'static str) -> Result<f64, LinalgError> {
+        check_symmetric(&self.matrix, what)?;
+        // An error can overflow although truth and estimate are finite.
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(LinalgError::NonFinite { what: "vector" });
+        }
+        if !self.factor() {
+            return Err(LinalgError::NotPositiveDefinite { what });
+        }
+        let q = self.solve(v);
+        if q.is_finite() {
+            Ok(q)
+        } else {
+            Err(LinalgError::NotPositiveDefinite { what })
+        }
+    }
+
+    /// `v^T M^-1 v` as `Covariance::named` and `kalibra_metrics::nis` compute it (`v`
+    /// finite): the matrix symmetrised first; `w` is left as the normalised innovation.
+    fn nis(&mut self, v: &[f64], what: &'static str) -> Result<f64, LinalgError> {
+        check_symmetric(&self.matrix, what)?;
+        symmetrize(&mut self.matrix);
+        if !(self.factor() && self.matrix.diagonal().iter().all(|d| d.is_finite())) {
+            return Err(LinalgError::NotPositiveDefinite { what });
+        }
+        Ok(self.solve(v))
+    }
+}
+
+/// A cell's matrix as an owned matrix.
+fn owned(dim: usize, cell: MatrixCell<'_>) -> DMatrix<f64> {
+    match cell {
+        MatrixCell::Full(v) => DMatrix::from_row_slice(dim, dim, v),
+        MatrixCell::Diagonal(v) => DMatrix::from_diagonal(&DVector::from_column_slice(v)),
+    }
 }
 
 /// A finite model matrix of `rows x cols` from its row-major cell.
@@ -333,6 +438,24 @@ fn model_matrix(
     Ok(DMatrix::from_row_slice(rows, cols, values))
 }
 
+/// What the pure part of a cell gives, computed on any thread: its checked model matrices
+/// and the outcomes of its two factorisations (each a value, or the reason of a finding).
+struct Prepared {
+    nees: Option<Result<f64, Reason>>,
+    nis: Option<Result<f64, Reason>>,
+    model: Option<[DMatrix<f64>; 4]>,
+}
+
+/// The factorisation storage of one thread.
+struct Scratch {
+    p: Factor,
+    s: Factor,
+}
+
+/// Batches from this many cells on are prepared on several threads: below it the hand-over
+/// costs more than it saves.
+const PARALLEL_FROM: usize = 512;
+
 impl Evaluator {
     /// Feeds the cell of `run` and `step`. Nothing is kept of a cell that fails.
     ///
@@ -343,8 +466,64 @@ impl Evaluator {
     /// expected). A bad covariance or a non-finite estimate or innovation is a finding, not
     /// an error.
     pub fn push(&mut self, run: usize, step: usize, cell: &Cell<'_>) -> Result<(), EvalError> {
-        let at = (run, step);
-        // Every check before any state changes, so a failed cell leaves no trace.
+        let mut scratch = self.scratch();
+        let prepared = self.prepare((run, step), cell, &mut scratch)?;
+        self.accept((run, step), cell, prepared)
+    }
+
+    /// Feeds the cells of `cells`, each with its run and step, in order: the same as
+    /// [`Evaluator::push`] on each, but the factorisations of a large batch run on every core
+    /// (rayon), while the sums still take the cells in order, so the report does not depend on
+    /// the number of threads.
+    ///
+    /// # Errors
+    /// The first failing cell's index in `cells` and its error (as [`Evaluator::push`]); the
+    /// cells before it were fed, it and those after it were not.
+    pub fn push_batch(
+        &mut self,
+        cells: &[(usize, usize, Cell<'_>)],
+    ) -> Result<(), (usize, EvalError)> {
+        let this = &*self;
+        let prepare = |chunk: &[(usize, usize, Cell<'_>)]| -> Vec<Result<Prepared, EvalError>> {
+            let mut scratch = this.scratch();
+            chunk
+                .iter()
+                .map(|(run, step, cell)| this.prepare((*run, *step), cell, &mut scratch))
+                .collect()
+        };
+        let prepared: Vec<Result<Prepared, EvalError>> = if cells.len() < PARALLEL_FROM {
+            prepare(cells)
+        } else {
+            cells
+                .par_chunks(PARALLEL_FROM / 2)
+                .map(prepare)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .flatten()
+                .collect()
+        };
+        for (i, ((run, step, cell), p)) in cells.iter().zip(prepared).enumerate() {
+            let p = p.map_err(|e| (i, e))?;
+            self.accept((*run, *step), cell, p).map_err(|e| (i, e))?;
+        }
+        Ok(())
+    }
+
+    fn scratch(&self) -> Scratch {
+        Scratch {
+            p: Factor::new(self.contents.state_dim().unwrap_or(0)),
+            s: Factor::new(self.contents.measurement_dim().unwrap_or(0)),
+        }
+    }
+
+    /// The pure part of a cell: every check, and its factorisations. Changes nothing.
+    fn prepare(
+        &self,
+        at: (usize, usize),
+        cell: &Cell<'_>,
+        scratch: &mut Scratch,
+    ) -> Result<Prepared, EvalError> {
+        let (run, step) = at;
         let (n, m) = (self.contents.state_dim(), self.contents.measurement_dim());
         let truth = vector("truth", at, n.unwrap_or(0), cell.truth)?;
         if truth.is_some_and(|x| !x.iter().all(|v| v.is_finite())) {
@@ -358,8 +537,8 @@ impl Evaluator {
         let cov = square("covariance", at, n.unwrap_or(0), cell.covariance)?;
         let nu = vector("innovation", at, m.unwrap_or(0), cell.innovation)?;
         let s = square("innovation_cov", at, m.unwrap_or(0), cell.innovation_cov)?;
-        let model = match (cell.model, self.contents.model) {
-            (Some(c), Some((n, m))) => Some([
+        let model = match (cell.model, self.contents.model, &self.j) {
+            (Some(c), Some((n, m)), Some(_)) => Some([
                 model_matrix("F", at, (n, n), c.f)?,
                 model_matrix("H", at, (m, n), c.h)?,
                 model_matrix("Q", at, (n, n), c.q)?,
@@ -367,16 +546,55 @@ impl Evaluator {
             ]),
             _ => None,
         };
+        let mut nees = None;
+        if let (Some(_), Some(x), Some(xhat), Some(p)) = (&self.state, truth, estimate, cov)
+            && xhat.iter().all(|v| v.is_finite())
+        {
+            // RMSE and windows need no covariance: estimate minus truth (paper 002's sign).
+            let error: Vec<f64> = xhat.iter().zip(x).map(|(a, b)| a - b).collect();
+            scratch.p.load(p);
+            nees = Some(match scratch.p.nees(&error, "state covariance P") {
+                Ok(value) => Ok(value),
+                Err(err) => Err(reason(err.into())?),
+            });
+        }
+        let mut nis = None;
+        if let (Some(_), Some(nu), Some(s)) = (&self.innovation, nu, s)
+            && nu.iter().all(|v| v.is_finite())
+        {
+            scratch.s.load(s);
+            nis = Some(match scratch.s.nis(nu, "innovation covariance S") {
+                Ok(value) => Ok(value),
+                Err(err) => Err(reason(err.into())?),
+            });
+        }
+        Ok(Prepared { nees, nis, model })
+    }
+
+    /// The stateful part of a cell: marks it, and adds what `prepare` found to the sums.
+    fn accept(
+        &mut self,
+        (run, step): (usize, usize),
+        cell: &Cell<'_>,
+        prepared: Prepared,
+    ) -> Result<(), EvalError> {
         self.mark(run, step)?;
-        let valid_cov = match (&mut self.state, truth, estimate) {
-            (Some(side), Some(x), Some(xhat)) => side.push(&self.options, at, x, xhat, &cov)?,
+        let at = (run, step);
+        let valid_cov = match (&mut self.state, cell.truth, cell.estimate) {
+            (Some(side), Some(x), Some(xhat)) => {
+                side.accept(&self.options, at, x, xhat, prepared.nees)?
+            }
             _ => false,
         };
-        if let (Some(side), Some(nu), Some(s)) = (&mut self.innovation, nu, s) {
-            side.push(&self.options, at, nu, s)?;
+        if let (Some(side), Some(nu), Some(s)) =
+            (&mut self.innovation, cell.innovation, cell.innovation_cov)
+        {
+            side.accept(&self.options, at, nu, s, prepared.nis)?;
         }
         if let Some(j) = &mut self.j {
-            j.push(at, valid_cov.then_some(cov).flatten(), model)?;
+            let n = self.contents.state_dim().unwrap_or(0);
+            let p = cell.covariance.filter(|_| valid_cov).map(|c| owned(n, c));
+            j.push(at, p, prepared.model)?;
         }
         Ok(())
     }
@@ -540,14 +758,15 @@ impl Evaluator {
 }
 
 impl StateSide {
-    /// One cell's state side; returns whether its covariance was valid (it entered NEES).
-    fn push(
+    /// One cell's state side, given its NEES; returns whether its covariance was valid (it
+    /// entered NEES).
+    fn accept(
         &mut self,
         options: &Evaluation,
         (run, step): (usize, usize),
         x: &[f64],
         xhat: &[f64],
-        cov: &Option<DMatrix<f64>>,
+        nees: Option<Result<f64, Reason>>,
     ) -> Result<bool, EvalError> {
         if run >= self.per_run.len() {
             self.per_run.resize(run + 1, (0.0, 0));
@@ -558,25 +777,25 @@ impl StateSide {
             return Ok(false);
         }
         // RMSE and windows need no covariance: estimate minus truth (paper 002's sign).
-        let error = DVector::from_iterator(self.n, xhat.iter().zip(x).map(|(a, b)| a - b));
-        self.squared.push_slice(step, error.as_slice())?;
-        if run == options.run {
-            self.window_series.push((step, error.as_slice().to_vec()));
+        for ((e, a), b) in self.error.iter_mut().zip(xhat).zip(x) {
+            *e = a - b;
         }
-        let Some(p) = cov else {
-            return Ok(false);
-        };
+        self.squared.push_slice(step, &self.error)?;
+        if run == options.run {
+            self.window_series.push((step, self.error.clone()));
+        }
         let n = self.n as f64;
-        match nees(&error, p) {
-            Ok(value) => {
+        match nees {
+            None => Ok(false),
+            Some(Ok(value)) => {
                 self.means.push(step, value / n)?;
-                self.cred.push_nees(step, error.as_slice(), value)?;
+                self.cred.push_nees(step, &self.error, value)?;
                 self.per_run[run].0 += value / n;
                 self.per_run[run].1 += 1;
                 Ok(true)
             }
-            Err(err) => {
-                self.findings.add("covariance", run, step, reason(err)?);
+            Some(Err(reason)) => {
+                self.findings.add("covariance", run, step, reason);
                 Ok(false)
             }
         }
@@ -584,38 +803,42 @@ impl StateSide {
 }
 
 impl InnovationSide {
-    fn push(
+    /// One cell's innovation side, given its NIS.
+    fn accept(
         &mut self,
         options: &Evaluation,
         (run, step): (usize, usize),
         nu: &[f64],
-        s: DMatrix<f64>,
+        s: MatrixCell<'_>,
+        nis: Option<Result<f64, Reason>>,
     ) -> Result<(), EvalError> {
         if run >= self.per_run.len() {
             self.per_run.resize(run + 1, (0.0, 0));
         }
-        if !nu.iter().all(|v| v.is_finite()) {
-            self.findings
-                .add("innovation", run, step, Reason::NonFiniteVector);
-            return Ok(());
-        }
-        let s = match Covariance::named(s, "innovation covariance S") {
-            Ok(s) => s,
-            Err(err) => {
+        let value = match nis {
+            None => {
                 self.findings
-                    .add("innovation_cov", run, step, reason(err.into())?);
+                    .add("innovation", run, step, Reason::NonFiniteVector);
                 return Ok(());
             }
+            Some(Err(reason)) => {
+                self.findings.add("innovation_cov", run, step, reason);
+                return Ok(());
+            }
+            Some(Ok(value)) => value,
         };
-        let nu = DVector::from_column_slice(nu);
-        let value = nis(&nu, &s)?;
         let m = self.m as f64;
         self.means.push(step, value / m)?;
         self.per_run[run].0 += value / m;
         self.per_run[run].1 += 1;
         if run == options.run {
-            self.normalized
-                .push((step, normalized_innovation(&nu, &s)?));
+            // The diagnostic run's normalised innovation: factor S again here, once per step
+            // of one run, rather than carry every cell's factor from `prepare`.
+            self.factor.load(s);
+            self.factor
+                .nis(nu, "innovation covariance S")
+                .map_err(kalibra_metrics::MetricsError::from)?;
+            self.normalized.push((step, self.factor.w.clone()));
         }
         Ok(())
     }
