@@ -14,7 +14,7 @@
 //!    shortest round-trip decimal form, so all three hold the same numbers bit for bit. Files
 //!    go to `target/bench-eval/log-rR-kK-sS.{csv,npz,json}` and are reused when present (they
 //!    are written under a temporary name and renamed, so a present file is complete). At full
-//!    size they take about 0.6, 0.24 and 0.6 GB.
+//!    size they take 261, 240 and 275 MB.
 //! 2. **Python.** Creates the virtual environment `target/bench-eval/venv` with `python3 -m
 //!    venv` and installs pandas and numpy into it from PyPI with pip, unless they import
 //!    already. Needs python3 with its venv module and network to PyPI the first time; Unix only
@@ -374,9 +374,7 @@ fn write_list(w: &mut impl Write, values: &[f64]) -> Result<()> {
 
 /// Runs `cmd` to completion, failing with its output if it fails.
 fn run(cmd: &mut Command) -> Result<()> {
-    let out = cmd
-        .output()
-        .with_context(|| format!("starting {cmd:?}"))?;
+    let out = cmd.output().with_context(|| format!("starting {cmd:?}"))?;
     ensure!(
         out.status.success(),
         "{cmd:?} failed ({}):\n{}{}",
@@ -411,7 +409,10 @@ fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
     };
     let mut out = versions().with_context(|| format!("starting {}", python.display()))?;
     if !out.status.success() {
-        println!("  installing pandas and numpy from PyPI into {}", venv.display());
+        println!(
+            "  installing pandas and numpy from PyPI into {}",
+            venv.display()
+        );
         run(Command::new(&python).args([
             "-m",
             "pip",
@@ -429,7 +430,10 @@ fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
             String::from_utf8_lossy(&out.stderr)
         );
     }
-    Ok((python, String::from_utf8_lossy(&out.stdout).trim().to_string()))
+    Ok((
+        python,
+        String::from_utf8_lossy(&out.stdout).trim().to_string(),
+    ))
 }
 
 /// Builds the `kalibra` executable in release mode and returns its path.
@@ -509,7 +513,10 @@ fn measure(
     }
     match (v["wall_s"].as_f64(), v["peak_rss_bytes"].as_u64()) {
         (Some(wall_s), Some(peak_bytes)) => Ok(Measured { wall_s, peak_bytes }),
-        _ => bail!("the timer's record {} lacks a field: {text}", record.display()),
+        _ => bail!(
+            "the timer's record {} lacks a field: {text}",
+            record.display()
+        ),
     }
 }
 
@@ -565,9 +572,7 @@ fn compared(n: usize, lags: usize) -> Vec<(&'static str, Vec<String>)> {
         .to_vec();
     per_step.extend((0..n).map(|i| format!("/rmse_per_step/{i}/values")));
     let window = (0..n)
-        .flat_map(|i| {
-            ["rmse", "bias", "std"].map(|s| format!("/window/components/{i}/{s}"))
-        })
+        .flat_map(|i| ["rmse", "bias", "std"].map(|s| format!("/window/components/{i}/{s}")))
         .collect();
     let summary = [
         "/summary/anees",
@@ -584,9 +589,7 @@ fn compared(n: usize, lags: usize) -> Vec<(&'static str, Vec<String>)> {
     whiteness.push("/whiteness/box_pierce".into());
     let bands = ["lower", "upper"]
         .into_iter()
-        .flat_map(|side| {
-            ["anees_band", "anis_band"].map(|b| format!("/{b}/*/{side}"))
-        })
+        .flat_map(|side| ["anees_band", "anis_band"].map(|b| format!("/{b}/*/{side}")))
         .collect();
     vec![
         ("per-step ANEES, ANIS, NCI, RMSE", per_step),
@@ -726,7 +729,9 @@ pub(crate) fn eval_bench(args: &Args) -> Result<()> {
             .map(|(group, d)| format!("{group} {d:.1e}"))
             .collect();
         // The last group (the bands) is approximated by the script, so it is not required.
-        let agree = diffs[..diffs.len() - 1].iter().all(|(_, d)| *d <= TOLERANCE);
+        let agree = diffs[..diffs.len() - 1]
+            .iter()
+            .all(|(_, d)| *d <= TOLERANCE);
         println!(
             "  {}: kalibra vs script, largest relative difference: {}; {}",
             format.ext(),
