@@ -1,8 +1,13 @@
 //! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
 //!
-//! `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: W1 (KF,
-//! `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF, `--runs` x 51 steps,
-//! in `bench_w2`) by default, or only the one named. `--steps` applies to W1 only.
+//! `cargo xtask bench [w1|w2|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
+//! [--seed N]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
+//! `--runs` x 51 steps, in `bench_w2`) by default, or only the one named. `--steps` applies to
+//! W1 and eval, `--threads` to W1 and W2, `--seed` to eval only.
+//!
+//! `eval` (in `bench_eval`) times the `kalibra` executable against a pandas + numpy script
+//! on generated logs. `all` leaves it out: it needs Python, a virtual environment installed
+//! from PyPI and over a gigabyte of logs, which the in-process workloads do not.
 
 use std::time::Instant;
 
@@ -16,7 +21,7 @@ use rand_distr::{Distribution, StandardNormal};
 /// Which workloads to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum Workloads {
-    /// W1 then W2.
+    /// W1 then W2 (not eval, which needs Python and PyPI).
     All,
     /// W1: 2-D constant-velocity KF with per-step NEES and NIS.
     #[value(alias = "W1")]
@@ -24,6 +29,8 @@ enum Workloads {
     /// W2: paper 001's problem III, EKF and UKF, 51 steps.
     #[value(alias = "W2")]
     W2,
+    /// `kalibra eval` on CSV, NPZ and JSON logs against a pandas + numpy script.
+    Eval,
 }
 
 /// `cargo xtask bench` arguments.
@@ -35,15 +42,18 @@ pub(crate) struct Args {
     /// Monte Carlo runs per workload.
     #[arg(long, default_value_t = 1000, value_parser = positive)]
     pub(crate) runs: usize,
-    /// Steps per run (W1 only; W2 has 51).
+    /// Steps per run (W1 and eval; W2 has 51).
     #[arg(long, default_value_t = 1000, value_parser = positive)]
-    steps: usize,
-    /// Threads for the multi-thread comparison (default: every core).
+    pub(crate) steps: usize,
+    /// Threads for the multi-thread comparison of W1 and W2 (default: every core).
     #[arg(long, default_value_t = cores())]
     pub(crate) threads: usize,
     /// Timed repeats; the best is reported.
     #[arg(long, default_value_t = 3, value_parser = positive)]
     pub(crate) repeats: usize,
+    /// Seed of the eval workload's generated logs (W1 and W2 keep their fixed seeds).
+    #[arg(long, default_value_t = 2012)]
+    pub(crate) seed: u64,
 }
 
 /// A count of at least one.
@@ -62,6 +72,9 @@ fn cores() -> usize {
 }
 
 pub fn main(args: &Args) -> Result<()> {
+    if args.workloads == Workloads::Eval {
+        return crate::bench_eval::eval_bench(args);
+    }
     if args.workloads != Workloads::W2 {
         w1_bench(args)?;
     }

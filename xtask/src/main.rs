@@ -6,6 +6,12 @@
 //! * `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs
 //!   the benchmark workloads through the public API and through hand-written nalgebra loops in
 //!   the same process, and prints steps per second and their ratio.
+//! * `cargo xtask bench eval [--runs N] [--steps N] [--seed N] [--repeats N]`: generates a W1
+//!   log of `--runs` x `--steps` (default 1000 x 1000, n = 4, m = 2) as CSV, NPZ and JSON under
+//!   `target/bench-eval/`, installs pandas and numpy from PyPI into a virtual environment
+//!   there, and times the release `kalibra eval` against `xtask/bench/eval_pandas.py` on each
+//!   file: wall time, rows per second and peak memory of both, their agreement, and the goals
+//!   of issue 15 (not part of `all`, which needs no Python).
 //!
 //! The studies live in `kalibra-studies`; this binary parses arguments, loops over the
 //! registry, renders figure data to SVG, writes files and times.
@@ -13,6 +19,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
+mod bench_eval;
 mod bench_w2;
 mod reproduce;
 
