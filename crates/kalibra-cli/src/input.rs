@@ -12,7 +12,10 @@ LOG FORMATS (chosen by the extension; R runs, K steps, n states, m measurements)
          time (K), and for J1/J2 all of F (n,n), H (m,n), Q (n,n), R (m,m), each one
          matrix for all steps, one per step (K,..) or one per run and step (R,K,..).
          A single run may drop the R axis. A cell (one run and step) that is null was
-         not logged. Matrices are lists of rows.
+         not logged. Matrices are lists of rows. NaN, Infinity and -Infinity as
+         Python's json.dump writes them are read as numbers: a cell of NaN alone was
+         not logged (as in .npz); a cell partly NaN or infinite is kept, so a NaN
+         covariance is a finding.
   .npz   numpy's np.savez (or np.savez_compressed) with the same array names and
          shapes as .json; a cell whose values are all NaN was not logged. float64,
          float32, int64 or int32, C order.

@@ -1,8 +1,15 @@
 //! The JSON log: an object of arrays with numpy's names and shapes (see `input::FORMATS_HELP`).
 //!
+//! Python's `json.dump` writes NaN, Infinity and -Infinity as the bare tokens `NaN`,
+//! `Infinity` and `-Infinity` (its default `allow_nan=True`), which are not JSON; they are read
+//! wherever a value may stand, with the NPZ reader's meaning: a cell (one run and step) whose
+//! values are all NaN was not logged, as `null`; a cell with only some NaN or infinite values
+//! is kept, so that a NaN covariance is a finding about the filter under test.
+//!
 //! Errors name the file and the array and index (`covariance[2][5][1]`), or the line and
 //! column for text that is not JSON.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use kalibra_eval::Scope;
@@ -28,13 +35,21 @@ struct Cells {
 /// Reads the JSON log in `bytes` (from `file`, named in errors).
 pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
     let name = file.display();
-    let value: Value = serde_json::from_slice(bytes).map_err(|e| {
+    let bytes = python_floats(bytes).map_err(|(line, column, literal)| {
+        format!(
+            "{name}: line {line}, column {column}: unexpected string {literal:?}; a log's only \
+             strings are the names of its arrays ({KNOWN})"
+        )
+    })?;
+    let value: Value = serde_json::from_slice(&bytes).map_err(|e| {
         let what = match e.classify() {
             serde_json::error::Category::Eof => "the file ends early (truncated?)".to_string(),
             _ => format!("not valid JSON ({e})"),
         };
         format!("{name}: line {}, column {}: {what}", e.line(), e.column())
     })?;
+    // A copy made for stand-ins is not needed past parsing: free it before the cells are built.
+    drop(bytes);
     let Value::Object(map) = value else {
         return Err(format!(
             "{name}: expected an object of named arrays ({KNOWN}), found {}",
@@ -81,12 +96,146 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
     Ok(log)
 }
 
+/// One of Python's tokens for a float JSON has no word for, and the stand-in it is read as.
+struct PythonFloat {
+    /// As `json.dump` writes it.
+    token: &'static str,
+    /// The JSON that replaces it before serde_json reads the file: a string of one character
+    /// that no valid log holds, exactly as long as the token, so that serde_json's line and
+    /// column of a later syntax error are still those of the file as written.
+    stand_in: &'static [u8],
+    /// The stand-in as serde_json reads it.
+    read_as: &'static str,
+    value: f64,
+}
+
+const PYTHON_FLOATS: [PythonFloat; 3] = [
+    PythonFloat {
+        token: "NaN",
+        stand_in: b"\"\x7f\"",
+        read_as: "\u{7f}",
+        value: f64::NAN,
+    },
+    PythonFloat {
+        token: "Infinity",
+        stand_in: br#""\u0001""#,
+        read_as: "\u{1}",
+        value: f64::INFINITY,
+    },
+    PythonFloat {
+        token: "-Infinity",
+        stand_in: br#""\u0002" "#,
+        read_as: "\u{2}",
+        value: f64::NEG_INFINITY,
+    },
+];
+
+/// The Python token a string read by serde_json stands in for.
+fn python_float(s: &str) -> Option<&'static PythonFloat> {
+    PYTHON_FLOATS.iter().find(|p| p.read_as == s)
+}
+
+/// `bytes` with each of Python's `NaN`, `Infinity` and `-Infinity` that stands where a value
+/// may (the start of the file, after `[`, `:`, or a list's `,`) replaced by its stand-in
+/// ([`PYTHON_FLOATS`]), in one pass; a copy only if there is one. Text inside strings is
+/// left as it is. A string in the file that reads as a stand-in would be taken for a number,
+/// so it is refused, with its line, column and text: no valid log holds one, since its only
+/// strings are array names. A file that is not JSON is left for serde_json to locate.
+fn python_floats(bytes: &[u8]) -> Result<Cow<'_, [u8]>, (usize, usize, String)> {
+    // The longest spelling of a one-character stand-in: `"\u0001"`.
+    const LONGEST_STAND_IN: usize = 8;
+    let mut out = Cow::Borrowed(bytes);
+    // The lists and objects open at `i`, innermost last: after a comma, a list takes a value
+    // and an object a key.
+    let mut open = Vec::new();
+    // The last byte before `i` outside strings and whitespace (`"` for a string).
+    let mut last = None;
+    let mut i = 0;
+    while i < bytes.len() {
+        let b = bytes[i];
+        match b {
+            b' ' | b'\t' | b'\n' | b'\r' => {
+                i += 1;
+                continue;
+            }
+            b'"' => {
+                let end = string_end(bytes, i);
+                let literal = &bytes[i..end];
+                if literal.len() <= LONGEST_STAND_IN
+                    && let Ok(s) = serde_json::from_slice::<String>(literal)
+                    && python_float(&s).is_some()
+                {
+                    let line_start = bytes[..i]
+                        .iter()
+                        .rposition(|&c| c == b'\n')
+                        .map_or(0, |p| p + 1);
+                    let line = bytes[..i].iter().filter(|&&c| c == b'\n').count() + 1;
+                    return Err((line, i - line_start + 1, s));
+                }
+                last = Some(b'"');
+                i = end;
+                continue;
+            }
+            // The first bytes of the tokens: the only place a token can start.
+            b'N' | b'I' | b'-' => {
+                let value_here = match last {
+                    None | Some(b'[' | b':') => true,
+                    Some(b',') => open.last() == Some(&b'['),
+                    Some(_) => false,
+                };
+                if value_here
+                    && let Some(p) = PYTHON_FLOATS
+                        .iter()
+                        .find(|p| bytes[i..].starts_with(p.token.as_bytes()))
+                {
+                    let end = i + p.token.len();
+                    out.to_mut()[i..end].copy_from_slice(p.stand_in);
+                    last = Some(b'"');
+                    i = end;
+                    continue;
+                }
+            }
+            b'[' | b'{' => open.push(b),
+            b']' | b'}' => {
+                open.pop();
+            }
+            _ => {}
+        }
+        last = Some(b);
+        i += 1;
+    }
+    Ok(out)
+}
+
+/// The end (one past the closing quote) of the string literal opening at `start`, or the end
+/// of `bytes` for an unterminated one.
+fn string_end(bytes: &[u8], start: usize) -> usize {
+    let mut i = start + 1;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'\\' => i += 2,
+            b'"' => return i + 1,
+            _ => i += 1,
+        }
+    }
+    bytes.len()
+}
+
+/// The number `v` stands for: a JSON number, or one of Python's tokens.
+fn number(v: &Value) -> Option<f64> {
+    match v {
+        Value::Number(n) => n.as_f64(),
+        Value::String(s) => python_float(s).map(|p| p.value),
+        _ => None,
+    }
+}
+
 fn kind(v: &Value) -> &'static str {
     match v {
         Value::Null => "null",
         Value::Bool(_) => "a boolean",
         Value::Number(_) => "a number",
-        Value::String(_) => "a string",
+        Value::String(s) => python_float(s).map_or("a string", |p| p.token),
         Value::Array(_) => "a list",
         Value::Object(_) => "an object",
     }
@@ -118,7 +267,7 @@ fn numbers(array: &str, v: &Value, index: &mut Vec<usize>) -> Result<Vec<f64>, S
     let mut out = Vec::with_capacity(items.len());
     for (i, item) in items.iter().enumerate() {
         index.push(i);
-        match item.as_f64() {
+        match number(item) {
             Some(x) => out.push(x),
             None => {
                 return Err(format!(
@@ -188,7 +337,7 @@ fn depth(v: &Value) -> Option<usize> {
             .find(|i| !i.is_null())
             .and_then(depth)
             .map(|d| d + 1),
-        Value::Number(_) => Some(0),
+        v if number(v).is_some() => Some(0),
         _ => None,
     }
 }
@@ -244,7 +393,10 @@ fn per_cell(array: &'static str, v: &Value, matrix: bool) -> Result<Cells, Strin
             } else {
                 let (values, s) = cell(array, item, &mut index, size, matrix)?;
                 size = Some(s);
-                cells.push(Some(values));
+                // All NaN is how a numpy array (and Python's json.dump of its list) marks a
+                // value not logged, as in the NPZ reader; some NaN is a finding, kept.
+                let logged = values.is_empty() || !values.iter().all(|v| v.is_nan());
+                cells.push(logged.then_some(values));
             }
             index.pop();
         }
@@ -328,4 +480,78 @@ fn walk_model(
         index.pop();
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rewritten(text: &str) -> Vec<u8> {
+        python_floats(text.as_bytes()).unwrap().into_owned()
+    }
+
+    #[test]
+    fn stand_ins_are_as_long_as_their_tokens_and_read_as_said() {
+        for p in &PYTHON_FLOATS {
+            assert_eq!(p.stand_in.len(), p.token.len(), "{}", p.token);
+            let read: String = serde_json::from_slice(p.stand_in.trim_ascii_end()).unwrap();
+            assert_eq!(read, p.read_as);
+        }
+    }
+
+    #[test]
+    fn tokens_become_stand_ins_of_their_length_where_values_stand() {
+        let text = r#"{"a": [NaN, -Infinity, [Infinity, 1e3]], "b": NaN}"#;
+        let out = rewritten(text);
+        assert_eq!(out.len(), text.len());
+        let value: Value = serde_json::from_slice(&out).unwrap();
+        let numbers: Vec<f64> = [&value["a"][0], &value["a"][1], &value["a"][2][0]]
+            .into_iter()
+            .map(|v| number(v).unwrap())
+            .collect();
+        assert!(numbers[0].is_nan());
+        assert_eq!(numbers[1..], [f64::NEG_INFINITY, f64::INFINITY]);
+        assert_eq!(number(&value["a"][2][1]), Some(1e3));
+        assert!(number(&value["b"]).unwrap().is_nan());
+    }
+
+    #[test]
+    fn text_without_tokens_is_borrowed_and_strings_are_untouched() {
+        let text = r#"{"NaN": ["Infinity", "x\"NaN", "-Infinity\\"], "k": [1, -2.5e-3]}"#;
+        assert!(matches!(
+            python_floats(text.as_bytes()),
+            Ok(Cow::Borrowed(_))
+        ));
+    }
+
+    #[test]
+    fn tokens_where_no_value_stands_are_left_for_serde_json_to_refuse() {
+        for text in [
+            r#"{NaN: 1}"#,
+            r#"{"a": 1, Infinity: 2}"#,
+            "[1 -Infinity]",
+            "[1]NaN",
+        ] {
+            assert_eq!(rewritten(text), text.as_bytes());
+        }
+        assert_eq!(rewritten("[NaN NaN]"), b"[\"\x7f\" NaN]");
+    }
+
+    #[test]
+    fn every_spelling_of_a_stand_in_is_refused_with_its_place() {
+        for literal in [
+            "\"\x7f\"",
+            r#""\u007f""#,
+            r#""\u007F""#,
+            r#""\u0001""#,
+            r#""\u0002""#,
+        ] {
+            let text = format!("{{\"a\":\n  [{literal}]}}");
+            let (line, column, s) = python_floats(text.as_bytes()).unwrap_err();
+            assert_eq!((line, column), (2, 4), "{literal}");
+            assert!(python_float(&s).is_some());
+        }
+        // Longer strings holding those characters are only text.
+        assert!(python_floats(br#"["\u0001\u0001", "a\u007f"]"#).is_ok());
+    }
 }

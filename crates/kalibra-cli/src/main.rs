@@ -1,8 +1,8 @@
 //! `kalibra`: judge any Kalman-type filter from its logs.
 //!
 //! * `kalibra eval LOG [--out DIR] [--confidence 0.95] [--window W] [--group NAME=i,j ...]
-//!   [--lags L]` reads a filter log (JSON or CSV, chosen by the extension), evaluates it with
-//!   `kalibra_eval::Evaluation` and writes `report.json`, `report.md`, SVG figures and a
+//!   [--lags L]` reads a filter log (JSON, CSV or NPZ, chosen by the extension), evaluates it
+//!   with `kalibra_eval::Evaluation` and writes `report.json`, `report.md`, SVG figures and a
 //!   self-contained `report.html` into DIR.
 //! * `kalibra tune MODEL.toml MEASUREMENTS.csv [--p FROM:TO:STEP] [--truth TRUTH.csv]
 //!   [--out DIR] [--threads N]` sweeps `Q = 10^p Q_nom` with `kalibra_eval::Tuning` and writes
@@ -12,7 +12,7 @@
 //! `kalibra_eval::FilterLog`, and writes what `kalibra_eval` and `kalibra_plot` return. Exit
 //! codes: 0 success, 1 the run failed (bad input, or a report that could not be written), 2 bad
 //! usage (clap's own errors). Errors are one message naming the file and the row and column
-//! (CSV) or the array and index (JSON); never a panic or a backtrace.
+//! (CSV) or the array and index (JSON, NPZ); never a panic or a backtrace.
 
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
@@ -97,7 +97,7 @@ fn parse_grid(s: &str) -> Result<(f64, f64, f64), String> {
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = input::FORMATS_HELP, after_help = input::FORMATS_HELP)]
 struct EvalArgs {
-    /// The filter log: a .json or .csv file (format chosen by the extension).
+    /// The filter log: a .json, .csv or .npz file (format chosen by the extension).
     log: PathBuf,
     /// Directory the report is written to (replaced if it holds an earlier report).
     #[arg(long, short, default_value = "kalibra-report")]

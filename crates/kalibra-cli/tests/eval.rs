@@ -26,63 +26,90 @@ struct Fixture {
     r: Vec<Vec<f64>>,
 }
 
-/// The evaluation of the fixture's arrays in-process, with the options the tests pass.
-fn in_process(with_model: bool) -> Report {
-    in_process_copies(with_model, 1)
+/// kf.json's arrays, one entry per cell in run-major order (`None` where null), read
+/// independently of the binary's reader.
+struct Arrays {
+    runs: usize,
+    steps: usize,
+    time: Vec<f64>,
+    truth: Vec<Option<Vec<f64>>>,
+    estimate: Vec<Option<Vec<f64>>>,
+    covariance: Vec<Option<Vec<f64>>>,
+    innovation: Vec<Option<Vec<f64>>>,
+    innovation_cov: Vec<Option<Vec<f64>>>,
+    /// F, H, Q, R, row by row.
+    model: [Vec<f64>; 4],
 }
 
-/// As [`in_process`], for the fixture's runs repeated `copies` times (run `c R + r` is run
-/// `r` of the fixture).
-fn in_process_copies(with_model: bool, copies: usize) -> Report {
-    let text = std::fs::read_to_string(fixture("kf.json")).unwrap();
-    let mut fx: Fixture = serde_json::from_str(&text).unwrap();
-    fn repeat<T: Clone>(v: &mut Vec<T>, copies: usize) {
-        *v = (0..copies).flat_map(|_| v.iter().cloned()).collect();
+impl Arrays {
+    /// The cell of `array` at `run` and `step`.
+    fn cell_mut(&mut self, array: &str, run: usize, step: usize) -> &mut Option<Vec<f64>> {
+        let cells = match array {
+            "truth" => &mut self.truth,
+            "estimate" => &mut self.estimate,
+            "covariance" => &mut self.covariance,
+            "innovation" => &mut self.innovation,
+            "innovation_cov" => &mut self.innovation_cov,
+            other => panic!("no per-cell array {other}"),
+        };
+        &mut cells[run * self.steps + step]
     }
-    repeat(&mut fx.truth, copies);
-    repeat(&mut fx.estimate, copies);
-    repeat(&mut fx.covariance, copies);
-    repeat(&mut fx.innovation, copies);
-    repeat(&mut fx.innovation_cov, copies);
-    let flat =
-        |v: &Vec<Vec<Vec<f64>>>| -> Vec<f64> { v.iter().flatten().flatten().copied().collect() };
-    let flat_m = |v: &Vec<Vec<Vec<Vec<f64>>>>| -> Vec<f64> {
-        v.iter().flatten().flatten().flatten().copied().collect()
-    };
+}
+
+fn fixture_arrays() -> Arrays {
+    let text = std::fs::read_to_string(fixture("kf.json")).unwrap();
+    let fx: Fixture = serde_json::from_str(&text).unwrap();
     let mat = |m: &Vec<Vec<f64>>| -> Vec<f64> { m.iter().flatten().copied().collect() };
-    let (runs, steps) = (fx.truth.len(), fx.truth[0].len());
-    let mut log = FilterLog::new(runs, steps)
+    let vectors = |v: &Vec<Vec<Vec<f64>>>| -> Vec<Option<Vec<f64>>> {
+        v.iter().flatten().map(|c| Some(c.clone())).collect()
+    };
+    Arrays {
+        runs: fx.truth.len(),
+        steps: fx.truth[0].len(),
+        time: fx.time.clone(),
+        truth: vectors(&fx.truth),
+        estimate: vectors(&fx.estimate),
+        covariance: fx
+            .covariance
+            .iter()
+            .flatten()
+            .map(|c| Some(mat(c)))
+            .collect(),
+        innovation: fx.innovation.iter().flatten().cloned().collect(),
+        innovation_cov: fx
+            .innovation_cov
+            .iter()
+            .flatten()
+            .map(|c| c.as_ref().map(mat))
+            .collect(),
+        model: [mat(&fx.f), mat(&fx.h), mat(&fx.q), mat(&fx.r)],
+    }
+}
+
+/// The evaluation of `a` in-process, with the options the tests pass.
+fn evaluate_arrays(a: &Arrays, with_model: bool) -> Report {
+    let mut log = FilterLog::new(a.runs, a.steps)
         .unwrap()
-        .with_times(fx.time.clone())
+        .with_times(a.time.clone())
         .unwrap()
-        .with_truth(Vectors::dense(4, flat(&fx.truth)))
+        .with_truth(Vectors::cells(4, a.truth.clone()))
         .unwrap()
-        .with_estimate(Vectors::dense(4, flat(&fx.estimate)))
+        .with_estimate(Vectors::cells(4, a.estimate.clone()))
         .unwrap()
-        .with_covariance(Matrices::dense(4, 4, flat_m(&fx.covariance)))
+        .with_covariance(Matrices::cells(4, 4, a.covariance.clone()))
         .unwrap()
-        .with_innovation(Vectors::cells(
-            2,
-            fx.innovation.iter().flatten().cloned().collect(),
-        ))
+        .with_innovation(Vectors::cells(2, a.innovation.clone()))
         .unwrap()
-        .with_innovation_cov(Matrices::cells(
-            2,
-            2,
-            fx.innovation_cov
-                .iter()
-                .flatten()
-                .map(|c| c.as_ref().map(mat))
-                .collect(),
-        ))
+        .with_innovation_cov(Matrices::cells(2, 2, a.innovation_cov.clone()))
         .unwrap();
     if with_model {
+        let [f, h, q, r] = a.model.clone();
         log = log
             .with_model(
-                Matrices::constant(4, 4, mat(&fx.f)),
-                Matrices::constant(2, 4, mat(&fx.h)),
-                Matrices::constant(4, 4, mat(&fx.q)),
-                Matrices::constant(2, 2, mat(&fx.r)),
+                Matrices::constant(4, 4, f),
+                Matrices::constant(2, 4, h),
+                Matrices::constant(4, 4, q),
+                Matrices::constant(2, 2, r),
             )
             .unwrap();
     }
@@ -91,6 +118,27 @@ fn in_process_copies(with_model: bool, copies: usize) -> Report {
         .unwrap()
         .evaluate(&log)
         .unwrap()
+}
+
+/// The evaluation of the fixture's arrays in-process.
+fn in_process(with_model: bool) -> Report {
+    evaluate_arrays(&fixture_arrays(), with_model)
+}
+
+/// As [`in_process`], for the fixture's runs repeated `copies` times (run `c R + r` is run
+/// `r` of the fixture).
+fn in_process_copies(with_model: bool, copies: usize) -> Report {
+    let mut a = fixture_arrays();
+    fn repeat<T: Clone>(v: &mut Vec<T>, copies: usize) {
+        *v = (0..copies).flat_map(|_| v.iter().cloned()).collect();
+    }
+    repeat(&mut a.truth, copies);
+    repeat(&mut a.estimate, copies);
+    repeat(&mut a.covariance, copies);
+    repeat(&mut a.innovation, copies);
+    repeat(&mut a.innovation_cov, copies);
+    a.runs *= copies;
+    evaluate_arrays(&a, with_model)
 }
 
 fn good_log(test: &str, log: &str, with_model: bool) {
@@ -223,6 +271,142 @@ fn csv_log_of_several_blocks() {
 #[test]
 fn npz_log_gives_the_in_process_report() {
     good_log("good-npz", "kf.npz", true);
+}
+
+/// `make_python_json.py`'s tables. Cells partly NaN or infinite (array, run, step, index in
+/// the flat cell, value): findings, left out of the statistics they would poison.
+const PYTHON_POISONED: [(&str, usize, usize, usize, f64); 4] = [
+    ("covariance", 1, 4, 0, f64::NAN),
+    ("covariance", 2, 9, 15, f64::INFINITY),
+    ("estimate", 3, 12, 1, f64::NEG_INFINITY),
+    ("innovation_cov", 2, 3, 3, f64::NAN),
+];
+/// Cells written as all NaN (array, run, step): not logged. So are the innovation cells that
+/// kf.json has as null, which the script writes as all NaN.
+const PYTHON_NOT_LOGGED: [(&str, usize, usize); 1] = [("truth", 0, 20)];
+
+/// `kf_python.json` holds kf.json's arrays as Python's `json.dump` wrote them
+/// (`make_python_json.py`), bare `NaN`, `Infinity` and `-Infinity` included: the report is
+/// the library's on the same arrays, with the all-NaN cells as not logged and the partly
+/// non-finite ones counted as findings.
+#[test]
+fn json_from_python_reads_nan_and_infinity() {
+    let out = scratch("python-json").join("report");
+    let run = kalibra(&[
+        "eval",
+        fixture("kf_python.json").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--group",
+        "position=0,1",
+    ]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let report: Report =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+
+    let mut arrays = fixture_arrays();
+    for (array, run, step, index, value) in PYTHON_POISONED {
+        arrays.cell_mut(array, run, step).as_mut().unwrap()[index] = value;
+    }
+    for (array, run, step) in PYTHON_NOT_LOGGED {
+        *arrays.cell_mut(array, run, step) = None;
+    }
+    assert_eq!(report, evaluate_arrays(&arrays, true));
+
+    // The findings are the poisoned cells, by family, and nothing else: an all-NaN cell read
+    // as logged would be one more.
+    let state: Vec<_> = PYTHON_POISONED
+        .iter()
+        .filter(|p| p.0 == "covariance" || p.0 == "estimate")
+        .collect();
+    let f = &report.findings;
+    assert_eq!(f.state.cells, state.len());
+    assert_eq!(
+        f.state.non_finite_vector,
+        state.iter().filter(|p| p.0 == "estimate").count()
+    );
+    assert_eq!(
+        f.state.non_finite,
+        f.state.cells - f.state.non_finite_vector
+    );
+    let first = state.iter().min_by_key(|p| (p.1, p.2)).unwrap();
+    let found = f.state.first.as_ref().unwrap();
+    assert_eq!(
+        (found.array.as_str(), found.run, found.step),
+        (first.0, first.1, first.2)
+    );
+    assert_eq!(f.innovation.cells, PYTHON_POISONED.len() - state.len());
+    assert_eq!(f.innovation.non_finite, f.innovation.cells);
+    // Every run has a NEES at a step but where the script poisoned or blanked a state cell.
+    for (k, &runs) in report.nees_runs_per_step.iter().enumerate() {
+        let lost = state.iter().filter(|p| p.2 == k).count()
+            + PYTHON_NOT_LOGGED.iter().filter(|p| p.2 == k).count();
+        assert_eq!(runs, report.runs - lost, "step {k}");
+    }
+}
+
+/// A NaN inside a string, key or value, stays text: only a bare token is a number.
+#[test]
+fn json_nan_inside_strings_is_text() {
+    let s = r#""innovation_cov": [[[1]], [[1]]]"#;
+    let cases: [(&str, String, &[&str]); 3] = [
+        (
+            "nan-key",
+            format!(r#"{{"NaN": [[0.5], [1.0]], {s}}}"#),
+            &["unknown array `NaN`"],
+        ),
+        (
+            "nan-value",
+            format!(r#"{{"innovation": [[0.5], ["NaN"]], {s}}}"#),
+            &[
+                "array innovation[1][0]",
+                "expected a number, found a string",
+            ],
+        ),
+        // An escaped quote does not end the string: the NaN after it is still inside.
+        (
+            "nan-after-escaped-quote",
+            format!(r#"{{"a\":NaN": [[0.5], [1.0]], {s}}}"#),
+            &[r#"unknown array `a":NaN`"#],
+        ),
+    ];
+    for (test, json, needles) in cases {
+        bad_input(test, "strings.json", json.as_bytes(), needles);
+    }
+}
+
+/// A string that serde_json would read like a bare token's stand-in is refused with its
+/// place, rather than taken for a number.
+#[test]
+fn json_string_like_a_stand_in_is_refused() {
+    let json = "{\"innovation\": [[0.5], [\"\\u0001\"]], \"innovation_cov\": [[[1]], [[1]]]}";
+    let column = json.find("\"\\u0001").unwrap() + 1;
+    bad_input(
+        "stand-in",
+        "forged.json",
+        json.as_bytes(),
+        &[&format!("line 1, column {column}"), "unexpected string"],
+    );
+}
+
+/// Syntax errors after a bare token keep the line and column of the file as written, and a
+/// bare token where a key belongs is a syntax error there.
+#[test]
+fn json_errors_after_python_tokens_keep_their_column() {
+    let json = r#"{"innovation": [[NaN], [-Infinity], [Infinity], [x]], "innovation_cov": []}"#;
+    let column = json.find('x').unwrap() + 1;
+    bad_input(
+        "token-column",
+        "column.json",
+        json.as_bytes(),
+        &[&format!("line 1, column {column}:"), "not valid JSON"],
+    );
+    bad_input(
+        "token-key",
+        "key.json",
+        br#"{NaN: [[1.0]]}"#,
+        &["line 1, column 2:", "not valid JSON"],
+    );
 }
 
 #[test]

@@ -2,9 +2,9 @@
 
 mod common;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use kalibra_eval::{TuneProblem, TuneReport, Tuning};
+use kalibra_eval::{InitialCovariance, TuneError, TuneProblem, TuneReport, Tuning};
 use kalibra_linalg::{DMatrix, DVector};
 
 use common::{fixture, kalibra, scratch, text};
@@ -13,17 +13,29 @@ fn m2(a: [[f64; 2]; 2]) -> DMatrix<f64> {
     DMatrix::from_fn(2, 2, |i, j| a[i][j])
 }
 
+/// A constructor of [`TuneProblem`]: [`TuneProblem::new`] or [`TuneProblem::as_given`].
+type Build = fn(
+    DMatrix<f64>,
+    DMatrix<f64>,
+    DMatrix<f64>,
+    DMatrix<f64>,
+    DVector<f64>,
+    DMatrix<f64>,
+    Vec<Option<DVector<f64>>>,
+) -> Result<TuneProblem, TuneError>;
+
 /// The problem of the fixtures built in-process from the generator's constants and its
-/// seeded simulation (not from the files the binary reads).
-fn in_process(with_truth: bool) -> TuneReport {
+/// seeded simulation (not from the files the binary reads), with the initial covariance `p0`
+/// taken by `build`.
+fn in_process_with(build: Build, p0: [[f64; 2]; 2], with_truth: bool) -> TuneReport {
     let (zs, xs) = common::simulate_tune();
-    let problem = TuneProblem::new(
+    let problem = build(
         m2(common::TUNE_F),
         DMatrix::from_fn(1, 2, |i, j| common::TUNE_H[i][j]),
         m2(common::TUNE_Q_NOM),
         DMatrix::from_element(1, 1, common::TUNE_R),
         DVector::from_column_slice(&common::TUNE_X0),
-        m2(common::TUNE_P0),
+        m2(p0),
         zs.iter()
             .map(|z| z.map(|z| DVector::from_element(1, z)))
             .collect(),
@@ -48,13 +60,16 @@ fn in_process(with_truth: bool) -> TuneReport {
         .unwrap()
 }
 
-fn run_good(test: &str, with_truth: bool) -> (PathBuf, TuneReport) {
+/// The fixtures' problem in-process, `P0` checked.
+fn in_process(with_truth: bool) -> TuneReport {
+    in_process_with(TuneProblem::new, common::TUNE_P0, with_truth)
+}
+
+/// Runs `kalibra tune` on `model` and the fixtures' measurements (and truth) on the tests'
+/// grid; returns the report directory and `report.json`.
+fn run_good(test: &str, model: &Path, with_truth: bool) -> (PathBuf, TuneReport) {
     let out = scratch(test).join("report");
-    let (model, meas, truth) = (
-        fixture("tune_model.toml"),
-        fixture("tune_measurements.csv"),
-        fixture("tune_truth.csv"),
-    );
+    let (meas, truth) = (fixture("tune_measurements.csv"), fixture("tune_truth.csv"));
     let mut args = vec![
         "tune",
         model.to_str().unwrap(),
@@ -83,7 +98,7 @@ fn run_good(test: &str, with_truth: bool) -> (PathBuf, TuneReport) {
 
 #[test]
 fn tune_with_truth_equals_the_library_sweep() {
-    let (out, report) = run_good("truth", true);
+    let (out, report) = run_good("truth", &fixture("tune_model.toml"), true);
     // The "results match the library's own sweep exactly": every field, bit for bit.
     assert_eq!(report, in_process(true));
     for name in [
@@ -114,11 +129,54 @@ fn tune_with_truth_equals_the_library_sweep() {
 
 #[test]
 fn tune_without_truth_equals_the_library_sweep() {
-    let (out, report) = run_good("no-truth", false);
+    let (out, report) = run_good("no-truth", &fixture("tune_model.toml"), false);
     assert_eq!(report, in_process(false));
     assert!(report.crossover.is_some());
     assert!(out.join("j1j2.svg").is_file());
     assert!(!out.join("rmse.svg").exists());
+}
+
+/// `p0_as_given = true` takes a `P0` that the checked path refuses (asymmetric, as the 2012
+/// paper's printed one, or indefinite) and sweeps it as `TuneProblem::as_given` does, field
+/// for field; without the key the same model is refused, naming `P0`.
+#[test]
+fn p0_as_given_equals_the_library_sweep_as_given() {
+    let asymmetric = [[10.0, 0.5], [0.0, 1.0]];
+    let indefinite = [[-12.0, 0.0], [0.0, 1.0]];
+    let fixture_p0 = "P0 = [[10.0, 0.0], [0.0, 1.0]]";
+    assert!(model_text().contains(fixture_p0));
+    for (name, p0) in [("asymmetric", asymmetric), ("indefinite", indefinite)] {
+        let dir = scratch(&format!("as-given-{name}"));
+        let checked = model_text().replace(
+            fixture_p0,
+            &format!(
+                "P0 = [[{:?}, {:?}], [{:?}, {:?}]]",
+                p0[0][0], p0[0][1], p0[1][0], p0[1][1]
+            ),
+        );
+        let refused = dir.join("checked.toml");
+        std::fs::write(&refused, &checked).unwrap();
+        let run = kalibra(&[
+            "tune",
+            refused.to_str().unwrap(),
+            fixture("tune_measurements.csv").to_str().unwrap(),
+            "--out",
+            dir.join("refused").to_str().unwrap(),
+        ]);
+        let err = text(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains("checked.toml") && err.contains("P0"), "{err}");
+
+        let model = dir.join("as_given.toml");
+        std::fs::write(&model, checked + "p0_as_given = true\n").unwrap();
+        let (_, report) = run_good(&format!("as-given-{name}-run"), &model, true);
+        assert_eq!(report.initial_covariance, InitialCovariance::AsGiven);
+        assert_eq!(
+            report,
+            in_process_with(TuneProblem::as_given, p0, true),
+            "{name}"
+        );
+    }
 }
 
 #[test]

@@ -1,10 +1,8 @@
-//! Validation errors of the log and the options, findings (NaN, asymmetric and indefinite
-//! covariances) and the property that the report equals kalibra-metrics on the same arrays.
+//! Validation errors of the log and the options, and findings (NaN, asymmetric and
+//! indefinite covariances). The property that the report equals kalibra-metrics on the same
+//! arrays is in `report_equals_metrics.rs`.
 
 use kalibra_eval::{EvalError, Evaluation, FilterLog, Matrices, Reason, Vectors, VerdictKind};
-use kalibra_linalg::{Covariance, DMatrix, DVector};
-use kalibra_metrics::{nees, nis};
-use proptest::prelude::*;
 
 #[test]
 fn shapes_are_checked_and_named() {
@@ -163,106 +161,4 @@ fn bad_covariances_are_counted_named_and_left_out() {
     assert!(r.summary.verdict.evidence.contains("3 cells left out"));
     // Exactly 1 in every run: no spread, so the chi-square fallback decides.
     assert_eq!(r.summary.verdict.kind, VerdictKind::Consistent);
-}
-
-/// A random positive definite matrix `L L^T + 0.1 I`.
-fn spd(dim: usize) -> impl Strategy<Value = Vec<f64>> {
-    prop::collection::vec(-2.0..2.0f64, dim * dim).prop_map(move |l| {
-        let l = DMatrix::from_row_slice(dim, dim, &l);
-        let p = &l * l.transpose() + DMatrix::identity(dim, dim) * 0.1;
-        (0..dim)
-            .flat_map(|i| (0..dim).map(move |j| (i, j)))
-            .map(|(i, j)| p[(i, j)])
-            .collect()
-    })
-}
-
-fn cells(count: usize, cell: impl Strategy<Value = Vec<f64>>) -> impl Strategy<Value = Vec<f64>> {
-    prop::collection::vec(cell, count).prop_map(|c| c.concat())
-}
-
-#[derive(Debug, Clone)]
-struct Arrays {
-    runs: usize,
-    steps: usize,
-    n: usize,
-    m: usize,
-    truth: Vec<f64>,
-    estimate: Vec<f64>,
-    cov: Vec<f64>,
-    innovation: Vec<f64>,
-    s: Vec<f64>,
-}
-
-fn arrays() -> impl Strategy<Value = Arrays> {
-    (1usize..4, 1usize..6, 1usize..4, 1usize..3).prop_flat_map(|(runs, steps, n, m)| {
-        let c = runs * steps;
-        (
-            cells(c, prop::collection::vec(-5.0..5.0f64, n)),
-            cells(c, prop::collection::vec(-5.0..5.0f64, n)),
-            cells(c, spd(n)),
-            cells(c, prop::collection::vec(-5.0..5.0f64, m)),
-            cells(c, spd(m)),
-        )
-            .prop_map(move |(truth, estimate, cov, innovation, s)| Arrays {
-                runs,
-                steps,
-                n,
-                m,
-                truth,
-                estimate,
-                cov,
-                innovation,
-                s,
-            })
-    })
-}
-
-fn close(a: f64, b: f64) -> bool {
-    (a - b).abs() <= 1e-12 * b.abs().max(1.0)
-}
-
-proptest! {
-    #[test]
-    fn report_equals_the_metrics_on_the_same_arrays(a in arrays()) {
-        let log = FilterLog::new(a.runs, a.steps).unwrap()
-            .with_truth(Vectors::dense(a.n, a.truth.clone())).unwrap()
-            .with_estimate(Vectors::dense(a.n, a.estimate.clone())).unwrap()
-            .with_covariance(Matrices::dense(a.n, a.n, a.cov.clone())).unwrap()
-            .with_innovation(Vectors::dense(a.m, a.innovation.clone())).unwrap()
-            .with_innovation_cov(Matrices::dense(a.m, a.m, a.s.clone())).unwrap();
-        let r = Evaluation::new().evaluate(&log).unwrap();
-        prop_assert_eq!(r.findings.state.cells + r.findings.innovation.cells, 0);
-        let (n, m) = (a.n, a.m);
-        let (mut all_nees, mut all_nis) = (0.0, 0.0);
-        for k in 0..a.steps {
-            let (mut sum_nees, mut sum_nis) = (0.0, 0.0);
-            let mut sq = vec![0.0; n];
-            for run in 0..a.runs {
-                let c = run * a.steps + k;
-                let x = DVector::from_column_slice(&a.truth[c * n..(c + 1) * n]);
-                let xhat = DVector::from_column_slice(&a.estimate[c * n..(c + 1) * n]);
-                let p = DMatrix::from_row_slice(n, n, &a.cov[c * n * n..(c + 1) * n * n]);
-                let e = &x - &xhat;
-                sum_nees += nees(&e, &p).unwrap();
-                for (s, e) in sq.iter_mut().zip(e.iter()) {
-                    *s += e * e;
-                }
-                let nu = DVector::from_column_slice(&a.innovation[c * m..(c + 1) * m]);
-                let s = Covariance::new(DMatrix::from_row_slice(m, m, &a.s[c * m * m..(c + 1) * m * m])).unwrap();
-                sum_nis += nis(&nu, &s).unwrap();
-            }
-            all_nees += sum_nees;
-            all_nis += sum_nis;
-            let runs = a.runs as f64;
-            prop_assert!(close(r.anees_per_step[k].unwrap(), sum_nees / runs / n as f64));
-            prop_assert!(close(r.anis_per_step[k].unwrap(), sum_nis / runs / m as f64));
-            for (series, sq) in r.rmse_per_step.iter().zip(&sq) {
-                prop_assert!(close(series.values[k].unwrap(), (sq / runs).sqrt()));
-            }
-        }
-        let cells = (a.runs * a.steps) as f64;
-        prop_assert!(close(r.summary.anees.unwrap(), all_nees / cells / n as f64));
-        prop_assert!(close(r.summary.anis.unwrap(), all_nis / cells / m as f64));
-    }
 }
