@@ -427,9 +427,9 @@ fn stream(
     buf.drain(..header_end);
 
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get().clamp(1, 4));
-    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>)>(2 * workers);
+    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>)>(workers);
     let work_rx = Mutex::new(work_rx);
-    let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(2 * workers + 2);
+    let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(workers + 1);
     let mut times: Vec<Option<(f64, u64)>> = Vec::new();
     let mut any = false;
     let fed: Result<(), String> = std::thread::scope(|scope| {

@@ -7,6 +7,7 @@ use kalibra_metrics::{
     ChiSquareBand, Credibility, MetricsError, SquaredErrors, StepMean, paired_t_test,
     sliding_window, whiteness,
 };
+use rayon::prelude::*;
 
 use crate::report::{
     Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, LagReport, Reason, Report,
@@ -192,7 +193,10 @@ impl Evaluation {
         report.summary.anees_test = consistency_test("anees", n, per_run, self.confidence)?;
         report.summary.anees = report.summary.anees_test.as_ref().map(|t| t.value);
         if runs >= 2 {
+            // Each step's summary stands alone (an eigen-decomposition and a median over the
+            // runs): computed on every core, collected in step order.
             report.nci_per_step = (0..steps)
+                .into_par_iter()
                 .map(|k| {
                     if cred.runs(k) < 2 {
                         return Ok(None);
