@@ -214,7 +214,7 @@ fn csv_log_gives_the_in_process_report() {
     good_log("good-csv", "kf.csv", false);
 }
 
-/// A CSV log larger than the blocks the reader hands to its parsing threads (1 MiB): the
+/// A CSV log larger than the blocks the reader hands to its parsing threads (256 KiB): the
 /// rows reach the evaluation in file order, so the report is the in-process one exactly, and
 /// an error in a later block names its row of the file.
 #[test]
