@@ -41,10 +41,19 @@ enum Command {
     Bench(bench::Args),
 }
 
-fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+fn main() -> std::process::ExitCode {
+    let result = match Cli::parse().command {
         Command::Reproduce(args) => reproduce::main(&args),
         Command::Bench(args) => bench::main(&args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // One line with the chain of causes; no backtrace, whatever RUST_BACKTRACE says
+            // (returning the error from main would print one).
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::from(1)
+        }
     }
 }
 

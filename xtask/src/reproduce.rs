@@ -93,6 +93,14 @@ pub fn main(args: &Args) -> Result<()> {
         seed: args.seed,
         threads: args.threads,
     };
+    // The output directory first: a bad --out fails before minutes of studies, not after.
+    std::fs::create_dir_all(&out)
+        .and_then(|()| {
+            let probe = out.join(format!(".write-check-{}", std::process::id()));
+            std::fs::write(&probe, b"")?;
+            std::fs::remove_file(probe)
+        })
+        .with_context(|| format!("--out {}: cannot write there", out.display()))?;
     let mut rows = Vec::new();
     let mut claims: Vec<(&dyn Reproduce, Vec<Claim>)> = Vec::new();
     let total = Instant::now();

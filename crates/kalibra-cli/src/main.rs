@@ -167,9 +167,11 @@ fn main() -> ExitCode {
 fn eval(args: &EvalArgs) -> Result<(), String> {
     let evaluation = evaluation(args)
         .map_err(|e| format!("{}: cannot evaluate the log: {e}", args.log.display()))?;
+    // The output first: an unwritable --out fails before a long evaluation.
+    let target = output::Target::prepare(&args.out)?;
     let report = input::evaluate_log(&args.log, &evaluation)?;
     let doc = document::Document::new(&args.log, &report);
-    output::write_report(&args.out, &report, &doc)?;
+    target.write(&report, &doc)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());
     Ok(())
@@ -177,6 +179,8 @@ fn eval(args: &EvalArgs) -> Result<(), String> {
 
 /// `kalibra tune`: read the model and the sequences, sweep, write.
 fn tune(args: &TuneArgs) -> Result<(), String> {
+    // The output first: an unwritable --out fails before any work.
+    let target = output::Target::prepare(&args.out)?;
     let model = tune_input::read_model(&args.model)?;
     let m = model.meas_dim();
     let measurements =
@@ -202,7 +206,7 @@ fn tune(args: &TuneArgs) -> Result<(), String> {
         .tune(&problem)
         .map_err(|e| format!("{}: cannot tune: {e}", args.model.display()))?;
     let doc = document::Document::tune(&args.model, &args.measurements, &report);
-    output::write_report(&args.out, &report, &doc)?;
+    target.write(&report, &doc)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());
     Ok(())

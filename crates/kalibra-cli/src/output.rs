@@ -27,73 +27,92 @@ fn sibling(out: &Path, tag: &str) -> PathBuf {
     out.with_file_name(format!(".{name}.{tag}-{}", std::process::id()))
 }
 
-/// Writes `report.json`, `report.md`, `report.html` and the figures into `out`.
-///
-/// `out` is replaced if it holds an earlier report (a `report.json`); a directory holding
-/// anything else is left alone and refused.
-/// `report` is the serialisable report (`kalibra eval`'s or `kalibra tune`'s).
-pub fn write_report(
-    out: &Path,
-    report: &impl serde::Serialize,
-    doc: &Document,
-) -> Result<(), String> {
-    let shown = out.display();
-    let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
-    if out.exists() {
-        let is_report = out.join("report.json").is_file();
-        let is_empty = out.is_dir()
-            && fs::read_dir(out)
-                .map_err(|e| io("read it", e))?
-                .next()
-                .is_none();
-        if !(is_report || is_empty) {
-            return Err(format!(
-                "{shown}: exists and holds no earlier report; choose another --out or remove it"
-            ));
+/// Where a report goes: checked and its temporary directory made before any work starts, so
+/// that an unwritable `--out` fails at once, not after a long evaluation.
+pub struct Target {
+    out: PathBuf,
+    /// As the user wrote it, for messages.
+    shown: String,
+    tmp: PathBuf,
+    guard: Guard,
+}
+
+impl Target {
+    /// Checks `out` and makes the temporary directory beside it.
+    ///
+    /// `out` will be replaced if it holds an earlier report (a `report.json`); a directory
+    /// holding anything else is left alone and refused.
+    pub fn prepare(out: &Path) -> Result<Self, String> {
+        let shown = out.display().to_string();
+        let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
+        if out.exists() {
+            let is_report = out.join("report.json").is_file();
+            let is_empty = out.is_dir()
+                && fs::read_dir(out)
+                    .map_err(|e| io("read it", e))?
+                    .next()
+                    .is_none();
+            if !(is_report || is_empty) {
+                return Err(format!(
+                    "{shown}: exists and holds no earlier report; choose another --out or \
+                     remove it"
+                ));
+            }
         }
+        // `a/b` with no parent components is relative to the current directory.
+        let out = if out.parent().is_none_or(|p| p.as_os_str().is_empty()) {
+            Path::new(".").join(out)
+        } else {
+            out.to_path_buf()
+        };
+        if let Some(parent) = out.parent() {
+            fs::create_dir_all(parent).map_err(|e| io("create its parent directory", e))?;
+        }
+        let tmp = sibling(&out, "tmp");
+        let _ = fs::remove_dir_all(&tmp);
+        fs::create_dir(&tmp).map_err(|e| io("create a temporary directory beside it", e))?;
+        Ok(Self {
+            out,
+            shown,
+            guard: Guard(Some(tmp.clone())),
+            tmp,
+        })
     }
-    // `a/b` with no parent components is relative to the current directory.
-    let out = if out.parent().is_none_or(|p| p.as_os_str().is_empty()) {
-        Path::new(".").join(out)
-    } else {
-        out.to_path_buf()
-    };
-    if let Some(parent) = out.parent() {
-        fs::create_dir_all(parent).map_err(|e| io("create its parent directory", e))?;
-    }
-    let tmp = sibling(&out, "tmp");
-    let _ = fs::remove_dir_all(&tmp);
-    fs::create_dir(&tmp).map_err(|e| io("create a temporary directory beside it", e))?;
-    let mut guard = Guard(Some(tmp.clone()));
 
-    let json = serde_json::to_string_pretty(report)
-        .map_err(|e| format!("{shown}: cannot serialise the report: {e}"))?;
-    let write = |name: &str, text: &str| {
-        fs::write(tmp.join(name), text).map_err(|e| io(&format!("write {name}"), e))
-    };
-    write("report.json", &(json + "\n"))?;
-    write("report.md", &doc.markdown())?;
-    for (name, fig) in &doc.figures {
-        write(name, &fig.to_svg())?;
-    }
-    write("report.html", &doc.html())?;
+    /// Writes `report.json`, `report.md`, `report.html` and the figures, and moves them into
+    /// place. `report` is the serialisable report (`kalibra eval`'s or `kalibra tune`'s).
+    pub fn write(mut self, report: &impl serde::Serialize, doc: &Document) -> Result<(), String> {
+        let (out, tmp, shown) = (&self.out, &self.tmp, &self.shown);
+        let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
+        let json = serde_json::to_string_pretty(report)
+            .map_err(|e| format!("{shown}: cannot serialise the report: {e}"))?;
+        let write = |name: &str, text: &str| {
+            fs::write(tmp.join(name), text).map_err(|e| io(&format!("write {name}"), e))
+        };
+        write("report.json", &(json + "\n"))?;
+        write("report.md", &doc.markdown())?;
+        for (name, fig) in &doc.figures {
+            write(name, &fig.to_svg())?;
+        }
+        write("report.html", &doc.html())?;
 
-    // Move an earlier report aside, put the new one in place, then drop the old one.
-    let old = sibling(&out, "old");
-    let had_old = out.exists();
-    if had_old {
-        let _ = fs::remove_dir_all(&old);
-        fs::rename(&out, &old).map_err(|e| io("move the earlier report aside", e))?;
-    }
-    if let Err(e) = fs::rename(&tmp, &out) {
+        // Move an earlier report aside, put the new one in place, then drop the old one.
+        let old = sibling(out, "old");
+        let had_old = out.exists();
         if had_old {
-            let _ = fs::rename(&old, &out);
+            let _ = fs::remove_dir_all(&old);
+            fs::rename(out, &old).map_err(|e| io("move the earlier report aside", e))?;
         }
-        return Err(io("move the new report into place", e));
+        if let Err(e) = fs::rename(tmp, out) {
+            if had_old {
+                let _ = fs::rename(&old, out);
+            }
+            return Err(io("move the new report into place", e));
+        }
+        self.guard.0 = None;
+        if had_old {
+            let _ = fs::remove_dir_all(&old);
+        }
+        Ok(())
     }
-    guard.0 = None;
-    if had_old {
-        let _ = fs::remove_dir_all(&old);
-    }
-    Ok(())
 }

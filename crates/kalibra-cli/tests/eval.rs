@@ -689,3 +689,27 @@ fn an_existing_directory_that_is_no_report_is_left_alone() {
         "keep me"
     );
 }
+
+/// The output is checked before the log is read: an `--out` under a plain file fails at once
+/// (here the log does not even exist, and the message is about `--out`), for both commands.
+#[test]
+fn an_unwritable_out_fails_before_any_work() {
+    let dir = scratch("unwritable-out");
+    let blocker = dir.join("plain-file");
+    std::fs::write(&blocker, "not a directory").unwrap();
+    let out = blocker.join("report");
+    for args in [
+        vec!["eval", "missing-log.csv"],
+        vec!["tune", "missing-model.toml", "missing-measurements.csv"],
+    ] {
+        let mut args = args.clone();
+        args.extend(["--out", out.to_str().unwrap()]);
+        let run = kalibra(&args);
+        let err = text(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{err}");
+        assert!(err.contains("plain-file/report"), "{err}");
+        assert!(err.contains("cannot create its parent directory"), "{err}");
+        assert!(!err.contains("missing-"), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    }
+}
