@@ -37,6 +37,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 pub use kalibra_bounds as bounds;
 pub use kalibra_eval as eval;
 pub use kalibra_filters as filters;

@@ -59,6 +59,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod as_given;
 mod constant_gain;
 mod core;

@@ -253,6 +253,9 @@ where
     ///
     /// In the records of a filter started with [`InitialCheck::AsGiven`] it is computed by LU
     /// with the `S` the update used; it can then be negative, and is NaN if `S` is singular.
+    // The record is built by the filter's update, which sizes the innovation and S from the
+    // same measurement dimension, so the quadratic form's dimension check cannot fail.
+    #[allow(clippy::expect_used)]
     pub fn nis(&self) -> f64 {
         match self.s_as_given() {
             None => self

@@ -62,6 +62,9 @@
 //! # Ok::<(), kalibra_metrics::MetricsError>(())
 //! ```
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod accumulate;
 mod consistency;
 mod credibility;

@@ -33,6 +33,9 @@
 //! assert_eq!(svg, again);
 //! ```
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 pub mod figure;
 mod svg;
 

@@ -31,6 +31,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod tuning;
 
 /// The generator of every Monte Carlo run (re-exported so callers can name it).

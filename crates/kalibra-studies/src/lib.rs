@@ -27,6 +27,9 @@
 //! (xtask does). Every report records its seed and size, and its numbers do not depend on the
 //! thread count.
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 pub mod claims;
 pub mod figure;
 pub mod paper000;
