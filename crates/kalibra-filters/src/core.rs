@@ -313,10 +313,18 @@ where
         Ok(())
     }
 
-    /// Makes the current estimate the prior of an update and returns it. After an update with
-    /// no prediction before it (a filter that starts by updating), the prior is the current
-    /// estimate, all of it counted as "propagated" (`B_k = 0`).
-    pub(crate) fn prepare_update(&mut self) -> &Estimate<N> {
+    /// The prior of an update at the current step: the prediction, or, after an update with
+    /// no prediction since (a filter that starts by updating), the current posterior. Nothing
+    /// changes until the update succeeds ([`KalmanCore::begin_record`]), so a failed update
+    /// leaves the filter and its last record as they were.
+    pub(crate) fn update_prior(&self) -> &Estimate<N> {
+        self.current()
+    }
+
+    /// On a successful update's way into the record: when no prediction ran since the last
+    /// update, the prior is that update's posterior, all of it counted as "propagated"
+    /// (`B_k = 0`, `F = I`).
+    fn begin_record(&mut self) {
         if self.phase == Phase::Posterior {
             let rec = &mut self.record;
             rec.prior = rec.posterior.clone();
@@ -325,7 +333,6 @@ where
             rec.f.fill_with_identity();
             self.phase = Phase::Prior;
         }
-        &self.record.prior
     }
 
     /// Stores an update computed by the caller (the unscented and shifted Rayleigh filters) and
@@ -353,6 +360,7 @@ where
                 step: k,
             });
         }
+        self.begin_record();
         let rec = &mut self.record;
         rec.posterior.mean = parts.mean;
         rec.posterior.cov = parts.cov;
@@ -385,7 +393,7 @@ where
         let k = self.record.k;
         let at = |e| FilterError::at(k, e);
         let form = self.update;
-        let prior = self.prepare_update();
+        let prior = self.update_prior();
         let pht = &prior.cov * h.transpose();
         let mut s = &h * &pht + &r;
         symmetrize(&mut s);
@@ -431,7 +439,7 @@ where
     ) -> Result<&StepRecord<N, M>, FilterError> {
         let k = self.record.k;
         let form = self.update;
-        let prior = self.prepare_update();
+        let prior = self.update_prior();
         let s = &h * &prior.cov * h.transpose() + &r;
         let gain = match fixed_gain {
             Some(gain) => gain.clone(),
@@ -459,6 +467,7 @@ where
                 step: k,
             });
         }
+        self.begin_record();
         let rec = &mut self.record;
         rec.posterior.mean = mean;
         rec.posterior.cov = cov;

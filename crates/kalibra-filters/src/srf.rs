@@ -172,7 +172,7 @@ where
     fn update(&mut self, z: &OVector<f64, U1>) -> Result<&StepRecord<N, U1>, FilterError> {
         let k = self.core.step();
         self.core.check_measurement(1, z)?;
-        let prior = self.core.prepare_update().clone();
+        let prior = self.core.update_prior().clone();
         let at = |e| FilterError::at(k, e);
         let bearing = &self.bearing;
 

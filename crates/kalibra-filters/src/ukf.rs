@@ -604,7 +604,7 @@ where
         let k = self.core.step();
         self.core
             .check_measurement(self.measurement.meas_dim().value(), z)?;
-        let prior: Estimate<N> = self.core.prepare_update().clone();
+        let prior: Estimate<N> = self.core.update_prior().clone();
         let n = prior.mean.nrows();
         let (l, method) = sigma_sqrt(&prior.cov, "prior covariance for sigma points")
             .map_err(|e| FilterError::at(k, e))?;
