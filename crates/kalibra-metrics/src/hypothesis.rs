@@ -94,6 +94,15 @@ pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f
         });
     }
     check_finite(WHAT, series)?;
+    // Values near the ends of f64's range: the means of the series scaled by a power of two
+    // (exact), scaled back, so a sum of values near 1e308 does not overflow.
+    if let Some(k) = crate::scale::extreme_exponent(series) {
+        let means = batch_means(&crate::scale::scaled(series, k), batch, burn_in)?;
+        return Ok(means
+            .into_iter()
+            .map(|m| crate::scale::ldexp(m, k))
+            .collect());
+    }
     let scale = 1.0 / batch as f64;
     Ok(series[burn_in..]
         .chunks_exact(batch)

@@ -45,6 +45,29 @@ pub fn itse(times: &[f64], squared_errors: &[f64]) -> Result<f64, MetricsError> 
             });
         }
     }
+    // Times or squared errors near the ends of f64's range: the integral of the scaled series
+    // (each by a power of two, exact), scaled back; ordinary data is computed as it is.
+    let (a, b) = (
+        crate::scale::extreme_exponent(times),
+        crate::scale::extreme_exponent(squared_errors),
+    );
+    if a.is_some() || b.is_some() {
+        let (a, b) = (a.unwrap_or(0), b.unwrap_or(0));
+        let total = itse(
+            &crate::scale::scaled(times, a),
+            &crate::scale::scaled(squared_errors, b),
+        )?;
+        // dt and t each carry 2^a, the squared error 2^b.
+        let total = crate::scale::ldexp(total, 2 * a + b);
+        return if total.is_finite() {
+            Ok(total)
+        } else {
+            Err(MetricsError::InvalidParameter {
+                name: "ITSE (beyond the range of f64)",
+                value: total,
+            })
+        };
+    }
     let mut total = 0.0;
     for k in 1..times.len() {
         let dt = times[k] - times[k - 1];

@@ -152,6 +152,14 @@ pub fn rmse(series: &[f64]) -> Result<f64, MetricsError> {
         });
     }
     check_finite_slice(series, "error series")?;
+    // Values near the ends of f64's range are scaled by a power of two (exact), so their
+    // squares stay in range; ordinary data is computed as it is.
+    if let Some(k) = crate::scale::extreme_exponent(series) {
+        return Ok(crate::scale::ldexp(
+            rmse(&crate::scale::scaled(series, k))?,
+            k,
+        ));
+    }
     // A sum of non-negative terms: no cancellation, relative rounding error at most N eps.
     let sum: f64 = series.iter().map(|e| e * e).sum();
     Ok((sum / series.len() as f64).sqrt())
@@ -297,6 +305,20 @@ pub fn sliding_window(series: &[f64], window: usize) -> Result<WindowStats, Metr
         });
     }
     check_finite_slice(series, "error series")?;
+    // Values near the ends of f64's range: the statistics of the series scaled by a power of
+    // two (exact), scaled back; ordinary data is computed as it is.
+    if let Some(k) = crate::scale::extreme_exponent(series) {
+        let mut stats = sliding_window(&crate::scale::scaled(series, k), window)?;
+        for v in stats
+            .rmse
+            .iter_mut()
+            .chain(&mut stats.bias)
+            .chain(&mut stats.std)
+        {
+            *v = crate::scale::ldexp(*v, k);
+        }
+        return Ok(stats);
+    }
 
     let w = window as f64;
     let count = series.len() - window + 1;
