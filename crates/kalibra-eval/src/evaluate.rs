@@ -221,8 +221,12 @@ impl Evaluation {
             .map(|(name, components)| {
                 let values: Vec<Option<f64>> = (0..steps)
                     .map(|k| {
-                        let r = squared.rmse_group(k, &components)?;
-                        Ok(r.is_finite().then_some(r))
+                        match squared.rmse_group(k, &components) {
+                            Ok(r) => Ok(r.is_finite().then_some(r)),
+                            // No error logged at this step.
+                            Err(MetricsError::Empty { .. }) => Ok(None),
+                            Err(e) => Err(e),
+                        }
                     })
                     .collect::<Result<_, MetricsError>>()?;
                 let present: Vec<usize> = (0..steps).filter(|&k| values[k].is_some()).collect();

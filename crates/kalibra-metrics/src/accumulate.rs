@@ -75,9 +75,17 @@ impl StepMean {
     /// Adds one run's value at `step`.
     ///
     /// # Errors
-    /// [`MetricsError::StepOutOfRange`] beyond the horizon.
+    /// [`MetricsError::StepOutOfRange`] beyond the horizon;
+    /// [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or infinite value, which
+    /// would poison every later mean at the step. Nothing is stored on error.
     pub fn push(&mut self, step: usize, value: f64) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
+        if !value.is_finite() {
+            return Err(MetricsError::NonFiniteSample {
+                what: "step mean",
+                index: step,
+            });
+        }
         self.sum[step] += value;
         self.count[step] += 1;
         Ok(())
@@ -169,7 +177,8 @@ impl SquaredErrors {
     ///
     /// # Errors
     /// [`MetricsError::StepOutOfRange`] beyond the horizon, [`MetricsError::DimensionMismatch`]
-    /// for a wrong length.
+    /// for a wrong length, [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or
+    /// infinite component. Nothing is stored on error.
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         if error.len() != self.dim {
@@ -177,6 +186,12 @@ impl SquaredErrors {
                 what: "error vector",
                 expected: self.dim,
                 found: error.len(),
+            });
+        }
+        if !error.iter().all(|e| e.is_finite()) {
+            return Err(MetricsError::NonFiniteSample {
+                what: "squared errors",
+                index: step,
             });
         }
         for (s, e) in self.sum[step * self.dim..(step + 1) * self.dim]
@@ -203,8 +218,9 @@ impl SquaredErrors {
     /// Mean squared error of component `i` at `step`.
     ///
     /// # Errors
-    /// [`MetricsError::StepOutOfRange`], or [`MetricsError::DimensionMismatch`] for a component
-    /// beyond the state.
+    /// [`MetricsError::StepOutOfRange`], [`MetricsError::DimensionMismatch`] for a component
+    /// beyond the state, [`MetricsError::Empty`] for a step where nothing was pushed (the mean
+    /// of nothing is not a number to return).
     pub fn mse(&self, step: usize, i: usize) -> Result<f64, MetricsError> {
         check_step(step, self.steps())?;
         if i >= self.dim {
@@ -214,12 +230,12 @@ impl SquaredErrors {
                 found: i,
             });
         }
-        let c = self.count[step];
-        Ok(if c == 0 {
-            f64::NAN
-        } else {
-            self.sum[step * self.dim + i] / c as f64
-        })
+        match self.count[step] {
+            0 => Err(MetricsError::Empty {
+                what: "squared errors at the step",
+            }),
+            c => Ok(self.sum[step * self.dim + i] / c as f64),
+        }
     }
 
     /// RMSE of component `i` at `step`.
