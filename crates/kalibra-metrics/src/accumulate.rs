@@ -355,4 +355,32 @@ mod tests {
         grown.2.extend_steps(1);
         assert_eq!(whole, grown);
     }
+
+    /// A NaN or an infinity is refused and leaves the accumulator as it was; the mean of a
+    /// step without samples is an error, not NaN.
+    #[test]
+    fn non_finite_samples_and_empty_steps() {
+        let mut mean = StepMean::new(2);
+        let mut squared = SquaredErrors::new(2, 2);
+        mean.push(0, 1.5).unwrap();
+        squared.push_slice(0, &[1.0, 2.0]).unwrap();
+        let (m0, s0) = (mean.clone(), squared.clone());
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert!(matches!(
+                mean.push(0, bad),
+                Err(MetricsError::NonFiniteSample { index: 0, .. })
+            ));
+            assert!(matches!(
+                squared.push_slice(0, &[0.0, bad]),
+                Err(MetricsError::NonFiniteSample { index: 0, .. })
+            ));
+        }
+        assert_eq!((mean, squared.clone()), (m0, s0));
+        assert_eq!(squared.rmse_group(0, &[0, 1]).unwrap(), 5f64.sqrt());
+        assert!(matches!(squared.mse(1, 0), Err(MetricsError::Empty { .. })));
+        assert!(matches!(
+            squared.rmse_series(&[0]),
+            Err(MetricsError::Empty { .. })
+        ));
+    }
 }
