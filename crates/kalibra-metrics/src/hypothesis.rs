@@ -341,7 +341,7 @@ pub fn ks_two_sample(a: &[f64], b: &[f64]) -> Result<TestResult, MetricsError> {
     {
         exact_p_outside(n, m, largest)
     } else {
-        ks_asymptotic_p(n, m, statistic)
+        ks_asymptotic_p(n, m, statistic)?
     };
     Ok(TestResult { statistic, p_value })
 }
@@ -362,21 +362,48 @@ pub fn ks_two_sample(a: &[f64], b: &[f64]) -> Result<TestResult, MetricsError> {
 /// `d` is compared with a relative tolerance of `1e-9`, so that a `D` computed in floating
 /// point counts as reached: at every attainable value of `D` this is `P(D >= D_obs)`, the
 /// value of scipy's `ks_2samp(method='exact')`. (Between attainable values scipy rounds `d` to
-/// the nearest one, this function to the next one up.) Returns 1 for `d <= 0`, 0 for `d > 1`,
-/// and NaN if a size is zero or `d` is NaN. Cost `O(n m)` time, `O(m)` memory.
-pub fn ks_two_sample_exact_p(n: usize, m: usize, d: f64) -> f64 {
-    if n == 0 || m == 0 || d.is_nan() {
-        return f64::NAN;
+/// the nearest one, this function to the next one up.) Returns 1 for `d <= 0`, 0 for `d > 1`.
+/// Cost `O(n m)` time, `O(m)` memory.
+///
+/// # Errors
+/// [`MetricsError::Empty`] for a size of zero, [`MetricsError::InvalidParameter`] for a NaN
+/// `d` or for `n m` beyond [`KS_EXACT_MAX_CELLS`] (use [`ks_asymptotic_p`] there).
+pub fn ks_two_sample_exact_p(n: usize, m: usize, d: f64) -> Result<f64, MetricsError> {
+    check_ks_input(n, m, d)?;
+    // O(n m) time: the size is checked up front instead of running for hours (or failing to
+    // allocate) on sizes whose asymptotic p-value is accurate anyway.
+    let cells = n.checked_mul(m).filter(|&c| c <= KS_EXACT_MAX_CELLS);
+    if cells.is_none() {
+        return Err(MetricsError::InvalidParameter {
+            name: "n m of the exact KS p-value (at most KS_EXACT_MAX_CELLS)",
+            value: n as f64 * m as f64,
+        });
     }
     if d <= 0.0 {
-        return 1.0;
+        return Ok(1.0);
     }
     if d > 1.0 {
-        return 0.0;
+        return Ok(0.0);
     }
     let scaled = d * n as f64 * m as f64;
     let threshold = (scaled * (1.0 - 1e-9)).ceil();
-    exact_p_outside(n, m, threshold as u128)
+    Ok(exact_p_outside(n, m, threshold as u128))
+}
+
+/// The sizes and statistic a KS p-value needs: both sizes positive, the statistic a number.
+fn check_ks_input(n: usize, m: usize, d: f64) -> Result<(), MetricsError> {
+    if n == 0 || m == 0 {
+        return Err(MetricsError::Empty {
+            what: "a sample of the KS test",
+        });
+    }
+    if d.is_nan() {
+        return Err(MetricsError::InvalidParameter {
+            name: "KS statistic",
+            value: d,
+        });
+    }
+    Ok(())
 }
 
 /// `P(max |i m - j n| >= threshold)` over a uniformly random lattice path from `(0, 0)` to
@@ -432,17 +459,18 @@ fn exact_p_outside(n: usize, m: usize, threshold: u128) -> f64 {
 /// `kstwobign.sf(lambda)`). This series converges slowly for small `lambda`, so below
 /// `lambda = 1` the equivalent theta-function form of the distribution function,
 /// `1 - Q = sqrt(2 pi) / lambda sum_{k >= 1} exp(-(2k - 1)^2 pi^2 / (8 lambda^2))`, is summed
-/// instead (a few terms suffice either way). Returns 1 for `d <= 0` and NaN if a size is zero
-/// or `d` is NaN.
+/// instead (a few terms suffice either way). Returns 1 for `d <= 0`.
 ///
 /// Note that scipy's `ks_2samp(method='asymp')` is a different approximation
 /// (`kstwo.sf(d, round(n m / (n + m)))`, the one-sample finite-`n` distribution).
-pub fn ks_asymptotic_p(n: usize, m: usize, d: f64) -> f64 {
-    if n == 0 || m == 0 || d.is_nan() {
-        return f64::NAN;
-    }
+///
+/// # Errors
+/// [`MetricsError::Empty`] for a size of zero, [`MetricsError::InvalidParameter`] for a NaN
+/// `d`.
+pub fn ks_asymptotic_p(n: usize, m: usize, d: f64) -> Result<f64, MetricsError> {
+    check_ks_input(n, m, d)?;
     let (nf, mf) = (n as f64, m as f64);
-    kolmogorov_sf((nf * mf / (nf + mf)).sqrt() * d)
+    Ok(kolmogorov_sf((nf * mf / (nf + mf)).sqrt() * d))
 }
 
 /// Survival function of the Kolmogorov distribution, `P(K >= lambda)`.

@@ -330,43 +330,51 @@ fn ks_statistic_by_hand() {
 fn ks_exact_p_enumerated_by_hand() {
     // n = m = 3, C(6, 3) = 20 paths. D >= 1/3 always. |i - j| <= 1 throughout iff each pair of
     // steps is ab or ba: 2^3 = 8 paths, so P(D >= 2/3) = 12/20. P(D >= 1) = 2/20.
-    assert_eq!(ks_two_sample_exact_p(3, 3, 1.0 / 3.0), 1.0);
+    assert_eq!(ks_two_sample_exact_p(3, 3, 1.0 / 3.0).unwrap(), 1.0);
     assert_relative_eq!(
-        ks_two_sample_exact_p(3, 3, 2.0 / 3.0),
+        ks_two_sample_exact_p(3, 3, 2.0 / 3.0).unwrap(),
         0.6,
         max_relative = 1e-14
     );
-    assert_relative_eq!(ks_two_sample_exact_p(3, 3, 1.0), 0.1, max_relative = 1e-14);
+    assert_relative_eq!(
+        ks_two_sample_exact_p(3, 3, 1.0).unwrap(),
+        0.1,
+        max_relative = 1e-14
+    );
     // n = m = 4, C(8, 4) = 70 paths. P(D >= 2/4) = (70 - 2^4) / 70 = 54/70. Reaching
     // |i - j| = 3: by reflection C(8, 1) = 8 paths touch i - j = 3, 8 touch j - i = 3, none
     // both, so P(D >= 3/4) = 16/70. P(D >= 1) = 2/70. The same values from
     // scipy.stats.ks_2samp(method='exact') (via its _attempt_exact_2kssamp(4, 4, 4, d)):
     // 0.7714285714285716, 0.22857142857142862, 0.028571428571428577.
-    assert_eq!(ks_two_sample_exact_p(4, 4, 0.25), 1.0);
+    assert_eq!(ks_two_sample_exact_p(4, 4, 0.25).unwrap(), 1.0);
     assert_relative_eq!(
-        ks_two_sample_exact_p(4, 4, 0.5),
+        ks_two_sample_exact_p(4, 4, 0.5).unwrap(),
         54.0 / 70.0,
         max_relative = 1e-14
     );
     assert_relative_eq!(
-        ks_two_sample_exact_p(4, 4, 0.75),
+        ks_two_sample_exact_p(4, 4, 0.75).unwrap(),
         16.0 / 70.0,
         max_relative = 1e-14
     );
     assert_relative_eq!(
-        ks_two_sample_exact_p(4, 4, 1.0),
+        ks_two_sample_exact_p(4, 4, 1.0).unwrap(),
         2.0 / 70.0,
         max_relative = 1e-14
     );
     // Between attainable values the next one up counts; edge cases.
     assert_eq!(
-        ks_two_sample_exact_p(4, 4, 0.6),
-        ks_two_sample_exact_p(4, 4, 0.75)
+        ks_two_sample_exact_p(4, 4, 0.6).unwrap(),
+        ks_two_sample_exact_p(4, 4, 0.75).unwrap()
     );
-    assert_eq!(ks_two_sample_exact_p(4, 4, 0.0), 1.0);
-    assert_eq!(ks_two_sample_exact_p(4, 4, 1.5), 0.0);
-    assert!(ks_two_sample_exact_p(0, 4, 0.5).is_nan());
-    assert!(ks_two_sample_exact_p(4, 4, f64::NAN).is_nan());
+    assert_eq!(ks_two_sample_exact_p(4, 4, 0.0).unwrap(), 1.0);
+    assert_eq!(ks_two_sample_exact_p(4, 4, 1.5).unwrap(), 0.0);
+    assert!(ks_two_sample_exact_p(0, 4, 0.5).is_err());
+    assert!(ks_two_sample_exact_p(4, 4, f64::NAN).is_err());
+    // Sizes whose exact computation would run for ages are refused up front.
+    assert!(ks_two_sample_exact_p(usize::MAX, usize::MAX, 0.5).is_err());
+    assert!(ks_two_sample_exact_p(1 << 20, 1 << 20, 0.5).is_err());
+    assert!(ks_asymptotic_p(usize::MAX, usize::MAX, 0.5).unwrap() < 1e-300);
 }
 
 #[test]
@@ -384,7 +392,7 @@ fn ks_exact_p_matches_scipy_180_180() {
     for (k, p) in reference {
         let d = f64::from(k) / 180.0;
         // scipy forms 1 - P(inside): absolute error ~1e-16, hence the absolute floor.
-        let ours = ks_two_sample_exact_p(180, 180, d);
+        let ours = ks_two_sample_exact_p(180, 180, d).unwrap();
         assert!(
             (ours - p).abs() <= 1e-13 * p + 1e-15,
             "k = {k}: {ours} vs scipy {p}"
@@ -404,7 +412,7 @@ fn ks_exact_p_matches_scipy_unequal_sizes() {
         (60, 0.1013339946846),
     ];
     for (k, p) in reference {
-        let ours = ks_two_sample_exact_p(25, 40, f64::from(k) / 200.0);
+        let ours = ks_two_sample_exact_p(25, 40, f64::from(k) / 200.0).unwrap();
         assert!((ours - p).abs() <= 1e-14, "k = {k}: {ours} vs scipy {p}");
     }
 }
@@ -419,7 +427,7 @@ fn ks_two_sample_matches_scipy_unequal_sizes() {
     // ks_2samp(method='asymp') gives 0.6188105811719509: it uses kstwo.sf(D, round(n m /
     // (n + m))), not the Kolmogorov limit.)
     assert_relative_eq!(
-        ks_asymptotic_p(25, 40, r.statistic),
+        ks_asymptotic_p(25, 40, r.statistic).unwrap(),
         0.6682540352618902,
         max_relative = 1e-14
     );
@@ -436,7 +444,7 @@ fn ks_two_sample_matches_scipy_180_180() {
     assert_relative_eq!(r.p_value, 0.06199942287900709, max_relative = 1e-13);
     // scipy.stats.kstwobign.sf(sqrt(90) * 25 / 180) = 0.062094058460313316.
     assert_relative_eq!(
-        ks_asymptotic_p(180, 180, r.statistic),
+        ks_asymptotic_p(180, 180, r.statistic).unwrap(),
         0.062094058460313316,
         max_relative = 1e-14
     );
@@ -459,15 +467,16 @@ fn ks_asymptotic_matches_kstwobign() {
         (5.0, 3.8574996959278356e-22),
     ];
     for (lambda, p) in reference {
-        let ours = ks_asymptotic_p(2, 2, lambda);
+        let ours = ks_asymptotic_p(2, 2, lambda).unwrap();
         assert!(
             (ours - p).abs() <= 1e-14 * p + 1e-16,
             "lambda = {lambda}: {ours} vs scipy {p}"
         );
     }
-    assert_eq!(ks_asymptotic_p(2, 2, 0.0), 1.0);
-    assert_eq!(ks_asymptotic_p(2, 2, -1.0), 1.0);
-    assert!(ks_asymptotic_p(0, 2, 0.5).is_nan());
+    assert_eq!(ks_asymptotic_p(2, 2, 0.0).unwrap(), 1.0);
+    assert_eq!(ks_asymptotic_p(2, 2, -1.0).unwrap(), 1.0);
+    assert!(ks_asymptotic_p(0, 2, 0.5).is_err());
+    assert!(ks_asymptotic_p(2, 2, f64::NAN).is_err());
 }
 
 #[test]
@@ -477,12 +486,15 @@ fn ks_exact_and_asymptotic_agree_roughly_at_180() {
     // 0.06209 limit, as scipy's ks_2samp(method='exact') and kstwobign.sf also give).
     for k in 1..=60 {
         let d = f64::from(k) / 180.0;
-        let exact = ks_two_sample_exact_p(180, 180, d);
-        let limit = ks_asymptotic_p(180, 180, d);
+        let exact = ks_two_sample_exact_p(180, 180, d).unwrap();
+        let limit = ks_asymptotic_p(180, 180, d).unwrap();
         assert!((exact - limit).abs() < 2e-3, "k = {k}: {exact} vs {limit}");
     }
     let d = 25.0 / 180.0;
-    assert!((ks_two_sample_exact_p(180, 180, d) - ks_asymptotic_p(180, 180, d)).abs() < 2e-4);
+    assert!(
+        (ks_two_sample_exact_p(180, 180, d).unwrap() - ks_asymptotic_p(180, 180, d).unwrap()).abs()
+            < 2e-4
+    );
 }
 
 #[test]
@@ -497,7 +509,7 @@ fn ks_two_sample_switches_to_asymptotic_for_large_samples() {
         .map(|k| (k as f64 * 2.0_f64.sqrt()).fract().powf(1.05))
         .collect();
     let r = ks_two_sample(&a, &b).unwrap();
-    assert_eq!(r.p_value, ks_asymptotic_p(n, m, r.statistic));
+    assert_eq!(r.p_value, ks_asymptotic_p(n, m, r.statistic).unwrap());
     // D by brute force: the gap of the ECDFs just after each sample value.
     let ecdf = |s: &[f64], x: f64| s.iter().filter(|&&v| v <= x).count() as f64 / s.len() as f64;
     let brute = a
@@ -669,7 +681,7 @@ fn ks_two_sample_agrees_with_statrs_ks_twosample() {
             NaNPolicy::Error,
         )
         .unwrap();
-        let limit = ks_asymptotic_p(n, m, ours.statistic);
+        let limit = ks_asymptotic_p(n, m, ours.statistic).unwrap();
         assert!(
             (limit - p).abs() <= 1e-13 * limit + 1e-13,
             "{n} x {m}: ours {limit} vs statrs {p}"
