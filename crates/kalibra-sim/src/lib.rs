@@ -38,7 +38,7 @@ mod tuning;
 
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
-pub use tuning::{TuningError, grid, p_ad, q_ad, sweep, two_point_init};
+pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};
 
 use kalibra_metrics::Merge;
 use rand_chacha::rand_core::SeedableRng;

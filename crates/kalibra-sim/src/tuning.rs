@@ -50,6 +50,9 @@ pub enum TuningError {
     Model(#[from] ModelError),
 }
 
+/// The most points [`grid`] makes.
+pub const GRID_MAX_POINTS: usize = 10_000_000;
+
 /// The grid `from, from + step, ...` over `from..=to`, up to and including `to` (within
 /// `step / 1000`), each point computed as `from + i step` so that rounding does not accumulate.
 ///
@@ -61,7 +64,8 @@ pub enum TuningError {
 /// ```
 ///
 /// # Errors
-/// [`TuningError::InvalidParameter`] unless `step > 0`, `to >= from` and all are finite.
+/// [`TuningError::InvalidParameter`] unless `step > 0`, `to >= from` and all are finite, or
+/// for a grid of more than [`GRID_MAX_POINTS`] points (checked before anything is allocated).
 pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningError> {
     let (from, to) = range.into_inner();
     if !(step.is_finite() && step > 0.0) {
@@ -76,7 +80,16 @@ pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningErr
             value: to,
         });
     }
-    let n = ((to - from) / step + 1e-3).floor() as usize;
+    let intervals = ((to - from) / step + 1e-3).floor();
+    // Each point is a filter run or more: a grid beyond this is a mistake in the step, not a
+    // study, and would exhaust memory before any work.
+    if intervals.is_nan() || intervals >= GRID_MAX_POINTS as f64 {
+        return Err(TuningError::InvalidParameter {
+            name: "grid points (at most GRID_MAX_POINTS)",
+            value: intervals + 1.0,
+        });
+    }
+    let n = intervals as usize;
     Ok((0..=n).map(|i| from + i as f64 * step).collect())
 }
 
@@ -263,6 +276,24 @@ where
 
 #[cfg(test)]
 mod tests {
+    /// An absurd grid is refused before anything is allocated; the largest allowed is built.
+    #[test]
+    fn grid_size_is_checked_up_front() {
+        for (range, step) in [
+            (0.0..=1e300, 1e-300),
+            (0.0..=1.0, 1e-12),
+            (-1e308..=1e308, 1.0),
+        ] {
+            assert!(matches!(
+                grid(range, step),
+                Err(TuningError::InvalidParameter { .. })
+            ));
+        }
+        let largest = grid(0.0..=(GRID_MAX_POINTS - 1) as f64, 1.0).unwrap();
+        assert_eq!(largest.len(), GRID_MAX_POINTS);
+        assert!(grid(0.0..=GRID_MAX_POINTS as f64, 1.0).is_err());
+    }
+
     use super::*;
     use kalibra_linalg::{Matrix2, Matrix4, U2, U4, Vector2, Vector4};
     use kalibra_models::{Kinematic, LinearObservation, ProcessNoise};
