@@ -200,7 +200,8 @@ pub fn two_point_init<const N: usize, const D: usize>(
 /// # Errors
 /// [`TuningError::TooShort`] for fewer than two states; [`TuningError::Linalg`] if an `R_k` is
 /// not positive definite or the averaged information matrix is singular (the state is not
-/// observable in one step along the trajectory), or an input is not finite.
+/// observable in one step along the trajectory), or an input is not finite, or (`Dyn` sizes) a
+/// state or a Jacobian whose size disagrees with the models' (`DimensionMismatch`).
 pub fn p_ad<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
     dynamics: &D,
     measurement: &H,
@@ -218,11 +219,20 @@ where
         });
     }
     let n = dynamics.state_dim();
+    let m = measurement.meas_dim();
+    // `Dyn` sizes meet here: every state must have the dynamics' size before a model sees it,
+    // and the Jacobians the sizes the products need, or nalgebra would panic on the product.
+    for state in states {
+        kalibra_linalg::check_dim(n.value(), state.nrows(), "state")?;
+    }
     let mut info = OMatrix::<f64, N, N>::zeros_generic(n, n);
     for (i, pair) in states.windows(2).enumerate() {
         let k = first_step + i + 1;
         let f = dynamics.jacobian(k - 1, &pair[0]);
         let h = measurement.jacobian(k, &pair[1]);
+        kalibra_linalg::check_dim(n.value(), f.ncols(), "transition Jacobian F columns")?;
+        kalibra_linalg::check_dim(n.value(), h.ncols(), "measurement Jacobian H columns")?;
+        kalibra_linalg::check_dim(m.value(), h.nrows(), "measurement Jacobian H rows")?;
         let r = Covariance::named(
             measurement.noise_cov(k, &pair[1]),
             "measurement noise covariance R",
@@ -244,8 +254,8 @@ where
 /// returned as computed, for the caller to judge).
 ///
 /// # Errors
-/// [`TuningError::TooShort`] for no pairs; [`TuningError::Linalg`] for sizes that differ from
-/// `q_guess` or non-finite entries.
+/// [`TuningError::TooShort`] for no pairs; [`TuningError::Linalg`] for a `q_guess` that is not
+/// square, matrices whose rows or columns differ from it, or non-finite entries.
 pub fn q_ad<'a, N: Dim>(
     q_guess: &OMatrix<f64, N, N>,
     steps: impl IntoIterator<Item = (&'a OMatrix<f64, N, N>, &'a OMatrix<f64, N, N>)>,
@@ -256,8 +266,15 @@ where
     let mut sum = q_guess.clone() * 0.0;
     let mut count = 0usize;
     for (prior, posterior) in steps {
+        kalibra_linalg::check_dim(q_guess.nrows(), q_guess.ncols(), "Q guess (square)")?;
         kalibra_linalg::check_dim(q_guess.nrows(), prior.nrows(), "prior covariance")?;
+        kalibra_linalg::check_dim(q_guess.ncols(), prior.ncols(), "prior covariance columns")?;
         kalibra_linalg::check_dim(q_guess.nrows(), posterior.nrows(), "posterior covariance")?;
+        kalibra_linalg::check_dim(
+            q_guess.ncols(),
+            posterior.ncols(),
+            "posterior covariance columns",
+        )?;
         sum += prior - posterior;
         count += 1;
     }
@@ -276,6 +293,40 @@ where
 
 #[cfg(test)]
 mod tests {
+    /// `Dyn` sizes that disagree are errors naming the sizes, not panics inside nalgebra.
+    #[test]
+    fn p_ad_and_q_ad_check_dyn_sizes() {
+        use kalibra_linalg::{DMatrix, DVector, Dyn};
+        let cv = kalibra_models::Kinematic::constant_velocity(2, 1.0).unwrap();
+        let f = cv.dynamics(Dyn(4)).unwrap();
+        let h = cv
+            .position_measurement(Dyn(4), Dyn(2), DMatrix::identity(2, 2))
+            .unwrap();
+        let good = vec![DVector::zeros(4), DVector::from_element(4, 1.0)];
+        let r = p_ad(&f, &h, &good, 0);
+        assert!(
+            !matches!(
+                r,
+                Err(TuningError::Linalg(LinalgError::DimensionMismatch { .. }))
+            ),
+            "{r:?}"
+        );
+        let bad = vec![DVector::zeros(4), DVector::zeros(3)];
+        assert!(matches!(
+            p_ad(&f, &h, &bad, 0),
+            Err(TuningError::Linalg(LinalgError::DimensionMismatch { .. }))
+        ));
+        let q = DMatrix::<f64>::identity(2, 2);
+        let (square, wide) = (DMatrix::<f64>::identity(2, 2), DMatrix::<f64>::zeros(2, 3));
+        assert!(q_ad(&q, [(&square, &square)]).is_ok());
+        assert!(matches!(
+            q_ad(&q, [(&wide, &square)]),
+            Err(TuningError::Linalg(LinalgError::DimensionMismatch { .. }))
+        ));
+        let wide_guess = DMatrix::<f64>::zeros(2, 3);
+        assert!(q_ad(&wide_guess, [(&wide, &wide)]).is_err());
+    }
+
     /// An absurd grid is refused before anything is allocated; the largest allowed is built.
     #[test]
     fn grid_size_is_checked_up_front() {
