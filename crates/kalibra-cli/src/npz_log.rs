@@ -16,9 +16,9 @@ use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
 const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
 
 /// One array as stored: its shape and its values in C order, as f64.
-struct Array {
-    shape: Vec<usize>,
-    data: Vec<f64>,
+pub(crate) struct Array {
+    pub(crate) shape: Vec<usize>,
+    pub(crate) data: Vec<f64>,
 }
 
 /// Reads the NPZ log in `bytes` (from `file`, named in errors).
@@ -158,7 +158,9 @@ fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
 }
 
 /// The log from the named arrays.
-fn build(mut arrays: std::collections::BTreeMap<String, Array>) -> Result<RawLog, String> {
+pub(crate) fn build(
+    mut arrays: std::collections::BTreeMap<String, Array>,
+) -> Result<RawLog, String> {
     let known = [
         "truth",
         "estimate",

@@ -1,0 +1,52 @@
+"""kalibra: judge any Kalman-type filter from numpy arrays, and run kalibra's filters.
+
+Is your filter's covariance telling the truth? ``kalibra.evaluate`` takes a filter's log as
+numpy arrays (truth, estimate, covariance, innovation, innovation covariance; R runs of K
+steps) and returns a report with per-step ANEES and ANIS and their chi-square bands, the
+non-credibility index (NCI), RMSE per component, sliding-window errors, the innovations'
+whiteness, J1/J2 and a verdict: consistent, optimistic (covariance too small) or pessimistic
+(too large). It is the evaluation of the ``kalibra eval`` command, the same numbers and the
+same report files, computed in Rust.
+
+Example:
+    >>> import numpy as np, kalibra
+    >>> rng = np.random.default_rng(0)
+    >>> truth = np.zeros((100, 10, 2))
+    >>> estimate = rng.normal(size=(100, 10, 2))
+    >>> covariance = np.broadcast_to(np.eye(2), (100, 10, 2, 2))
+    >>> report = kalibra.evaluate(truth=truth, estimate=estimate, covariance=covariance)
+    >>> report.verdict
+    'consistent'
+    >>> float(kalibra.nees(truth, estimate, covariance).mean() / 2) < 1.2
+    True
+
+The building blocks: ``nees``, ``nis``, ``nci``, ``chi2_band``, ``rmse``,
+``sliding_window``. Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
+argument and, where one is at fault, the index.
+"""
+
+from ._kalibra import (
+    KalibraError,
+    Report,
+    __version__,
+    chi2_band,
+    evaluate,
+    nci,
+    nees,
+    nis,
+    rmse,
+    sliding_window,
+)
+
+__all__ = [
+    "KalibraError",
+    "Report",
+    "__version__",
+    "chi2_band",
+    "evaluate",
+    "nci",
+    "nees",
+    "nis",
+    "rmse",
+    "sliding_window",
+]

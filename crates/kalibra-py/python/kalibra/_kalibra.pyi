@@ -1,0 +1,60 @@
+"""Type stubs of the native module kalibra._kalibra (see kalibra's docstrings)."""
+
+import os
+from typing import Any, Literal, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+ArrayLike = npt.ArrayLike
+FloatArray = npt.NDArray[np.float64]
+
+__version__: str
+
+class KalibraError(ValueError):
+    """Bad input: the message names the argument and, where one is at fault, the index."""
+
+class Report:
+    """The consistency report of a filter log (the content of ``report.json``)."""
+
+    @property
+    def verdict(self) -> Literal["consistent", "optimistic", "pessimistic", "undetermined"]: ...
+    @property
+    def headline(self) -> str: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    def markdown(self) -> str: ...
+    def html(self) -> str: ...
+    def _repr_html_(self) -> str: ...
+    def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
+
+def evaluate(
+    truth: Optional[ArrayLike] = None,
+    estimate: Optional[ArrayLike] = None,
+    covariance: Optional[ArrayLike] = None,
+    innovation: Optional[ArrayLike] = None,
+    innovation_cov: Optional[ArrayLike] = None,
+    *,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    time: Optional[ArrayLike] = None,
+    F: Optional[ArrayLike] = None,
+    H: Optional[ArrayLike] = None,
+    Q: Optional[ArrayLike] = None,
+    R: Optional[ArrayLike] = None,
+    name: str = "numpy arrays",
+) -> Report: ...
+def nees(truth: ArrayLike, estimate: ArrayLike, covariance: ArrayLike) -> FloatArray: ...
+def nis(innovation: ArrayLike, innovation_cov: ArrayLike) -> FloatArray: ...
+def nci(truth: ArrayLike, estimate: ArrayLike, covariance: ArrayLike) -> FloatArray: ...
+def chi2_band(
+    dof: float, samples: int, confidence: float = 0.95, normalized: bool = False
+) -> Tuple[float, float]: ...
+def rmse(
+    truth: ArrayLike, estimate: ArrayLike, over: Literal["runs", "time"] = "runs"
+) -> FloatArray: ...
+def sliding_window(
+    errors: ArrayLike, window: int
+) -> Tuple[FloatArray, FloatArray, FloatArray]: ...
