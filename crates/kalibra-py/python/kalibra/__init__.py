@@ -21,12 +21,14 @@ Example:
     True
 
 The building blocks: ``nees``, ``nis``, ``nci``, ``chi2_band``, ``rmse``,
-``sliding_window``. Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
+``sliding_window``. The filters: ``KalmanFilter`` (``run`` over a measurement sequence, or
+many at once, returning numpy arrays named as ``evaluate``'s arguments). Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
 argument and, where one is at fault, the index.
 """
 
 from ._kalibra import (
     KalibraError,
+    KalmanFilter,
     Report,
     __version__,
     chi2_band,
@@ -40,6 +42,7 @@ from ._kalibra import (
 
 __all__ = [
     "KalibraError",
+    "KalmanFilter",
     "Report",
     "__version__",
     "chi2_band",

@@ -58,3 +58,22 @@ def rmse(
 def sliding_window(
     errors: ArrayLike, window: int
 ) -> Tuple[FloatArray, FloatArray, FloatArray]: ...
+
+class KalmanFilter:
+    """The linear Kalman filter, run in Rust."""
+
+    def __init__(
+        self,
+        F: ArrayLike,
+        H: ArrayLike,
+        Q: ArrayLike,
+        R: ArrayLike,
+        x0: ArrayLike,
+        P0: ArrayLike,
+        start: Literal["predict_first", "update_first"] = "predict_first",
+    ) -> None: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def measurement_dim(self) -> int: ...
+    def run(self, measurements: ArrayLike) -> dict[str, FloatArray]: ...
