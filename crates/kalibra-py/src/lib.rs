@@ -13,6 +13,7 @@
 //! across the boundary. Long computations release the GIL.
 
 mod arrays;
+mod callbacks;
 mod eval;
 mod filters;
 mod metrics;

@@ -22,14 +22,18 @@ Example:
 
 The building blocks: ``nees``, ``nis``, ``nci``, ``chi2_band``, ``rmse``,
 ``sliding_window``. The filters: ``KalmanFilter`` (``run`` over a measurement sequence, or
-many at once, returning numpy arrays named as ``evaluate``'s arguments). Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
+many at once, returning numpy arrays named as ``evaluate``'s arguments), and
+``ExtendedKalmanFilter`` and ``UnscentedKalmanFilter`` on your own model given as Python
+callables (symmetric or scaled sigma points, adaptive kappa). Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
 argument and, where one is at fault, the index.
 """
 
 from ._kalibra import (
+    ExtendedKalmanFilter,
     KalibraError,
     KalmanFilter,
     Report,
+    UnscentedKalmanFilter,
     __version__,
     chi2_band,
     evaluate,
@@ -41,9 +45,11 @@ from ._kalibra import (
 )
 
 __all__ = [
+    "ExtendedKalmanFilter",
     "KalibraError",
     "KalmanFilter",
     "Report",
+    "UnscentedKalmanFilter",
     "__version__",
     "chi2_band",
     "evaluate",

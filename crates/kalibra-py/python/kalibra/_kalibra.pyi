@@ -1,7 +1,7 @@
 """Type stubs of the native module kalibra._kalibra (see kalibra's docstrings)."""
 
 import os
-from typing import Any, Literal, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -76,4 +76,50 @@ class KalmanFilter:
     def state_dim(self) -> int: ...
     @property
     def measurement_dim(self) -> int: ...
+    def run(self, measurements: ArrayLike) -> dict[str, FloatArray]: ...
+
+StateFn = Callable[[FloatArray, int], ArrayLike]
+ResidualFn = Callable[[FloatArray, FloatArray], ArrayLike]
+Start = Literal["predict_first", "update_first"]
+
+class ExtendedKalmanFilter:
+    """The extended Kalman filter on a model given as Python callables."""
+
+    def __init__(
+        self,
+        f: StateFn,
+        F_jacobian: StateFn,
+        h: StateFn,
+        H_jacobian: StateFn,
+        Q: ArrayLike,
+        R: ArrayLike,
+        x0: ArrayLike,
+        P0: ArrayLike,
+        *,
+        residual: Optional[ResidualFn] = None,
+        start: Start = "predict_first",
+    ) -> None: ...
+    def run(self, measurements: ArrayLike) -> dict[str, FloatArray]: ...
+
+class UnscentedKalmanFilter:
+    """The unscented Kalman filter on a model given as Python callables."""
+
+    def __init__(
+        self,
+        f: StateFn,
+        h: StateFn,
+        Q: ArrayLike,
+        R: ArrayLike,
+        x0: ArrayLike,
+        P0: ArrayLike,
+        *,
+        points: Literal["symmetric", "scaled"] = "symmetric",
+        kappa: Optional[float] = None,
+        alpha: float = 1.0,
+        beta: float = 2.0,
+        adaptive_kappa: Optional[Literal["maximum_likelihood", "maximum_posterior"]] = None,
+        kappa_grid: Optional[Sequence[float]] = None,
+        residual: Optional[ResidualFn] = None,
+        start: Start = "predict_first",
+    ) -> None: ...
     def run(self, measurements: ArrayLike) -> dict[str, FloatArray]: ...
