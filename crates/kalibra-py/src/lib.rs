@@ -17,6 +17,7 @@ mod callbacks;
 mod eval;
 mod filters;
 mod metrics;
+mod tune;
 
 use pyo3::prelude::*;
 
@@ -43,5 +44,6 @@ fn kalibra_py(m: &Bound<'_, PyModule>) -> PyResult<()> {
     eval::register(m)?;
     metrics::register(m)?;
     filters::register(m)?;
+    tune::register(m)?;
     Ok(())
 }

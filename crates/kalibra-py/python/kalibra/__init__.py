@@ -24,7 +24,8 @@ The building blocks: ``nees``, ``nis``, ``nci``, ``chi2_band``, ``rmse``,
 ``sliding_window``. The filters: ``KalmanFilter`` (``run`` over a measurement sequence, or
 many at once, returning numpy arrays named as ``evaluate``'s arguments), and
 ``ExtendedKalmanFilter`` and ``UnscentedKalmanFilter`` on your own model given as Python
-callables (symmetric or scaled sigma points, adaptive kappa). Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
+callables (symmetric or scaled sigma points, adaptive kappa). Tuning: ``sweep_q``, the
+J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command. Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
 argument and, where one is at fault, the index.
 """
 
@@ -33,6 +34,7 @@ from ._kalibra import (
     KalibraError,
     KalmanFilter,
     Report,
+    TuneReport,
     UnscentedKalmanFilter,
     __version__,
     chi2_band,
@@ -42,6 +44,7 @@ from ._kalibra import (
     nis,
     rmse,
     sliding_window,
+    sweep_q,
 )
 
 __all__ = [
@@ -49,6 +52,7 @@ __all__ = [
     "KalibraError",
     "KalmanFilter",
     "Report",
+    "TuneReport",
     "UnscentedKalmanFilter",
     "__version__",
     "chi2_band",
@@ -58,4 +62,5 @@ __all__ = [
     "nis",
     "rmse",
     "sliding_window",
+    "sweep_q",
 ]
