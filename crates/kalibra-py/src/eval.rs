@@ -38,6 +38,14 @@ pub struct Report {
 }
 
 impl Report {
+    /// The report of the log named `name`.
+    pub(crate) fn new(report: kalibra_eval::Report, name: &str) -> Self {
+        Self {
+            report,
+            name: name.to_string(),
+        }
+    }
+
     fn document(&self) -> Document {
         Document::new(Path::new(&self.name), &self.report)
     }
@@ -198,6 +206,23 @@ fn evaluate(
             arrays.push((array.to_string(), a.shape, a.data));
         }
     }
+    let evaluation = evaluation(confidence, window, groups, lags)?;
+    let report = py
+        .detach(|| {
+            let log = kalibra_cli::input::log_from_arrays(arrays)?;
+            evaluation.evaluate(&log).map_err(|e| e.to_string())
+        })
+        .map_err(error)?;
+    Ok(Report::new(report, name))
+}
+
+/// The evaluation with `evaluate`'s options; errors name the option.
+pub(crate) fn evaluation(
+    confidence: f64,
+    window: Option<usize>,
+    groups: Option<&Bound<'_, PyDict>>,
+    lags: usize,
+) -> PyResult<Evaluation> {
     let option = |e: kalibra_eval::EvalError| error(e.to_string());
     let mut evaluation = Evaluation::new()
         .confidence(confidence)
@@ -220,16 +245,7 @@ fn evaluate(
             evaluation = evaluation.group(group, components).map_err(option)?;
         }
     }
-    let report = py
-        .detach(|| {
-            let log = kalibra_cli::input::log_from_arrays(arrays)?;
-            evaluation.evaluate(&log).map_err(|e| e.to_string())
-        })
-        .map_err(error)?;
-    Ok(Report {
-        report,
-        name: name.to_string(),
-    })
+    Ok(evaluation)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

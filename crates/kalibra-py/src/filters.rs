@@ -85,17 +85,17 @@ fn rows(z: &[f64], m: usize) -> Result<Vec<Option<DVector<f64>>>, String> {
 
 /// The outputs of one run: per row of the measurements, row-major.
 #[derive(Default)]
-struct Outputs {
-    estimate: Vec<f64>,
-    covariance: Vec<f64>,
-    prior: Vec<f64>,
-    prior_covariance: Vec<f64>,
-    innovation: Vec<f64>,
-    innovation_cov: Vec<f64>,
-    nis: Vec<f64>,
-    log_likelihood: Vec<f64>,
+pub(crate) struct Outputs {
+    pub estimate: Vec<f64>,
+    pub covariance: Vec<f64>,
+    pub prior: Vec<f64>,
+    pub prior_covariance: Vec<f64>,
+    pub innovation: Vec<f64>,
+    pub innovation_cov: Vec<f64>,
+    pub nis: Vec<f64>,
+    pub log_likelihood: Vec<f64>,
     /// The UKF's kappa at each update (empty for other filters).
-    kappa: Vec<f64>,
+    pub kappa: Vec<f64>,
 }
 
 /// One field of [`Outputs`].
@@ -108,7 +108,7 @@ fn push_matrix(out: &mut Vec<f64>, m: &DMatrix<f64>) {
 
 /// Runs `filter` over `zs` as `Filter::run_all` does (predict, then update where there is a
 /// measurement), recording every row; `after` sees the filter after each row.
-fn run_filter<F: Filter<Dyn, Dyn>>(
+pub(crate) fn run_filter<F: Filter<Dyn, Dyn>>(
     filter: &mut F,
     zs: &[Option<DVector<f64>>],
     start: Start,

@@ -17,6 +17,7 @@ mod callbacks;
 mod eval;
 mod filters;
 mod metrics;
+mod montecarlo;
 mod tune;
 
 use pyo3::prelude::*;
@@ -45,5 +46,6 @@ fn kalibra_py(m: &Bound<'_, PyModule>) -> PyResult<()> {
     metrics::register(m)?;
     filters::register(m)?;
     tune::register(m)?;
+    montecarlo::register(m)?;
     Ok(())
 }

@@ -25,7 +25,9 @@ The building blocks: ``nees``, ``nis``, ``nci``, ``chi2_band``, ``rmse``,
 many at once, returning numpy arrays named as ``evaluate``'s arguments), and
 ``ExtendedKalmanFilter`` and ``UnscentedKalmanFilter`` on your own model given as Python
 callables (symmetric or scaled sigma points, adaptive kappa). Tuning: ``sweep_q``, the
-J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command. Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
+J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command. Simulation:
+``monte_carlo``, a seeded Monte Carlo of a linear model through the Kalman filter, evaluated,
+all in Rust and bit-identical for any thread count. Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
 argument and, where one is at fault, the index.
 """
 
@@ -39,6 +41,7 @@ from ._kalibra import (
     __version__,
     chi2_band,
     evaluate,
+    monte_carlo,
     nci,
     nees,
     nis,
@@ -57,6 +60,7 @@ __all__ = [
     "__version__",
     "chi2_band",
     "evaluate",
+    "monte_carlo",
     "nci",
     "nees",
     "nis",

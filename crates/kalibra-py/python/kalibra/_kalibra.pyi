@@ -163,3 +163,24 @@ def sweep_q(
     threads: int = 0,
     names: Tuple[str, str] = ("model", "measurements"),
 ) -> TuneReport: ...
+
+def monte_carlo(
+    F: ArrayLike,
+    H: ArrayLike,
+    Q: ArrayLike,
+    R: ArrayLike,
+    x0: ArrayLike,
+    P0: ArrayLike,
+    *,
+    runs: int = 100,
+    steps: int = 100,
+    seed: int = 0,
+    threads: int = 0,
+    filter_Q: Optional[ArrayLike] = None,
+    filter_R: Optional[ArrayLike] = None,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    return_log: bool = False,
+) -> Union[Report, Tuple[Report, dict[str, FloatArray]]]: ...
