@@ -7,6 +7,7 @@ use kalibra_linalg::{DMatrix, DVector, Dyn};
 use kalibra_models::{LinearGaussian, LinearObservation};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use rayon::prelude::*;
 
 use crate::arrays::{Array, new_array, read};
 use crate::callbacks::{Failure, PyDynamics, PyMeasurement};
@@ -102,8 +103,11 @@ pub(crate) struct Outputs {
 type Field = fn(&Outputs) -> &Vec<f64>;
 
 fn push_matrix(out: &mut Vec<f64>, m: &DMatrix<f64>) {
-    // nalgebra stores columns; numpy wants rows.
-    out.extend(m.transpose().iter());
+    // nalgebra stores columns; numpy wants rows (read in place: a transposed copy would be an
+    // allocation per matrix and step).
+    for i in 0..m.nrows() {
+        out.extend((0..m.ncols()).map(|j| m[(i, j)]));
+    }
 }
 
 /// Runs `filter` over `zs` as `Filter::run_all` does (predict, then update where there is a
@@ -295,7 +299,10 @@ impl KalmanFilter {
     ///
     /// Args:
     ///     measurements: (K, m), one row per step; a row of NaN has no measurement (the filter
-    ///         predicts through it). Or (R, K, m): R independent runs, each from (x0, P0).
+    ///         predicts through it). Or (R, K, m): R independent runs, each from (x0, P0),
+    ///         run in parallel.
+    ///     threads: for (R, K, m): 0 for rayon's pool (one thread per core), 1 for none, or a
+    ///         count. The results do not depend on it.
     ///
     /// Returns:
     ///     dict[str, numpy.ndarray]: per row (and run), with a leading R axis for (R, K, m):
@@ -309,30 +316,42 @@ impl KalmanFilter {
     ///     KalibraError: a wrong shape, a row that is NaN in some components only, a step
     ///         whose S is not positive definite or whose output is not finite (naming the run
     ///         and step).
+    #[pyo3(signature = (measurements, threads=0))]
     fn run<'py>(
         &self,
         py: Python<'py>,
         measurements: &Bound<'py, PyAny>,
+        threads: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let z = read(measurements, "measurements")?;
         let (runs, k, batch) = layout(&z, self.m)?;
         let size = k * self.m;
+        let one = |r: usize| -> PyResult<Outputs> {
+            let zs = rows(&z.data[r * size..(r + 1) * size], self.m)
+                .map_err(|e| run_error(batch, r, e))?;
+            let mut kf = Kf::new(
+                &self.dynamics,
+                &self.sensor,
+                self.x0.clone(),
+                self.p0.clone(),
+            )
+            .map_err(|e| error(e.to_string()))?;
+            run_filter(&mut kf, &zs, self.start, |_, _, _| {})
+                .map_err(|e| run_error(batch, r, format!("{e} (x0 is step 0)")))
+        };
+        // Runs are independent: in parallel, results in run order, and the error of the first
+        // failing run whatever the thread count.
         let outputs = py.detach(|| {
-            (0..runs)
-                .map(|r| {
-                    let zs = rows(&z.data[r * size..(r + 1) * size], self.m)
-                        .map_err(|e| run_error(batch, r, e))?;
-                    let mut kf = Kf::new(
-                        &self.dynamics,
-                        &self.sensor,
-                        self.x0.clone(),
-                        self.p0.clone(),
-                    )
-                    .map_err(|e| error(e.to_string()))?;
-                    run_filter(&mut kf, &zs, self.start, |_, _, _| {})
-                        .map_err(|e| run_error(batch, r, format!("{e} (x0 is step 0)")))
-                })
-                .collect::<PyResult<Vec<Outputs>>>()
+            let all: Vec<PyResult<Outputs>> = match threads {
+                1 => (0..runs).map(one).collect(),
+                0 => (0..runs).into_par_iter().map(one).collect(),
+                t => rayon::ThreadPoolBuilder::new()
+                    .num_threads(t)
+                    .build()
+                    .map_err(|e| error(format!("argument threads: {e}")))?
+                    .install(|| (0..runs).into_par_iter().map(one).collect()),
+            };
+            all.into_iter().collect::<PyResult<Vec<Outputs>>>()
         })?;
         outputs_dict(py, &outputs, (runs, k, batch), (self.n, self.m))
     }

@@ -61,6 +61,10 @@ def test_batch_runs_equal_single_runs_and_feed_evaluate():
     one = kf.run(z[7])
     for key in out:
         np.testing.assert_array_equal(out[key][7], one[key])
+    for threads in (1, 3):
+        again = kf.run(z, threads=threads)
+        for key in out:
+            np.testing.assert_array_equal(again[key], out[key])
     args = ("estimate", "covariance", "innovation", "innovation_cov")
     report = kalibra.evaluate(truth=truth, **{k: out[k] for k in args})
     assert report.verdict == "consistent"
@@ -99,10 +103,12 @@ def test_run_errors_name_the_row():
     kf = kalibra.KalmanFilter(F, H, Q, R, X0, P0)
     with pytest.raises(kalibra.KalibraError, match=r"argument measurements has shape \[5, 3\]"):
         kf.run(np.zeros((5, 3)))
-    z = np.zeros((2, 5, 2))
-    z[1, 3, 0] = np.nan
-    with pytest.raises(kalibra.KalibraError, match="run 1: row 3 holds NaN in some components"):
-        kf.run(z)
+    z = np.zeros((40, 5, 2))
+    z[17, 3, 0] = np.nan
+    z[30, 2, 1] = np.nan
+    for threads in (0, 1, 2):
+        with pytest.raises(kalibra.KalibraError, match="run 17: row 3 holds NaN in some"):
+            kf.run(z, threads=threads)
     z = np.zeros((5, 2))
     z[2] = np.inf
     with pytest.raises(kalibra.KalibraError, match="not finite"):
