@@ -339,7 +339,7 @@ fn assemble(
             let m = MatrixArray {
                 dim: layout.dim,
                 diagonal: layout.diagonal,
-                cells,
+                cells: cells.into(),
             };
             if ARRAYS[layout.array] == "covariance" {
                 log.covariance = Some(m);
@@ -349,7 +349,7 @@ fn assemble(
         } else {
             let v = VectorArray {
                 dim: layout.dim,
-                cells,
+                cells: cells.into(),
             };
             match ARRAYS[layout.array] {
                 "truth" => log.truth = Some(v),

@@ -27,12 +27,27 @@ innovation and innovation_cov give NIS/ANIS and whiteness; both give both.
 EXIT CODES: 0 success, 1 bad input (the message names the file and the row and
 column, or the array and index), 2 bad usage.";
 
-/// One array of vectors: `dim` values per cell, cells in run-major order, `None` where not
-/// logged.
+/// The cells of an array as read, in run-major order.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum CellValues {
+    /// Every cell logged: the values in one buffer (the NPZ reader's common case, which saves
+    /// an allocation per cell).
+    Dense(Vec<f64>),
+    /// One entry per cell, `None` where not logged.
+    Sparse(Vec<Option<Vec<f64>>>),
+}
+
+impl From<Vec<Option<Vec<f64>>>> for CellValues {
+    fn from(cells: Vec<Option<Vec<f64>>>) -> Self {
+        Self::Sparse(cells)
+    }
+}
+
+/// One array of vectors: `dim` values per cell.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct VectorArray {
     pub dim: usize,
-    pub cells: Vec<Option<Vec<f64>>>,
+    pub cells: CellValues,
 }
 
 /// One array of square matrices per run and step: full (`dim * dim` values, row by row) or
@@ -41,7 +56,7 @@ pub(crate) struct VectorArray {
 pub(crate) struct MatrixArray {
     pub dim: usize,
     pub diagonal: bool,
-    pub cells: Vec<Option<Vec<f64>>>,
+    pub cells: CellValues,
 }
 
 /// A model matrix array: constant, per step or per run and step, every cell present.
@@ -105,10 +120,18 @@ pub(crate) fn model_given(present: &[&str]) -> Result<bool, String> {
 }
 
 fn matrices(m: MatrixArray) -> Matrices {
-    if m.diagonal {
-        Matrices::diagonal_cells(m.dim, m.cells)
-    } else {
-        Matrices::cells(m.dim, m.dim, m.cells)
+    match (m.cells, m.diagonal) {
+        (CellValues::Dense(data), true) => Matrices::diagonal(m.dim, data),
+        (CellValues::Dense(data), false) => Matrices::dense(m.dim, m.dim, data),
+        (CellValues::Sparse(cells), true) => Matrices::diagonal_cells(m.dim, cells),
+        (CellValues::Sparse(cells), false) => Matrices::cells(m.dim, m.dim, cells),
+    }
+}
+
+fn vectors(v: VectorArray) -> Vectors {
+    match v.cells {
+        CellValues::Dense(data) => Vectors::dense(v.dim, data),
+        CellValues::Sparse(cells) => Vectors::cells(v.dim, cells),
     }
 }
 
@@ -121,7 +144,7 @@ impl RawLog {
         array: &'static str,
         (runs, steps): (usize, usize),
         (rows, cols): (usize, usize),
-        cells: Vec<Option<Vec<f64>>>,
+        cells: CellValues,
     ) -> Result<(), String> {
         match self.shape_from {
             None => {
@@ -185,16 +208,16 @@ impl RawLog {
             log = log.with_times(t)?;
         }
         if let Some(a) = self.truth {
-            log = log.with_truth(Vectors::cells(a.dim, a.cells))?;
+            log = log.with_truth(vectors(a))?;
         }
         if let Some(a) = self.estimate {
-            log = log.with_estimate(Vectors::cells(a.dim, a.cells))?;
+            log = log.with_estimate(vectors(a))?;
         }
         if let Some(a) = self.covariance {
             log = log.with_covariance(matrices(a))?;
         }
         if let Some(a) = self.innovation {
-            log = log.with_innovation(Vectors::cells(a.dim, a.cells))?;
+            log = log.with_innovation(vectors(a))?;
         }
         if let Some(a) = self.innovation_cov {
             log = log.with_innovation_cov(matrices(a))?;

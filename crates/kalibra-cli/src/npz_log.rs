@@ -11,7 +11,7 @@ use std::path::Path;
 
 use kalibra_eval::Scope;
 
-use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
+use crate::input::{CellValues, ModelArray, PER_CELL, RawLog, model_given};
 
 const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
 
@@ -116,8 +116,9 @@ struct Cells {
     steps: usize,
     /// The shape of one cell (`[n]` or `[n, n]`).
     shape: Vec<usize>,
-    /// Run-major cells, `None` where every value is NaN (not logged).
-    cells: Vec<Option<Vec<f64>>>,
+    /// Run-major cells, `None` where every value is NaN (not logged); kept as one buffer when
+    /// every cell was logged.
+    cells: CellValues,
 }
 
 /// The cells of a per-cell array with `cell_dims` trailing dimensions; a single run may drop
@@ -141,13 +142,18 @@ fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
     let steps = rest[0];
     let cell_shape = rest[1..].to_vec();
     let size: usize = cell_shape.iter().product();
+    let logged = |c: &[f64]| !c.iter().all(|v| v.is_nan());
     let cells = if size == 0 {
-        vec![None; runs * steps]
+        CellValues::Sparse(vec![None; runs * steps])
+    } else if a.data.chunks(size).all(logged) {
+        CellValues::Dense(a.data)
     } else {
-        a.data
-            .chunks(size)
-            .map(|c| (!c.iter().all(|v| v.is_nan())).then(|| c.to_vec()))
-            .collect()
+        CellValues::Sparse(
+            a.data
+                .chunks(size)
+                .map(|c| logged(c).then(|| c.to_vec()))
+                .collect(),
+        )
     };
     Ok(Cells {
         runs,

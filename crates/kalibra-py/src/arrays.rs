@@ -36,9 +36,15 @@ fn values<T: Element + Copy>(
         .try_readonly()
         .map_err(|e| error(format!("argument {name}: cannot read the array ({e})")))?;
     let a = view.as_array();
+    // A C-contiguous array is one slice (a straight copy); any other layout is read in its
+    // logical (C) order element by element.
+    let data = match view.as_slice() {
+        Ok(slice) => slice.iter().map(|&v| convert(v)).collect(),
+        Err(_) => a.iter().map(|&v| convert(v)).collect(),
+    };
     Ok(Some(Array {
         shape: a.shape().to_vec(),
-        data: a.iter().map(|&v| convert(v)).collect(),
+        data,
     }))
 }
 
