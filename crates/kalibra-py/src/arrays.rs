@@ -38,9 +38,10 @@ fn values<T: Element + Copy>(
     let a = view.as_array();
     // A C-contiguous array is one slice (a straight copy); any other layout is read in its
     // logical (C) order element by element.
+    // (`as_slice` alone would also take a Fortran-ordered array, in its memory order.)
     let data = match view.as_slice() {
-        Ok(slice) => slice.iter().map(|&v| convert(v)).collect(),
-        Err(_) => a.iter().map(|&v| convert(v)).collect(),
+        Ok(slice) if array.is_c_contiguous() => slice.iter().map(|&v| convert(v)).collect(),
+        _ => a.iter().map(|&v| convert(v)).collect(),
     };
     Ok(Some(Array {
         shape: a.shape().to_vec(),

@@ -22,6 +22,11 @@ def test_nees_and_nis_per_cell_with_nan_cells():
     assert np.isnan(got[2, 4])
     np.testing.assert_allclose(kalibra.nees(truth[0], est[0], cov[0]), expected[0], rtol=1e-12)
     np.testing.assert_allclose(kalibra.nis(e, cov), expected, rtol=1e-12)
+    # Fortran order and a transposed view are read in their logical order, not memory order.
+    np.testing.assert_array_equal(kalibra.nees(truth, est, np.asfortranarray(cov)), got)
+    swapped = np.swapaxes(np.swapaxes(cov, -1, -2).copy(), -1, -2)
+    assert not swapped.flags.c_contiguous
+    np.testing.assert_array_equal(kalibra.nees(truth, est, swapped), got)
 
 
 def test_chi2_band_matches_the_textbook():
