@@ -1,19 +1,38 @@
 """Type stubs of the native module kalibra._kalibra (see kalibra's docstrings)."""
 
 import os
-from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
 
-ArrayLike = npt.ArrayLike
-FloatArray = npt.NDArray[np.float64]
+_ArrayLike = npt.ArrayLike
+_FloatArray = npt.NDArray[np.float64]
 
 __version__: str
+__all__ = [
+    "KalibraError",
+    "__version__",
+    "Report",
+    "evaluate",
+    "nees",
+    "nis",
+    "nci",
+    "chi2_band",
+    "rmse",
+    "sliding_window",
+    "KalmanFilter",
+    "ExtendedKalmanFilter",
+    "UnscentedKalmanFilter",
+    "TuneReport",
+    "sweep_q",
+    "monte_carlo",
+]
 
 class KalibraError(ValueError):
     """Bad input: the message names the argument and, where one is at fault, the index."""
 
+@final
 class Report:
     """The consistency report of a filter log (the content of ``report.json``)."""
 
@@ -29,89 +48,92 @@ class Report:
     def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
 
 def evaluate(
-    truth: Optional[ArrayLike] = None,
-    estimate: Optional[ArrayLike] = None,
-    covariance: Optional[ArrayLike] = None,
-    innovation: Optional[ArrayLike] = None,
-    innovation_cov: Optional[ArrayLike] = None,
+    truth: Optional[_ArrayLike] = None,
+    estimate: Optional[_ArrayLike] = None,
+    covariance: Optional[_ArrayLike] = None,
+    innovation: Optional[_ArrayLike] = None,
+    innovation_cov: Optional[_ArrayLike] = None,
     *,
     confidence: float = 0.95,
     window: Optional[int] = None,
     groups: Optional[Mapping[str, Sequence[int]]] = None,
     lags: int = 10,
-    time: Optional[ArrayLike] = None,
-    F: Optional[ArrayLike] = None,
-    H: Optional[ArrayLike] = None,
-    Q: Optional[ArrayLike] = None,
-    R: Optional[ArrayLike] = None,
+    time: Optional[_ArrayLike] = None,
+    F: Optional[_ArrayLike] = None,
+    H: Optional[_ArrayLike] = None,
+    Q: Optional[_ArrayLike] = None,
+    R: Optional[_ArrayLike] = None,
     name: str = "numpy arrays",
 ) -> Report: ...
-def nees(truth: ArrayLike, estimate: ArrayLike, covariance: ArrayLike) -> FloatArray: ...
-def nis(innovation: ArrayLike, innovation_cov: ArrayLike) -> FloatArray: ...
-def nci(truth: ArrayLike, estimate: ArrayLike, covariance: ArrayLike) -> FloatArray: ...
+def nees(truth: _ArrayLike, estimate: _ArrayLike, covariance: _ArrayLike) -> _FloatArray: ...
+def nis(innovation: _ArrayLike, innovation_cov: _ArrayLike) -> _FloatArray: ...
+def nci(truth: _ArrayLike, estimate: _ArrayLike, covariance: _ArrayLike) -> _FloatArray: ...
 def chi2_band(
     dof: float, samples: int, confidence: float = 0.95, normalized: bool = False
 ) -> Tuple[float, float]: ...
 def rmse(
-    truth: ArrayLike, estimate: ArrayLike, over: Literal["runs", "time"] = "runs"
-) -> FloatArray: ...
+    truth: _ArrayLike, estimate: _ArrayLike, over: Literal["runs", "time"] = "runs"
+) -> _FloatArray: ...
 def sliding_window(
-    errors: ArrayLike, window: int
-) -> Tuple[FloatArray, FloatArray, FloatArray]: ...
+    errors: _ArrayLike, window: int
+) -> Tuple[_FloatArray, _FloatArray, _FloatArray]: ...
 
+@final
 class KalmanFilter:
     """The linear Kalman filter, run in Rust."""
 
-    def __init__(
-        self,
-        F: ArrayLike,
-        H: ArrayLike,
-        Q: ArrayLike,
-        R: ArrayLike,
-        x0: ArrayLike,
-        P0: ArrayLike,
+    def __new__(
+        cls,
+        F: _ArrayLike,
+        H: _ArrayLike,
+        Q: _ArrayLike,
+        R: _ArrayLike,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
         start: Literal["predict_first", "update_first"] = "predict_first",
-    ) -> None: ...
+    ) -> "KalmanFilter": ...
     @property
     def state_dim(self) -> int: ...
     @property
     def measurement_dim(self) -> int: ...
-    def run(self, measurements: ArrayLike, threads: int = 0) -> dict[str, FloatArray]: ...
+    def run(self, measurements: _ArrayLike, threads: int = 0) -> dict[str, _FloatArray]: ...
 
-StateFn = Callable[[FloatArray, int], ArrayLike]
-ResidualFn = Callable[[FloatArray, FloatArray], ArrayLike]
-Start = Literal["predict_first", "update_first"]
+_StateFn = Callable[[_FloatArray, int], _ArrayLike]
+_ResidualFn = Callable[[_FloatArray, _FloatArray], _ArrayLike]
+_Start = Literal["predict_first", "update_first"]
 
+@final
 class ExtendedKalmanFilter:
     """The extended Kalman filter on a model given as Python callables."""
 
-    def __init__(
-        self,
-        f: StateFn,
-        F_jacobian: StateFn,
-        h: StateFn,
-        H_jacobian: StateFn,
-        Q: ArrayLike,
-        R: ArrayLike,
-        x0: ArrayLike,
-        P0: ArrayLike,
+    def __new__(
+        cls,
+        f: _StateFn,
+        F_jacobian: _StateFn,
+        h: _StateFn,
+        H_jacobian: _StateFn,
+        Q: _ArrayLike,
+        R: _ArrayLike,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
         *,
-        residual: Optional[ResidualFn] = None,
-        start: Start = "predict_first",
-    ) -> None: ...
-    def run(self, measurements: ArrayLike) -> dict[str, FloatArray]: ...
+        residual: Optional[_ResidualFn] = None,
+        start: _Start = "predict_first",
+    ) -> "ExtendedKalmanFilter": ...
+    def run(self, measurements: _ArrayLike) -> dict[str, _FloatArray]: ...
 
+@final
 class UnscentedKalmanFilter:
     """The unscented Kalman filter on a model given as Python callables."""
 
-    def __init__(
-        self,
-        f: StateFn,
-        h: StateFn,
-        Q: ArrayLike,
-        R: ArrayLike,
-        x0: ArrayLike,
-        P0: ArrayLike,
+    def __new__(
+        cls,
+        f: _StateFn,
+        h: _StateFn,
+        Q: _ArrayLike,
+        R: _ArrayLike,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
         *,
         points: Literal["symmetric", "scaled"] = "symmetric",
         kappa: Optional[float] = None,
@@ -119,26 +141,27 @@ class UnscentedKalmanFilter:
         beta: float = 2.0,
         adaptive_kappa: Optional[Literal["maximum_likelihood", "maximum_posterior"]] = None,
         kappa_grid: Optional[Sequence[float]] = None,
-        residual: Optional[ResidualFn] = None,
-        start: Start = "predict_first",
-    ) -> None: ...
-    def run(self, measurements: ArrayLike) -> dict[str, FloatArray]: ...
+        residual: Optional[_ResidualFn] = None,
+        start: _Start = "predict_first",
+    ) -> "UnscentedKalmanFilter": ...
+    def run(self, measurements: _ArrayLike) -> dict[str, _FloatArray]: ...
 
+@final
 class TuneReport:
     """The J1/J2 sweep of Q = 10^p Q_nom and its recommendation (``kalibra tune``'s report)."""
 
     @property
     def headline(self) -> str: ...
     @property
-    def p(self) -> FloatArray: ...
+    def p(self) -> _FloatArray: ...
     @property
-    def j1(self) -> FloatArray: ...
+    def j1(self) -> _FloatArray: ...
     @property
-    def j2(self) -> FloatArray: ...
+    def j2(self) -> _FloatArray: ...
     @property
     def crossover(self) -> Optional[dict[str, Any]]: ...
     @property
-    def recommended_q(self) -> Optional[FloatArray]: ...
+    def recommended_q(self) -> Optional[_FloatArray]: ...
     def to_dict(self) -> dict[str, Any]: ...
     def to_json(self) -> str: ...
     def markdown(self) -> str: ...
@@ -147,40 +170,40 @@ class TuneReport:
     def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
 
 def sweep_q(
-    F: ArrayLike,
-    H: ArrayLike,
-    Q_nom: ArrayLike,
-    R: ArrayLike,
-    x0: ArrayLike,
-    P0: ArrayLike,
-    measurements: ArrayLike,
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q_nom: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    measurements: _ArrayLike,
     *,
-    p: Tuple[float, float, float] = (-6.0, 6.0, 0.5),
-    truth: Optional[ArrayLike] = None,
-    start: Start = "predict_first",
+    p: Tuple[float, float, float] = ...,  # (-6.0, 6.0, 0.5)
+    truth: Optional[_ArrayLike] = None,
+    start: _Start = "predict_first",
     position: Optional[Sequence[int]] = None,
     p0_as_given: bool = False,
     threads: int = 0,
-    names: Tuple[str, str] = ("model", "measurements"),
+    names: Tuple[str, str] = ...,  # ("model", "measurements")
 ) -> TuneReport: ...
 
 def monte_carlo(
-    F: ArrayLike,
-    H: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
-    x0: ArrayLike,
-    P0: ArrayLike,
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
     *,
     runs: int = 100,
     steps: int = 100,
     seed: int = 0,
     threads: int = 0,
-    filter_Q: Optional[ArrayLike] = None,
-    filter_R: Optional[ArrayLike] = None,
+    filter_Q: Optional[_ArrayLike] = None,
+    filter_R: Optional[_ArrayLike] = None,
     confidence: float = 0.95,
     window: Optional[int] = None,
     groups: Optional[Mapping[str, Sequence[int]]] = None,
     lags: int = 10,
     return_log: bool = False,
-) -> Union[Report, Tuple[Report, dict[str, FloatArray]]]: ...
+) -> Union[Report, Tuple[Report, dict[str, _FloatArray]]]: ...
