@@ -30,26 +30,41 @@ innovation and innovation_cov give NIS/ANIS and whiteness; both give both.
 EXIT CODES: 0 success, 1 bad input (the message names the file and the row and
 column, or the array and index), 2 bad usage.";
 
-/// One array of vectors: `dim` values per cell, cells in run-major order, `None` where not
-/// logged.
+/// The cells of an array as read, in run-major order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct VectorArray {
+pub(crate) enum CellValues {
+    /// Every cell logged: the values in one buffer (the NPZ reader's common case, which saves
+    /// an allocation per cell).
+    Dense(Vec<f64>),
+    /// One entry per cell, `None` where not logged.
+    Sparse(Vec<Option<Vec<f64>>>),
+}
+
+impl From<Vec<Option<Vec<f64>>>> for CellValues {
+    fn from(cells: Vec<Option<Vec<f64>>>) -> Self {
+        Self::Sparse(cells)
+    }
+}
+
+/// One array of vectors: `dim` values per cell.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct VectorArray {
     pub dim: usize,
-    pub cells: Vec<Option<Vec<f64>>>,
+    pub cells: CellValues,
 }
 
 /// One array of square matrices per run and step: full (`dim * dim` values, row by row) or
 /// diagonal (`dim` values).
 #[derive(Debug, Clone, PartialEq)]
-pub struct MatrixArray {
+pub(crate) struct MatrixArray {
     pub dim: usize,
     pub diagonal: bool,
-    pub cells: Vec<Option<Vec<f64>>>,
+    pub cells: CellValues,
 }
 
 /// A model matrix array: constant, per step or per run and step, every cell present.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ModelArray {
+pub(crate) struct ModelArray {
     pub rows: usize,
     pub cols: usize,
     pub scope: kalibra_eval::Scope,
@@ -68,7 +83,7 @@ impl ModelArray {
 
 /// What a reader found, before `kalibra_eval` checks it.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct RawLog {
+pub(crate) struct RawLog {
     pub runs: usize,
     pub steps: usize,
     pub time: Option<Vec<f64>>,
@@ -84,7 +99,7 @@ pub struct RawLog {
 }
 
 /// The per-cell arrays, in the order the readers take them.
-pub const PER_CELL: [&str; 5] = [
+pub(crate) const PER_CELL: [&str; 5] = [
     "truth",
     "estimate",
     "covariance",
@@ -94,7 +109,7 @@ pub const PER_CELL: [&str; 5] = [
 
 /// Whether the model arrays `F`, `H`, `Q`, `R` are given; all four go together, so a log
 /// with only some of them (`present`) is an error naming one that is missing.
-pub fn model_given(present: &[&str]) -> Result<bool, String> {
+pub(crate) fn model_given(present: &[&str]) -> Result<bool, String> {
     if present.is_empty() {
         return Ok(false);
     }
@@ -108,10 +123,18 @@ pub fn model_given(present: &[&str]) -> Result<bool, String> {
 }
 
 fn matrices(m: MatrixArray) -> Matrices {
-    if m.diagonal {
-        Matrices::diagonal_cells(m.dim, m.cells)
-    } else {
-        Matrices::cells(m.dim, m.dim, m.cells)
+    match (m.cells, m.diagonal) {
+        (CellValues::Dense(data), true) => Matrices::diagonal(m.dim, data),
+        (CellValues::Dense(data), false) => Matrices::dense(m.dim, m.dim, data),
+        (CellValues::Sparse(cells), true) => Matrices::diagonal_cells(m.dim, cells),
+        (CellValues::Sparse(cells), false) => Matrices::cells(m.dim, m.dim, cells),
+    }
+}
+
+fn vectors(v: VectorArray) -> Vectors {
+    match v.cells {
+        CellValues::Dense(data) => Vectors::dense(v.dim, data),
+        CellValues::Sparse(cells) => Vectors::cells(v.dim, cells),
     }
 }
 
@@ -124,7 +147,7 @@ impl RawLog {
         array: &'static str,
         (runs, steps): (usize, usize),
         (rows, cols): (usize, usize),
-        cells: Vec<Option<Vec<f64>>>,
+        cells: CellValues,
     ) -> Result<(), String> {
         match self.shape_from {
             None => {
@@ -177,39 +200,76 @@ impl RawLog {
 
     /// The checked log; an error names the file and the array at fault.
     pub fn build(self, file: &Path) -> Result<FilterLog, String> {
-        let fail = |e: kalibra_eval::EvalError| format!("{}: {e}", file.display());
-        let mut log = FilterLog::new(self.runs, self.steps).map_err(fail)?;
+        self.checked()
+            .map_err(|e| format!("{}: {e}", file.display()))
+    }
+
+    /// The checked log; an error names the array at fault.
+    fn checked(self) -> Result<FilterLog, kalibra_eval::EvalError> {
+        let mut log = FilterLog::new(self.runs, self.steps)?;
         if let Some(t) = self.time {
-            log = log.with_times(t).map_err(fail)?;
+            log = log.with_times(t)?;
         }
         if let Some(a) = self.truth {
-            log = log
-                .with_truth(Vectors::cells(a.dim, a.cells))
-                .map_err(fail)?;
+            log = log.with_truth(vectors(a))?;
         }
         if let Some(a) = self.estimate {
-            log = log
-                .with_estimate(Vectors::cells(a.dim, a.cells))
-                .map_err(fail)?;
+            log = log.with_estimate(vectors(a))?;
         }
         if let Some(a) = self.covariance {
-            log = log.with_covariance(matrices(a)).map_err(fail)?;
+            log = log.with_covariance(matrices(a))?;
         }
         if let Some(a) = self.innovation {
-            log = log
-                .with_innovation(Vectors::cells(a.dim, a.cells))
-                .map_err(fail)?;
+            log = log.with_innovation(vectors(a))?;
         }
         if let Some(a) = self.innovation_cov {
-            log = log.with_innovation_cov(matrices(a)).map_err(fail)?;
+            log = log.with_innovation_cov(matrices(a))?;
         }
         if let Some([f, h, q, r]) = self.model {
-            log = log
-                .with_model(f.matrices(), h.matrices(), q.matrices(), r.matrices())
-                .map_err(fail)?;
+            log = log.with_model(f.matrices(), h.matrices(), q.matrices(), r.matrices())?;
         }
         Ok(log)
     }
+}
+
+/// The log held by numpy-shaped arrays, read with the NPZ reader's rules: each item is an
+/// array's name (`truth`, `estimate`, `covariance`, `innovation`, `innovation_cov`, `time`,
+/// `F`, `H`, `Q`, `R`), its shape and its values in C (row-major) order. Per-cell arrays are
+/// `(R, K, dim)` or `(R, K, dim, dim)`, or without the `R` axis for a single run; a cell whose
+/// values are all NaN was not logged. This is how the Python package hands over numpy arrays,
+/// so `kalibra.evaluate` and `kalibra eval log.npz` read the same arrays the same way.
+///
+/// # Errors
+/// A message naming the array: an unknown name, a shape that fits none of the layouts, values
+/// that do not fill the shape, arrays that disagree on runs or steps, `F`, `H`, `Q`, `R` not all
+/// given, or what [`kalibra_eval::FilterLog`] refuses (naming the run and step).
+///
+/// # Example
+/// ```
+/// // One run of two steps of a scalar state; the second step's estimate was not logged.
+/// let log = kalibra_cli::input::log_from_arrays(vec![
+///     ("truth".to_string(), vec![2, 1], vec![0.0, 0.0]),
+///     ("estimate".to_string(), vec![2, 1], vec![0.5, f64::NAN]),
+///     ("covariance".to_string(), vec![2, 1, 1], vec![1.0, 1.0]),
+/// ])?;
+/// assert_eq!((log.runs(), log.steps()), (1, 2));
+/// # Ok::<(), String>(())
+/// ```
+pub fn log_from_arrays(arrays: Vec<(String, Vec<usize>, Vec<f64>)>) -> Result<FilterLog, String> {
+    let mut named = std::collections::BTreeMap::new();
+    for (name, shape, data) in arrays {
+        let size: usize = shape.iter().product();
+        if data.len() != size {
+            return Err(format!(
+                "array {name} holds {} values for shape {shape:?}",
+                data.len()
+            ));
+        }
+        named.insert(name, crate::arrays::Array { shape, data });
+    }
+    crate::arrays::build(named)?
+        .checked()
+        .map_err(|e| e.to_string())
 }
 
 /// Evaluates the log `path` in the format its extension names: a CSV file streams through

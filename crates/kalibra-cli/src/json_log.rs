@@ -70,7 +70,7 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
     for array in PER_CELL {
         let Some(v) = map.get(array) else { continue };
         let c = per_cell(array, v, MATRICES.contains(&array)).map_err(fail)?;
-        log.put_cells(array, (c.runs, c.steps), (c.rows, c.cols), c.cells)
+        log.put_cells(array, (c.runs, c.steps), (c.rows, c.cols), c.cells.into())
             .map_err(fail)?;
     }
     let (runs, steps) = log.require_cells().map_err(fail)?;

@@ -16,20 +16,11 @@
 
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
-mod csv_log;
-mod csv_rows;
-mod document;
-mod input;
-mod json_log;
-mod npz_log;
-mod output;
-mod tune_document;
-mod tune_input;
-
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use kalibra_cli::{document, input, output, tune_input};
 use kalibra_eval::{Evaluation, Tuning};
 
 /// Judge a Kalman-type filter from its logs: is its covariance telling the truth?

@@ -27,6 +27,20 @@ fn sibling(out: &Path, tag: &str) -> PathBuf {
     out.with_file_name(format!(".{name}.{tag}-{}", std::process::id()))
 }
 
+/// Writes `report.json`, `report.md`, `report.html` and the figures into `out` at once
+/// ([`Target::prepare`] then [`Target::write`]), for a caller whose report is already computed
+/// (the Python package's `save`).
+///
+/// `out` is replaced if it holds an earlier report (a `report.json`); a directory holding
+/// anything else is left alone and refused.
+pub fn write_report(
+    out: &Path,
+    report: &impl serde::Serialize,
+    doc: &Document,
+) -> Result<(), String> {
+    Target::prepare(out)?.write(report, doc)
+}
+
 /// Where a report goes: checked and its temporary directory made before any work starts, so
 /// that an unwritable `--out` fails at once, not after a long evaluation.
 pub struct Target {

@@ -1,0 +1,148 @@
+//! Numpy-shaped arrays as a filter log: the rules of the NPZ format (see `input::FORMATS_HELP`)
+//! for arrays handed over whole, which is how the Python package passes numpy arrays
+//! (`input::log_from_arrays`). A cell (one run and step) whose values are all NaN was not
+//! logged; a cell with only some NaN values is kept, so that a NaN covariance is a finding.
+//!
+//! `kalibra eval log.npz` streams the same arrays cell by cell instead (`npz_log`), with the
+//! same shape rules.
+
+use kalibra_eval::Scope;
+
+use crate::input::{CellValues, ModelArray, PER_CELL, RawLog, model_given};
+
+const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
+
+/// One array as stored: its shape and its values in C order, as f64.
+pub(crate) struct Array {
+    pub(crate) shape: Vec<usize>,
+    pub(crate) data: Vec<f64>,
+}
+
+/// A per-cell array cut into its cells.
+struct Cells {
+    runs: usize,
+    steps: usize,
+    /// The shape of one cell (`[n]` or `[n, n]`).
+    shape: Vec<usize>,
+    /// Run-major cells, `None` where every value is NaN (not logged); kept as one buffer when
+    /// every cell was logged.
+    cells: CellValues,
+}
+
+/// The cells of a per-cell array with `cell_dims` trailing dimensions; a single run may drop
+/// the leading R axis.
+fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
+    let (runs, rest) = match a.shape.len() - cell_dims.min(a.shape.len()) {
+        2 => (a.shape[0], &a.shape[1..]),
+        1 => (1, &a.shape[..]),
+        _ => {
+            let expected = if cell_dims == 1 {
+                "(R, K, dim) or (K, dim)"
+            } else {
+                "(R, K, dim, dim) or (K, dim, dim)"
+            };
+            return Err(format!(
+                "array {array} has shape {:?}; expected {expected}",
+                a.shape
+            ));
+        }
+    };
+    let steps = rest[0];
+    let cell_shape = rest[1..].to_vec();
+    let size: usize = cell_shape.iter().product();
+    let logged = |c: &[f64]| !c.iter().all(|v| v.is_nan());
+    let cells = if size == 0 {
+        CellValues::Sparse(vec![None; runs * steps])
+    } else if a.data.chunks(size).all(logged) {
+        CellValues::Dense(a.data)
+    } else {
+        CellValues::Sparse(
+            a.data
+                .chunks(size)
+                .map(|c| logged(c).then(|| c.to_vec()))
+                .collect(),
+        )
+    };
+    Ok(Cells {
+        runs,
+        steps,
+        shape: cell_shape,
+        cells,
+    })
+}
+
+/// The log from the named arrays.
+pub(crate) fn build(
+    mut arrays: std::collections::BTreeMap<String, Array>,
+) -> Result<RawLog, String> {
+    let known = [
+        "truth",
+        "estimate",
+        "covariance",
+        "innovation",
+        "innovation_cov",
+        "time",
+        "F",
+        "H",
+        "Q",
+        "R",
+    ];
+    if let Some(unknown) = arrays.keys().find(|k| !known.contains(&k.as_str())) {
+        return Err(format!("unknown array `{unknown}`; the arrays are {KNOWN}"));
+    }
+    let mut log = RawLog::default();
+    for array in PER_CELL {
+        let Some(a) = arrays.remove(array) else {
+            continue;
+        };
+        let matrix = array == "covariance" || array == "innovation_cov";
+        let c = cells(array, a, if matrix { 2 } else { 1 })?;
+        let cols = c.shape.get(1).copied().unwrap_or(0);
+        log.put_cells(array, (c.runs, c.steps), (c.shape[0], cols), c.cells)?;
+    }
+    let (runs, steps) = log.require_cells()?;
+    if let Some(t) = arrays.remove("time") {
+        if t.shape.len() != 1 {
+            return Err(format!("array time has shape {:?}; expected (K,)", t.shape));
+        }
+        log.time = Some(t.data);
+    }
+    let model = ["F", "H", "Q", "R"];
+    let present: Vec<&str> = model
+        .iter()
+        .copied()
+        .filter(|m| arrays.contains_key(*m))
+        .collect();
+    if model_given(&present)? {
+        let mut out = Vec::with_capacity(4);
+        for name in model {
+            let a = arrays.remove(name).unwrap_or(Array {
+                shape: vec![],
+                data: vec![],
+            });
+            let (scope, rows, cols) = match a.shape.as_slice() {
+                [r, c] => (Scope::Constant, *r, *c),
+                [k, r, c] if *k == steps => (Scope::PerStep, *r, *c),
+                [rr, k, r, c] if (*rr, *k) == (runs, steps) => (Scope::PerRunStep, *r, *c),
+                other => {
+                    return Err(format!(
+                        "array {name} has shape {other:?}; expected one matrix (rows, cols), \
+                         one per step ({steps}, rows, cols) or one per run and step ({runs}, \
+                         {steps}, rows, cols)"
+                    ));
+                }
+            };
+            out.push(ModelArray {
+                rows,
+                cols,
+                scope,
+                data: a.data,
+            });
+        }
+        let [f, h, q, r]: [ModelArray; 4] = out
+            .try_into()
+            .map_err(|_| "arrays F, H, Q and R".to_string())?;
+        log.model = Some([f, h, q, r]);
+    }
+    Ok(log)
+}

@@ -1,0 +1,209 @@
+"""Type stubs of the native module kalibra._kalibra (see kalibra's docstrings)."""
+
+import os
+from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, Union, final
+
+import numpy as np
+import numpy.typing as npt
+
+_ArrayLike = npt.ArrayLike
+_FloatArray = npt.NDArray[np.float64]
+
+__version__: str
+__all__ = [
+    "KalibraError",
+    "__version__",
+    "Report",
+    "evaluate",
+    "nees",
+    "nis",
+    "nci",
+    "chi2_band",
+    "rmse",
+    "sliding_window",
+    "KalmanFilter",
+    "ExtendedKalmanFilter",
+    "UnscentedKalmanFilter",
+    "TuneReport",
+    "sweep_q",
+    "monte_carlo",
+]
+
+class KalibraError(ValueError):
+    """Bad input: the message names the argument and, where one is at fault, the index."""
+
+@final
+class Report:
+    """The consistency report of a filter log (the content of ``report.json``)."""
+
+    @property
+    def verdict(self) -> Literal["consistent", "optimistic", "pessimistic", "undetermined"]: ...
+    @property
+    def headline(self) -> str: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    def markdown(self) -> str: ...
+    def html(self) -> str: ...
+    def _repr_html_(self) -> str: ...
+    def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
+
+def evaluate(
+    truth: Optional[_ArrayLike] = None,
+    estimate: Optional[_ArrayLike] = None,
+    covariance: Optional[_ArrayLike] = None,
+    innovation: Optional[_ArrayLike] = None,
+    innovation_cov: Optional[_ArrayLike] = None,
+    *,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    time: Optional[_ArrayLike] = None,
+    F: Optional[_ArrayLike] = None,
+    H: Optional[_ArrayLike] = None,
+    Q: Optional[_ArrayLike] = None,
+    R: Optional[_ArrayLike] = None,
+    name: str = "numpy arrays",
+) -> Report: ...
+def nees(truth: _ArrayLike, estimate: _ArrayLike, covariance: _ArrayLike) -> _FloatArray: ...
+def nis(innovation: _ArrayLike, innovation_cov: _ArrayLike) -> _FloatArray: ...
+def nci(truth: _ArrayLike, estimate: _ArrayLike, covariance: _ArrayLike) -> _FloatArray: ...
+def chi2_band(
+    dof: float, samples: int, confidence: float = 0.95, normalized: bool = False
+) -> Tuple[float, float]: ...
+def rmse(
+    truth: _ArrayLike, estimate: _ArrayLike, over: Literal["runs", "time"] = "runs"
+) -> _FloatArray: ...
+def sliding_window(
+    errors: _ArrayLike, window: int
+) -> Tuple[_FloatArray, _FloatArray, _FloatArray]: ...
+
+@final
+class KalmanFilter:
+    """The linear Kalman filter, run in Rust."""
+
+    def __new__(
+        cls,
+        F: _ArrayLike,
+        H: _ArrayLike,
+        Q: _ArrayLike,
+        R: _ArrayLike,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        start: Literal["predict_first", "update_first"] = "predict_first",
+    ) -> "KalmanFilter": ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def measurement_dim(self) -> int: ...
+    def run(self, measurements: _ArrayLike, threads: int = 0) -> dict[str, _FloatArray]: ...
+
+_StateFn = Callable[[_FloatArray, int], _ArrayLike]
+_ResidualFn = Callable[[_FloatArray, _FloatArray], _ArrayLike]
+_Start = Literal["predict_first", "update_first"]
+
+@final
+class ExtendedKalmanFilter:
+    """The extended Kalman filter on a model given as Python callables."""
+
+    def __new__(
+        cls,
+        f: _StateFn,
+        F_jacobian: _StateFn,
+        h: _StateFn,
+        H_jacobian: _StateFn,
+        Q: _ArrayLike,
+        R: _ArrayLike,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        *,
+        residual: Optional[_ResidualFn] = None,
+        start: _Start = "predict_first",
+    ) -> "ExtendedKalmanFilter": ...
+    def run(self, measurements: _ArrayLike) -> dict[str, _FloatArray]: ...
+
+@final
+class UnscentedKalmanFilter:
+    """The unscented Kalman filter on a model given as Python callables."""
+
+    def __new__(
+        cls,
+        f: _StateFn,
+        h: _StateFn,
+        Q: _ArrayLike,
+        R: _ArrayLike,
+        x0: _ArrayLike,
+        P0: _ArrayLike,
+        *,
+        points: Literal["symmetric", "scaled"] = "symmetric",
+        kappa: Optional[float] = None,
+        alpha: float = 1.0,
+        beta: float = 2.0,
+        adaptive_kappa: Optional[Literal["maximum_likelihood", "maximum_posterior"]] = None,
+        kappa_grid: Optional[Sequence[float]] = None,
+        residual: Optional[_ResidualFn] = None,
+        start: _Start = "predict_first",
+    ) -> "UnscentedKalmanFilter": ...
+    def run(self, measurements: _ArrayLike) -> dict[str, _FloatArray]: ...
+
+@final
+class TuneReport:
+    """The J1/J2 sweep of Q = 10^p Q_nom and its recommendation (``kalibra tune``'s report)."""
+
+    @property
+    def headline(self) -> str: ...
+    @property
+    def p(self) -> _FloatArray: ...
+    @property
+    def j1(self) -> _FloatArray: ...
+    @property
+    def j2(self) -> _FloatArray: ...
+    @property
+    def crossover(self) -> Optional[dict[str, Any]]: ...
+    @property
+    def recommended_q(self) -> Optional[_FloatArray]: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    def markdown(self) -> str: ...
+    def html(self) -> str: ...
+    def _repr_html_(self) -> str: ...
+    def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
+
+def sweep_q(
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q_nom: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    measurements: _ArrayLike,
+    *,
+    p: Tuple[float, float, float] = ...,  # (-6.0, 6.0, 0.5)
+    truth: Optional[_ArrayLike] = None,
+    start: _Start = "predict_first",
+    position: Optional[Sequence[int]] = None,
+    p0_as_given: bool = False,
+    threads: int = 0,
+    names: Tuple[str, str] = ...,  # ("model", "measurements")
+) -> TuneReport: ...
+
+def monte_carlo(
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    *,
+    runs: int = 100,
+    steps: int = 100,
+    seed: int = 0,
+    threads: int = 0,
+    filter_Q: Optional[_ArrayLike] = None,
+    filter_R: Optional[_ArrayLike] = None,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    return_log: bool = False,
+) -> Union[Report, Tuple[Report, dict[str, _FloatArray]]]: ...

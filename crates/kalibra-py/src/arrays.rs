@@ -1,0 +1,106 @@
+//! numpy arrays in and out: any of the dtypes the NPZ reader takes (float64, float32, int64,
+//! int32), in any memory layout, read as f64 values in C (row-major) order; results are new
+//! float64 arrays.
+
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{
+    Element, IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+
+use crate::error;
+
+/// An array as read: its shape and its values in C order.
+pub(crate) struct Array {
+    pub shape: Vec<usize>,
+    pub data: Vec<f64>,
+}
+
+impl Array {
+    /// The number of leading axes before the last `trailing`.
+    pub fn leading(&self, trailing: usize) -> &[usize] {
+        &self.shape[..self.shape.len() - trailing]
+    }
+}
+
+/// The values of a numpy array of element type `T`, in C order whatever its strides.
+fn values<T: Element + Copy>(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    convert: impl Fn(T) -> f64,
+) -> PyResult<Option<Array>> {
+    let Ok(array) = obj.cast::<PyArrayDyn<T>>() else {
+        return Ok(None);
+    };
+    let view = array
+        .try_readonly()
+        .map_err(|e| error(format!("argument {name}: cannot read the array ({e})")))?;
+    let a = view.as_array();
+    // A C-contiguous array is one slice (a straight copy); any other layout is read in its
+    // logical (C) order element by element.
+    // (`as_slice` alone would also take a Fortran-ordered array, in its memory order.)
+    let data = match view.as_slice() {
+        Ok(slice) if array.is_c_contiguous() => slice.iter().map(|&v| convert(v)).collect(),
+        _ => a.iter().map(|&v| convert(v)).collect(),
+    };
+    Ok(Some(Array {
+        shape: a.shape().to_vec(),
+        data,
+    }))
+}
+
+/// Reads argument `name`: a numpy array of float64, float32, int64 or int32 (any layout), or
+/// anything `numpy.asarray` turns into one (nested lists).
+pub(crate) fn read(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Array> {
+    let as_array;
+    let obj = if obj.is_instance_of::<PyUntypedArray>() {
+        obj
+    } else {
+        let numpy = obj.py().import("numpy")?;
+        as_array = numpy.call_method1("asarray", (obj,)).map_err(|e| {
+            error(format!(
+                "argument {name}: not an array and not convertible to one ({e})"
+            ))
+        })?;
+        &as_array
+    };
+    if let Some(a) = values::<f64>(obj, name, |v| v)? {
+        return Ok(a);
+    }
+    if let Some(a) = values::<f32>(obj, name, f64::from)? {
+        return Ok(a);
+    }
+    #[allow(clippy::cast_precision_loss)]
+    if let Some(a) = values::<i64>(obj, name, |v| v as f64)? {
+        return Ok(a);
+    }
+    if let Some(a) = values::<i32>(obj, name, f64::from)? {
+        return Ok(a);
+    }
+    let dtype = obj
+        .cast::<PyUntypedArray>()
+        .map(|a| a.dtype().to_string())
+        .unwrap_or_else(|_| "unknown".into());
+    Err(error(format!(
+        "argument {name}: dtype {dtype} is not a number type kalibra reads (float64, float32, \
+         int64, int32)"
+    )))
+}
+
+/// Reads an optional argument.
+pub(crate) fn read_opt(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Array>> {
+    obj.filter(|o| !o.is_none())
+        .map(|o| read(o, name))
+        .transpose()
+}
+
+/// A new float64 array of `shape` holding `data` (C order).
+pub(crate) fn new_array<'py>(
+    py: Python<'py>,
+    shape: &[usize],
+    data: Vec<f64>,
+) -> Bound<'py, PyArrayDyn<f64>> {
+    ArrayD::from_shape_vec(IxDyn(shape), data)
+        .expect("the shape holds exactly the values")
+        .into_pyarray(py)
+}
