@@ -95,6 +95,9 @@ pub(crate) fn read_opt(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<O
 }
 
 /// A new float64 array of `shape` holding `data` (C order).
+// Every caller builds `data` from `shape` inside this crate: a mismatch is a bug here, never
+// bad input from Python.
+#[allow(clippy::expect_used)]
 pub(crate) fn new_array<'py>(
     py: Python<'py>,
     shape: &[usize],

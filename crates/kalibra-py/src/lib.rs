@@ -12,6 +12,9 @@
 //! message names the argument and, where one is at fault, the run and step); nothing panics
 //! across the boundary. Long computations release the GIL.
 
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod arrays;
 mod callbacks;
 mod eval;
