@@ -4,7 +4,8 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite, check_dim,
-    check_finite, check_symmetric, joseph_update, propagate, standard_update, symmetrize,
+    check_finite, check_symmetric, innovation_covariance, joseph_update, propagate,
+    standard_update, symmetrize,
 };
 
 use crate::as_given::lu_solve;
@@ -386,9 +387,7 @@ where
         let at = |e| FilterError::at(k, e);
         let form = self.update;
         let prior = self.prepare_update();
-        let pht = &prior.cov * h.transpose();
-        let mut s = &h * &pht + &r;
-        symmetrize(&mut s);
+        let (pht, s) = innovation_covariance(&prior.cov, &h, &r);
         let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(|e| {
             // NaN in H or R makes the factorisation fail too: name the real culprit.
             let culprit = check_finite(&h, "measurement Jacobian H")
@@ -397,8 +396,8 @@ where
         })?;
         let gain = match fixed_gain {
             Some(gain) => gain.clone(),
-            // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
-            None => s.cholesky().solve(&pht.transpose()).transpose(),
+            // K = P H^T S^-1: a solve with the factor of S (sizes agree by construction).
+            None => s.solve_right(&pht).map_err(at)?,
         };
         let x_post = &prior.mean + &gain * &innovation;
         let p_post = match form {

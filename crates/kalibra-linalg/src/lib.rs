@@ -58,6 +58,7 @@
 //! ```
 
 mod alloc;
+pub mod backend;
 mod covariance;
 mod error;
 mod gaussian;
@@ -66,13 +67,17 @@ mod lyapunov;
 mod psd;
 
 pub use alloc::Alloc;
+pub use backend::{
+    FAER_MIN_DIM, KernelPolicy, PARALLEL_MIN_DIM, kernel_policy, with_kernel_policy,
+};
 pub use covariance::{
     Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once, quad_form_symmetric,
 };
 pub use error::LinalgError;
 pub use gaussian::Gaussian;
 pub use kernels::{
-    all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
+    all_finite, check_dim, check_finite, innovation_covariance, joseph_update, product, propagate,
+    standard_update, symmetrize,
 };
 pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,
