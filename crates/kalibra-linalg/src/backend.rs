@@ -1,10 +1,13 @@
 //! Where the kernels choose between nalgebra's code and faer's, and faer's side of them.
 //!
 //! Every kernel of this crate that carries the cost of a large filter step ([`propagate`],
-//! [`innovation_covariance`], [`Covariance::solve_right`] and the other solves,
-//! [`joseph_update`], [`standard_update`], the Cholesky factorisations behind [`Covariance`],
-//! [`quad_form_symmetric`] and [`sigma_sqrt`], and the products of [`discrete_lyapunov`] and
-//! [`spectral_radius`]) asks [`route`] once which code to run. Fixed sizes (every dimension a
+//! [`product`], [`innovation_covariance`], [`joseph_update`], [`standard_update`], the
+//! Cholesky factorisations behind [`Covariance`], [`quad_form_symmetric`] and [`sigma_sqrt`],
+//! the solves with a matrix right-hand side [`Covariance::solve`] and
+//! [`Covariance::solve_right`], and the products of [`discrete_lyapunov`] and
+//! [`spectral_radius`]) asks [`route`] once which code to run. Solves with one vector (the
+//! quadratic forms after their factorisation) stay with nalgebra: `O(n^2)` work that faer does
+//! not speed up measurably. Fixed sizes (every dimension a
 //! `Const`) never leave nalgebra: the test is on the types, so the compiler removes the faer
 //! branch and the fixed-size code is what it was before faer came in. A `Dyn` kernel whose
 //! largest dimension is at least the policy's threshold ([`FAER_MIN_DIM`] unless the calling
@@ -20,7 +23,9 @@
 //! are views).
 //!
 //! [`propagate`]: crate::propagate
+//! [`product`]: crate::product
 //! [`innovation_covariance`]: crate::innovation_covariance
+//! [`Covariance::solve`]: crate::Covariance::solve
 //! [`Covariance::solve_right`]: crate::Covariance::solve_right
 //! [`Covariance`]: crate::Covariance
 //! [`joseph_update`]: crate::joseph_update
@@ -564,17 +569,6 @@ pub(crate) fn cholesky_solve_right_in_place<R: Dim, D: Dim>(
     let mut xt = view_mut(b).transpose_mut();
     solve_lower_triangular_in_place(view(l), xt.as_mut(), par);
     solve_upper_triangular_in_place(view(l).transpose(), xt, par);
-}
-
-/// `L^-1 v` in place (the half solve of a quadratic form).
-pub(crate) fn lower_solve_in_place<D: Dim, C: Dim>(
-    l: &OMatrix<f64, D, D>,
-    v: &mut OMatrix<f64, D, C>,
-    par: Par,
-) where
-    DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
-{
-    solve_lower_triangular_in_place(view(l), view_mut(v), par);
 }
 
 #[cfg(test)]
