@@ -3,7 +3,7 @@
 //! `cargo xtask bench [w1|w2|w4|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
 //! [--seed N] [--sizes N,N,...] [--kernels] [--no-python]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
 //! `--runs` x 51 steps, in `bench_w2`) by default, or only the one named. `--steps` applies to
-//! W1 and eval, `--threads` to W1 and W2, `--seed` to eval only.
+//! W1 and eval, `--threads` to W1, W2 and W4, `--seed` to eval only.
 //!
 //! `eval` (in `bench_eval`) times the `kalibra` executable against a pandas + numpy script
 //! on generated logs. `all` leaves it out: it needs Python, a virtual environment installed
@@ -53,7 +53,8 @@ pub(crate) struct Args {
     /// Steps per run (W1 and eval; W2 has 51).
     #[arg(long, default_value_t = 1000, value_parser = positive)]
     pub(crate) steps: usize,
-    /// Threads for the multi-thread comparison of W1 and W2 (default: every core).
+    /// Threads for the multi-thread comparison of W1 and W2, and for W4's within-step
+    /// parallelism at n >= 512 (default: every core).
     #[arg(long, default_value_t = cores())]
     pub(crate) threads: usize,
     /// Timed repeats; the best is reported.

@@ -24,6 +24,7 @@
 //! `bench eval` (`target/bench-eval/venv`, installed from PyPI if missing), with BLAS held to
 //! one thread. Its figures are reported, not compared with goals. `--no-python` skips it.
 
+use std::num::NonZeroUsize;
 use std::path::Path as FsPath;
 use std::process::Command;
 use std::time::Instant;
@@ -31,8 +32,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail, ensure};
 use kalibra_filters::{Filter, Kf};
 use kalibra_linalg::{
-    Covariance, DMatrix, DVector, Dyn, KernelPolicy, innovation_covariance, joseph_update, product,
-    propagate, quad_form_symmetric, with_kernel_policy,
+    Covariance, DMatrix, DVector, Dyn, KernelPolicy, PARALLEL_MIN_DIM, innovation_covariance,
+    joseph_update, product, propagate, quad_form_symmetric, with_kernel_policy,
 };
 use kalibra_models::{LinearGaussian, LinearObservation, Truth, simulate};
 use rand_chacha::ChaCha8Rng;
@@ -148,6 +149,9 @@ pub(crate) struct Row {
     pub(crate) faer: f64,
     pub(crate) nalgebra: f64,
     pub(crate) library: f64,
+    /// With within-step parallelism: the thread count, the time per step, and whether the
+    /// posterior is bit-identical to the one-thread library path's.
+    pub(crate) parallel: Option<(usize, f64, bool)>,
     /// Relative Frobenius difference of the faer and nalgebra posteriors after the same steps.
     pub(crate) difference: f64,
     /// Steps every path ran.
@@ -155,13 +159,26 @@ pub(crate) struct Row {
 }
 
 /// Times the three paths on `problem`.
-pub(crate) fn measure(problem: &Problem, min_blocks: usize, budget: f64) -> Result<Row> {
-    let mut paths: Vec<Lane<'_>> = Vec::new();
-    for policy in [
+///
+/// With `threads` above 1 and `n >= PARALLEL_MIN_DIM`, a fourth path runs the default policy
+/// with faer on `threads` threads within each step ([`KernelPolicy::with_threads`]).
+pub(crate) fn measure(
+    problem: &Problem,
+    min_blocks: usize,
+    budget: f64,
+    threads: usize,
+) -> Result<Row> {
+    let mut policies = vec![
         KernelPolicy::faer_from(0),
         KernelPolicy::NALGEBRA,
         KernelPolicy::DEFAULT,
-    ] {
+    ];
+    let parallel = NonZeroUsize::new(threads)
+        .filter(|t| t.get() > 1 && problem.n >= PARALLEL_MIN_DIM)
+        .map(|t| KernelPolicy::DEFAULT.with_threads(t));
+    policies.extend(parallel);
+    let mut paths: Vec<Lane<'_>> = Vec::new();
+    for policy in policies {
         paths.push(Lane {
             policy,
             kf: problem.filter()?,
@@ -185,6 +202,14 @@ pub(crate) fn measure(problem: &Problem, min_blocks: usize, budget: f64) -> Resu
     let p_faer = paths[0].kf.covariance();
     let p_nalgebra = paths[1].kf.covariance();
     let difference = (p_faer - p_nalgebra).norm() / p_nalgebra.norm();
+    // The parallel path runs the same kernels as the library's on more threads: the same bits.
+    let parallel = paths.get(3).map(|lane| {
+        (
+            lane.policy.threads().get(),
+            lane.best,
+            lane.kf.covariance() == paths[2].kf.covariance(),
+        )
+    });
     ensure!(
         paths.iter().all(|p| p.nees.is_finite()),
         "non-finite NEES at n = {}",
@@ -196,6 +221,7 @@ pub(crate) fn measure(problem: &Problem, min_blocks: usize, budget: f64) -> Resu
         faer: paths[0].best,
         nalgebra: paths[1].best,
         library: paths[2].best,
+        parallel,
         difference,
         steps: paths[0].k,
     })
@@ -402,7 +428,7 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
     );
     for &n in sizes {
         let problem = Problem::new(n)?;
-        let row = measure(&problem, args.repeats, BUDGET)?;
+        let row = measure(&problem, args.repeats, BUDGET, args.threads)?;
         let flops = nominal_flops(row.n, row.m);
         println!(
             "  {:>5} {:>4} {:>12.1} {:>12.1} {:>7.2}x {:>12.1} {:>9.2} {:>9.2} {:>10.1e} {:>6}",
@@ -418,6 +444,23 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
             row.steps,
         );
         rows.push(row);
+    }
+    for row in &rows {
+        if let Some((threads, t, same)) = row.parallel {
+            println!(
+                "  n = {}: library with faer on {threads} threads within the step: {:.1} us, \
+                 {:.2}x the one-thread library path, results {}",
+                row.n,
+                us(t),
+                row.library / t,
+                if same { "bit-identical" } else { "DIFFERENT" }
+            );
+            ensure!(
+                same,
+                "within-step parallelism changed the results at n = {}",
+                row.n
+            );
+        }
     }
     let goal = |ok: bool| if ok { "met" } else { "NOT MET" };
     let speedups = |from: usize| {
@@ -504,7 +547,7 @@ mod tests {
     #[test]
     fn paths_agree_on_a_small_problem() {
         let problem = Problem::new(40).unwrap();
-        let row = measure(&problem, 1, 0.0).unwrap();
+        let row = measure(&problem, 1, 0.0, 1).unwrap();
         assert_eq!(row.steps, WARM_UP + STEPS);
         assert!(row.difference < 1e-12, "{}", row.difference);
         assert!(row.faer > 0.0 && row.nalgebra > 0.0 && row.library > 0.0);
