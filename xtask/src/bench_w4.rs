@@ -264,26 +264,38 @@ impl Lane<'_> {
     }
 }
 
-/// Best time per call of `f` on `policy`: batches of calls timed until `budget` seconds.
-fn time_kernel(policy: KernelPolicy, budget: f64, mut f: impl FnMut()) -> f64 {
-    with_kernel_policy(policy, || {
-        f();
-        let mut best = f64::INFINITY;
-        let mut calls = 1;
-        let start = Instant::now();
-        while start.elapsed().as_secs_f64() < budget {
-            let t = Instant::now();
-            for _ in 0..calls {
-                f();
-            }
-            let elapsed = t.elapsed().as_secs_f64();
-            best = best.min(elapsed / calls as f64);
-            if elapsed < 1e-3 {
-                calls *= 2;
-            }
+/// Best times per call of `f` through faer and through nalgebra: batches of calls (doubled
+/// until a batch takes a millisecond) timed alternately on the two policies, so that machine
+/// noise hits both alike, until `budget` seconds have passed and each has at least three.
+fn time_kernel(budget: f64, mut f: impl FnMut()) -> (f64, f64) {
+    let policies = [KernelPolicy::faer_from(0), KernelPolicy::NALGEBRA];
+    let mut best = [f64::INFINITY; 2];
+    let mut calls = 1;
+    for policy in policies {
+        with_kernel_policy(policy, &mut f);
+    }
+    let start = Instant::now();
+    let mut batches = 0;
+    while batches < 3 || start.elapsed().as_secs_f64() < budget {
+        let mut shortest = f64::INFINITY;
+        for (policy, best) in policies.iter().zip(&mut best) {
+            let elapsed = with_kernel_policy(*policy, || {
+                let t = Instant::now();
+                for _ in 0..calls {
+                    f();
+                }
+                t.elapsed().as_secs_f64()
+            });
+            *best = best.min(elapsed / calls as f64);
+            shortest = shortest.min(elapsed);
         }
-        best
-    })
+        if shortest < 1e-3 {
+            calls *= 2;
+        } else {
+            batches += 1;
+        }
+    }
+    (best[0], best[1])
 }
 
 /// The kernels of a step one by one at dimension `n` (`m = max(2, n / 4)` where a
@@ -337,8 +349,7 @@ fn kernel_ratios(n: usize, budget: f64) -> Result<Vec<(&'static str, f64)>> {
     ];
     let mut out = Vec::new();
     for (name, f) in &mut kernels {
-        let faer = time_kernel(KernelPolicy::faer_from(0), budget, &mut **f);
-        let nalgebra = time_kernel(KernelPolicy::NALGEBRA, budget, &mut **f);
+        let (faer, nalgebra) = time_kernel(budget, &mut **f);
         out.push((*name, nalgebra / faer));
     }
     Ok(out)
