@@ -110,8 +110,10 @@ impl KernelPolicy {
     /// for kernels of dimension [`PARALLEL_MIN_DIM`] and more (within one filter step). Off
     /// by default: Monte Carlo studies already keep every core busy with whole runs.
     ///
-    /// Results do not depend on `threads` (faer splits the output, never a sum, between
-    /// threads; a test checks it to the bit).
+    /// Results do not depend on `threads`: faer splits a matrix product's output between
+    /// threads, each entry summed whole on one of them, and the kernels run products and
+    /// solves with a vector output (where faer would split the sum) on one thread. A test
+    /// checks it to the bit on 1, 2 and 4 threads.
     pub const fn with_threads(self, threads: NonZeroUsize) -> Self {
         Self {
             faer_min_dim: self.faer_min_dim,
@@ -265,6 +267,31 @@ pub(crate) fn symmetrize_slice(s: &mut [f64], n: usize) {
     });
 }
 
+/// `par` for a product or solve whose output is `rows` x `cols`: sequential for a vector
+/// output. faer splits a matrix-vector product's sum between threads (each adds a share of the
+/// columns, then the shares are added), which would make its bits depend on the thread count;
+/// a matrix output it splits by blocks of the output, each summed whole on one thread.
+fn par_for(par: Par, rows: usize, cols: usize) -> Par {
+    if rows <= 1 || cols <= 1 {
+        Par::Seq
+    } else {
+        par
+    }
+}
+
+/// `dst = [dst +] alpha lhs * rhs` (faer's `matmul`, with [`par_for`]).
+fn mul(
+    dst: MatMut<'_, f64>,
+    accum: Accum,
+    lhs: MatRef<'_, f64>,
+    rhs: MatRef<'_, f64>,
+    alpha: f64,
+    par: Par,
+) {
+    let par = par_for(par, dst.nrows(), dst.ncols());
+    matmul(dst, accum, lhs, rhs, alpha, par);
+}
+
 /// `dst` (lower triangle) `= [dst +] lhs * rhs`, the upper triangle untouched.
 fn lower_product(
     dst: MatMut<'_, f64>,
@@ -273,6 +300,7 @@ fn lower_product(
     rhs: MatRef<'_, f64>,
     par: Par,
 ) {
+    let par = par_for(par, dst.nrows(), dst.ncols());
     triangular::matmul(
         dst,
         BlockStructure::TriangularLower,
@@ -296,7 +324,7 @@ where
     DefaultAllocator: Allocator<R, K> + Allocator<K, C> + Allocator<R, C>,
 {
     let mut out = OMatrix::<f64, R, C>::zeros_generic(a.shape_generic().0, b.shape_generic().1);
-    matmul(
+    mul(
         view_mut(&mut out),
         Accum::Replace,
         view(a),
@@ -330,7 +358,7 @@ where
         );
         mirror_lower(&mut out);
     } else {
-        matmul(
+        mul(
             view_mut(&mut out),
             Accum::Replace,
             view(&ap),
@@ -355,7 +383,7 @@ where
 {
     let (m, n) = h.shape_generic();
     let mut pht = OMatrix::<f64, N, M>::zeros_generic(n, m);
-    matmul(
+    mul(
         view_mut(&mut pht),
         Accum::Replace,
         view(p),
@@ -420,9 +448,9 @@ where
         // T = P - K (H P).
         let hp = product(h, &p, par);
         let mut t = p.into_owned();
-        matmul(view_mut(&mut t), Accum::Add, view(k), view(&hp), -1.0, par);
+        mul(view_mut(&mut t), Accum::Add, view(k), view(&hp), -1.0, par);
         // W = T H^T - K R; the result is T - W K^T.
-        matmul(
+        mul(
             view_mut(&mut kr),
             Accum::Replace,
             view(k),
@@ -430,7 +458,7 @@ where
             -1.0,
             par,
         );
-        matmul(
+        mul(
             view_mut(&mut kr),
             Accum::Add,
             view(&t),
@@ -439,6 +467,7 @@ where
             par,
         );
         let w = kr;
+        let (rows, cols) = (t.nrows(), t.ncols());
         triangular::matmul(
             view_mut(&mut t),
             BlockStructure::TriangularLower,
@@ -448,14 +477,14 @@ where
             view(k).transpose(),
             BlockStructure::Rectangular,
             -1.0,
-            par,
+            par_for(par, rows, cols),
         );
         // Above the diagonal `t` still holds T, whose upper triangle is not the result's.
         mirror_lower(&mut t);
         return t;
     }
     let mut ikh = OMatrix::<f64, N, N>::zeros_generic(n, n);
-    matmul(
+    mul(
         view_mut(&mut ikh),
         Accum::Replace,
         view(k),
@@ -467,7 +496,7 @@ where
         ikh[(i, i)] += 1.0;
     }
     let ikh_p = product(&ikh, &p, par);
-    matmul(
+    mul(
         view_mut(&mut kr),
         Accum::Replace,
         view(k),
@@ -506,7 +535,7 @@ where
 {
     let hp = product(h, p, par);
     let mut out = p.clone();
-    matmul(
+    mul(
         view_mut(&mut out),
         Accum::Add,
         view(k),
@@ -553,6 +582,7 @@ pub(crate) fn cholesky_solve_in_place<D: Dim, C: Dim>(
 ) where
     DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
 {
+    let par = par_for(par, b.nrows(), b.ncols());
     let mut x = view_mut(b);
     solve_lower_triangular_in_place(view(l), x.as_mut(), par);
     solve_upper_triangular_in_place(view(l).transpose(), x, par);
@@ -566,6 +596,7 @@ pub(crate) fn cholesky_solve_right_in_place<R: Dim, D: Dim>(
 ) where
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
+    let par = par_for(par, b.nrows(), b.ncols());
     let mut xt = view_mut(b).transpose_mut();
     solve_lower_triangular_in_place(view(l), xt.as_mut(), par);
     solve_upper_triangular_in_place(view(l).transpose(), xt, par);
@@ -793,24 +824,40 @@ mod tests {
     #[test]
     fn parallel_kernels_give_the_sequential_bits() {
         let n = PARALLEL_MIN_DIM;
+        for m in [1, 2, n / 4] {
+            parallel_case(n, m);
+        }
+        // Sizes that are no multiple of faer's blocks.
+        parallel_case(n + 89, 3);
+    }
+
+    /// The kernels of a step at `n` states and `m` measurements on 1, 2 and 4 threads.
+    fn parallel_case(n: usize, m: usize) {
         let (a, p) = (entries(n, n, 1) / (n as f64).sqrt(), spd(n, 2));
-        let (h, r) = (entries(n / 4, n, 3), spd(n / 4, 4));
-        let k = entries(n, n / 4, 5) * 0.01;
+        let (h, r) = (entries(m, n, 3), spd(m, 4));
+        let k = entries(n, m, 5) * 0.01;
+        let v: DVector<f64> = entries(n, 1, 6).column(0).into_owned();
         let run = |threads: usize| {
             let policy = KernelPolicy::DEFAULT.with_threads(NonZeroUsize::new(threads).unwrap());
             on(policy, || {
                 let c = Covariance::from_symmetric(p.clone(), "P").unwrap();
+                let (pht, s) = innovation_covariance(&p, &h, &r);
                 (
-                    propagate(&a, &p),
+                    (propagate(&a, &p), propagate(&h, &p), pht, s),
                     crate::joseph_update(&p, &k, &h, &r),
-                    c.factor(),
-                    c.solve_right(&k.transpose()).unwrap(),
+                    standard_update(&p, &k, &h),
+                    (
+                        c.factor(),
+                        c.solve(&v).unwrap(),
+                        c.solve_right(&k.transpose()).unwrap(),
+                    ),
+                    (product(&h, &a), product(&a, &k)),
                 )
             })
         };
         let one = run(1);
         for threads in [2, 4] {
-            assert!(run(threads) == one, "{threads} threads");
+            assert!(run(threads) == one, "m = {m}, {threads} threads");
         }
     }
 }
