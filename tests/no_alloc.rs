@@ -87,3 +87,49 @@ fn the_counter_detects_dynamic_allocations() {
     kf.update(&z).unwrap();
     assert!(allocations() > before);
 }
+
+/// On `Dyn` sizes from the faer threshold on, a step (predict, Joseph update, NEES) allocates
+/// no more than on nalgebra's path (issue 18): faer's operands are views of nalgebra's storage,
+/// its Cholesky scratch is a per-thread buffer kept between calls, and its products write into
+/// the result instead of into a temporary plus a transposed copy.
+#[test]
+fn faer_steps_allocate_no_more_than_nalgebra_steps() {
+    use kalibra::linalg::{DMatrix, DVector, FAER_MIN_DIM, KernelPolicy, with_kernel_policy};
+    use kalibra::models::{LinearGaussian, LinearObservation};
+    for n in [FAER_MIN_DIM, 64] {
+        let m = (n / 4).max(2);
+        let wave = |i: usize, j: usize| ((i * 7 + j * 3) as f64).sin();
+        let f = DMatrix::from_fn(n, n, |i, j| {
+            0.01 * wave(i, j) + if i == j { 0.9 } else { 0.0 }
+        });
+        let h = DMatrix::from_fn(m, n, wave);
+        let spd =
+            |k: usize| DMatrix::from_fn(k, k, |i, j| if i == j { 2.0 } else { 0.5 / k as f64 });
+        let dynamics = LinearGaussian::new(f, spd(n) * 0.1).unwrap();
+        let measurement = LinearObservation::new(h, spd(m)).unwrap();
+        let (z, x) = (DVector::from_element(m, 0.5), DVector::from_element(n, 0.1));
+        let count = |policy| {
+            with_kernel_policy(policy, || {
+                let mut kf = Kf::new(&dynamics, &measurement, DVector::zeros(n), spd(n)).unwrap();
+                let mut step = || {
+                    kf.predict().unwrap();
+                    let rec = kf.update(&z).unwrap();
+                    rec.nees(&(&x - &rec.posterior().mean)).unwrap()
+                };
+                // The first steps size faer's per-thread buffers.
+                let mut total = step() + step();
+                let before = allocations();
+                for _ in 0..10 {
+                    total += step();
+                }
+                assert!(total.is_finite());
+                allocations() - before
+            })
+        };
+        let (faer, nalgebra) = (count(KernelPolicy::DEFAULT), count(KernelPolicy::NALGEBRA));
+        assert!(
+            faer <= nalgebra,
+            "n = {n}: {faer} allocations in 10 faer steps, {nalgebra} in 10 nalgebra steps"
+        );
+    }
+}

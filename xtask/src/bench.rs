@@ -1,13 +1,17 @@
 //! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
 //!
-//! `cargo xtask bench [w1|w2|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
-//! [--seed N]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
+//! `cargo xtask bench [w1|w2|w4|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
+//! [--seed N] [--sizes N,N,...] [--kernels] [--no-python]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
 //! `--runs` x 51 steps, in `bench_w2`) by default, or only the one named. `--steps` applies to
-//! W1 and eval, `--threads` to W1 and W2, `--seed` to eval only.
+//! W1 and eval, `--threads` to W1, W2 and W4, `--seed` to eval only.
 //!
 //! `eval` (in `bench_eval`) times the `kalibra` executable against a pandas + numpy script
 //! on generated logs. `all` leaves it out: it needs Python, a virtual environment installed
 //! from PyPI and over a gigabyte of logs, which the in-process workloads do not.
+//!
+//! `w4` (in `bench_w4`) times one Kalman filter at the run-time sizes `--sizes` through
+//! faer's kernels and nalgebra's, and a numpy script beside them (`--no-python` skips it). It
+//! is not part of `all` either: it takes minutes at n = 1024.
 
 use std::time::Instant;
 
@@ -31,6 +35,10 @@ enum Workloads {
     W2,
     /// `kalibra eval` on CSV, NPZ and JSON logs against a pandas + numpy script.
     Eval,
+    /// W4: one KF at run-time sizes n = 8 .. 1024, faer's kernels against nalgebra's, and a
+    /// numpy script.
+    #[value(alias = "W4")]
+    W4,
 }
 
 /// `cargo xtask bench` arguments.
@@ -45,7 +53,8 @@ pub(crate) struct Args {
     /// Steps per run (W1 and eval; W2 has 51).
     #[arg(long, default_value_t = 1000, value_parser = positive)]
     pub(crate) steps: usize,
-    /// Threads for the multi-thread comparison of W1 and W2 (default: every core).
+    /// Threads for the multi-thread comparison of W1 and W2, and for W4's within-step
+    /// parallelism at n >= 512 (default: every core).
     #[arg(long, default_value_t = cores())]
     pub(crate) threads: usize,
     /// Timed repeats; the best is reported.
@@ -54,6 +63,15 @@ pub(crate) struct Args {
     /// Seed of the eval workload's generated logs (W1 and W2 keep their fixed seeds).
     #[arg(long, default_value_t = 2012)]
     pub(crate) seed: u64,
+    /// W4: the state dimensions measured (default 8, 16, ..., 1024).
+    #[arg(long, value_delimiter = ',', default_values_t = crate::bench_w4::SIZES)]
+    pub(crate) sizes: Vec<usize>,
+    /// W4: also time the kernels of the step one by one, faer against nalgebra.
+    #[arg(long)]
+    pub(crate) kernels: bool,
+    /// W4: skip the numpy script (no Python, no PyPI).
+    #[arg(long)]
+    pub(crate) no_python: bool,
 }
 
 /// A count of at least one.
@@ -74,6 +92,9 @@ fn cores() -> usize {
 pub fn main(args: &Args) -> Result<()> {
     if args.workloads == Workloads::Eval {
         return crate::bench_eval::eval_bench(args);
+    }
+    if args.workloads == Workloads::W4 {
+        return crate::bench_w4::w4_bench(args);
     }
     if args.workloads != Workloads::W2 {
         w1_bench(args)?;

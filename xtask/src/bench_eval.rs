@@ -387,7 +387,7 @@ fn run(cmd: &mut Command) -> Result<()> {
 
 /// The virtual environment's Python with pandas and numpy, created and installed if needed;
 /// returns it and the versions of Python, numpy and pandas.
-fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
+pub(crate) fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
     let venv = dir.join("venv");
     let python = venv.join("bin").join("python");
     if !python.exists() {

@@ -21,6 +21,7 @@
 mod bench;
 mod bench_eval;
 mod bench_w2;
+mod bench_w4;
 mod reproduce;
 
 use clap::{Parser, Subcommand};

@@ -22,7 +22,7 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, check_dim, check_finite,
-    discrete_lyapunov, propagate, spectral_radius, symmetrize,
+    discrete_lyapunov, product, propagate, spectral_radius, symmetrize,
 };
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 
@@ -178,7 +178,7 @@ where
         for i in 0..n {
             i_kh[(i, i)] += 1.0;
         }
-        let c = &i_kh * jacobian;
+        let c = product(&i_kh, jacobian);
         let mut eta_cov = propagate(&i_kh, q) + propagate(gain, r);
         symmetrize(&mut eta_cov);
         let rho = spectral_radius(&c)?;

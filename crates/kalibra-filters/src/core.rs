@@ -4,7 +4,8 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite, check_dim,
-    check_finite, check_symmetric, joseph_update, propagate, standard_update, symmetrize,
+    check_finite, check_symmetric, innovation_covariance, joseph_update, propagate,
+    standard_update, symmetrize,
 };
 
 use crate::as_given::lu_solve;
@@ -394,9 +395,20 @@ where
         let at = |e| FilterError::at(k, e);
         let form = self.update;
         let prior = self.update_prior();
-        let pht = &prior.cov * h.transpose();
-        let mut s = &h * &pht + &r;
-        symmetrize(&mut s);
+        // Run-time sizes go through the kernels, which may hand them to faer. Fixed sizes keep
+        // the expressions written out: the same arithmetic as the kernels' nalgebra branch,
+        // but W1's step measured 60 instructions (1.5%) shorter under callgrind than through
+        // the kernel calls, whose faer branches are dead for fixed sizes yet change how the
+        // compiler inlines the update.
+        let dynamic = N::try_to_usize().is_none() || M::try_to_usize().is_none();
+        let (pht, mut s);
+        if dynamic {
+            (pht, s) = innovation_covariance(&prior.cov, &h, &r);
+        } else {
+            pht = &prior.cov * h.transpose();
+            s = &h * &pht + &r;
+            symmetrize(&mut s);
+        }
         let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(|e| {
             // NaN in H or R makes the factorisation fail too: name the real culprit.
             let culprit = check_finite(&h, "measurement Jacobian H")
@@ -405,7 +417,9 @@ where
         })?;
         let gain = match fixed_gain {
             Some(gain) => gain.clone(),
-            // K = P H^T S^-1, as the transpose of S^-1 (H P): a solve with the factor of S.
+            // K = P H^T S^-1: a solve with the factor of S (sizes agree by construction).
+            None if dynamic => s.solve_right(&pht).map_err(at)?,
+            // K = P H^T S^-1 as the transpose of S^-1 (H P).
             None => s.cholesky().solve(&pht.transpose()).transpose(),
         };
         let x_post = &prior.mean + &gain * &innovation;

@@ -3,7 +3,7 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, OMatrix, check_dim, check_finite, joseph_update,
-    propagate, symmetrize,
+    product, propagate, symmetrize,
 };
 
 use crate::FilterError;
@@ -83,7 +83,7 @@ where
         let s = Covariance::named(propagate(h, &prior) + r, "innovation covariance S")
             .map_err(|e| FilterError::at(iteration, e))?;
         let gain = s
-            .solve(&(h * &prior))
+            .solve(&product(h, &prior))
             .map_err(|e| FilterError::at(iteration, e))?
             .transpose();
         let posterior = joseph_update(&prior, &gain, h, r);

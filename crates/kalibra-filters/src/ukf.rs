@@ -829,12 +829,13 @@ where
         };
         FilterError::at(k, e)
     })?;
-    let gain = s.cholesky().solve(&pxz.transpose()).transpose();
+    // Sizes agree by construction: `pxz` has as many columns as `S` has rows.
+    let gain = s.solve_right(&pxz).map_err(|e| FilterError::at(k, e))?;
     let mut mean = x + &gain * &nu;
     if let Some(space) = spaces.state {
         space.normalize(&mut mean);
     }
-    let cov = &prior.cov - &gain * s.matrix() * gain.transpose();
+    let cov = &prior.cov - propagate(&gain, s.matrix());
     Ok(Candidate {
         zhat,
         nu,

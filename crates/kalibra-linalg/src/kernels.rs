@@ -2,13 +2,14 @@
 //!
 //! Each kernel is written once for any `N: Dim`; with `Const` dimensions nalgebra unrolls it
 //! into stack code as fast as a hand-written `SMatrix` expression (checked by `cargo xtask
-//! bench`).
+//! bench`). `Dyn` sizes from [`FAER_MIN_DIM`](crate::FAER_MIN_DIM) on run faer's products
+//! instead (the choice is [`crate::backend`]'s, made once per kernel call).
 
 use nalgebra::allocator::Allocator;
 use nalgebra::storage::IsContiguous;
 use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, RawStorage};
 
-use crate::{Alloc, LinalgError};
+use crate::{Alloc, LinalgError, backend};
 
 /// `A P A^T` for any `A` (r x n) and square `P` (n x n): the covariance propagation `F P F^T`,
 /// the projection `H P H^T`, and `K R K^T` all use it.
@@ -30,8 +31,63 @@ where
     // either way, a second `Alloc` instance would not be.
     DefaultAllocator: Allocator<R, N> + Allocator<N, R> + Allocator<R, R> + Allocator<N, N>,
 {
+    if let Some(par) = backend::route(a.shape_generic().0, p.shape_generic().0) {
+        return backend::propagate(a, p, par);
+    }
     let ap = a * p;
     ap * a.transpose()
+}
+
+/// The product `a b`: nalgebra's `a * b`, or faer's for large `Dyn` sizes.
+///
+/// ```
+/// use kalibra_linalg::{product, Matrix2};
+/// let a = Matrix2::new(1.0, 2.0, 3.0, 4.0);
+/// assert_eq!(product(&a, &a), a * a);
+/// ```
+#[inline]
+pub fn product<R: Dim, K: Dim, C: Dim>(
+    a: &OMatrix<f64, R, K>,
+    b: &OMatrix<f64, K, C>,
+) -> OMatrix<f64, R, C>
+where
+    DefaultAllocator: Allocator<R, K> + Allocator<K, C> + Allocator<R, C>,
+{
+    let (r, k) = a.shape_generic();
+    if let Some(par) = backend::route3(r, k, b.shape_generic().1) {
+        return backend::product(a, b, par);
+    }
+    a * b
+}
+
+/// `(P H^T, S)` with the innovation covariance `S = H P H^T + R` symmetrised: the first half
+/// of a Kalman update, whose `P H^T` the gain `K = P H^T S^-1` reuses
+/// ([`Covariance::solve_right`](crate::Covariance::solve_right)).
+///
+/// ```
+/// use kalibra_linalg::{innovation_covariance, Matrix2, SMatrix};
+/// let p = Matrix2::new(4.0, 1.0, 1.0, 2.0);
+/// let h = SMatrix::<f64, 1, 2>::new(1.0, 0.0);
+/// let (pht, s) = innovation_covariance(&p, &h, &SMatrix::<f64, 1, 1>::new(0.5));
+/// assert_eq!(pht, SMatrix::<f64, 2, 1>::new(4.0, 1.0));
+/// assert_eq!(s[(0, 0)], 4.5);
+/// ```
+#[inline]
+pub fn innovation_covariance<N: Dim, M: Dim>(
+    p: &OMatrix<f64, N, N>,
+    h: &OMatrix<f64, M, N>,
+    r: &OMatrix<f64, M, M>,
+) -> (OMatrix<f64, N, M>, OMatrix<f64, M, M>)
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    if let Some(par) = backend::route(p.shape_generic().0, r.shape_generic().0) {
+        return backend::innovation_covariance(p, h, r, par);
+    }
+    let pht = p * h.transpose();
+    let mut s = h * &pht + r;
+    symmetrize(&mut s);
+    (pht, s)
 }
 
 /// Replaces `m` by `(m + m^T) / 2`, removing the asymmetry that rounding leaves in products.
@@ -46,6 +102,12 @@ where
 {
     let n = m.nrows();
     assert_eq!(n, m.ncols(), "symmetrize needs a square matrix");
+    if D::try_to_usize().is_none() {
+        // Over the raw slice tile by tile (no bounds check per entry, and the strided
+        // triangle stays in cache): the same arithmetic.
+        backend::symmetrize_slice(m.as_mut_slice(), n);
+        return;
+    }
     for j in 0..n {
         for i in (j + 1)..n {
             let mean = 0.5 * (m[(i, j)] + m[(j, i)]);
@@ -70,6 +132,9 @@ pub fn joseph_update<N: Dim, M: Dim>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    if let Some(par) = backend::route(p.shape_generic().0, r.shape_generic().0) {
+        return backend::joseph_update(p, k, h, r, par);
+    }
     let mut ikh = -(k * h);
     for i in 0..ikh.nrows() {
         ikh[(i, i)] += 1.0;
@@ -90,6 +155,9 @@ pub fn standard_update<N: Dim, M: Dim>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    if let Some(par) = backend::route(p.shape_generic().0, h.shape_generic().0) {
+        return backend::standard_update(p, k, h, par);
+    }
     let mut out = p - k * (h * p);
     symmetrize(&mut out);
     out

@@ -16,16 +16,23 @@
 //!   both.
 //! * [`PsdMatrix`], a checked symmetric positive *semi*-definite matrix with a square-root
 //!   factor, for process noise that is often rank-deficient (`Q = G G^T`).
-//! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`joseph_update`],
-//!   [`standard_update`], [`symmetrize`], and [`sigma_sqrt`], a matrix square root for sigma
-//!   points with a documented fallback.
+//! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`innovation_covariance`]
+//!   (`P H^T` and `S`), the gain by [`Covariance::solve_right`], [`joseph_update`],
+//!   [`standard_update`], [`product`], [`symmetrize`], and [`sigma_sqrt`], a matrix square root
+//!   for sigma points with a documented fallback.
 //! * [`discrete_lyapunov`]: the stationary covariance `X = A X A^T + Q` by Smith's doubling,
 //!   with a typed error when the series diverges, and [`spectral_radius`] (Gelfand's formula
 //!   by repeated squaring).
+//! * Large run-time sizes through faer ([`backend`]): from [`FAER_MIN_DIM`] on, the `Dyn`
+//!   kernels run faer's blocked, vectorised products and Cholesky factorisation on views of
+//!   nalgebra's storage (a Kalman step about 1.5x as fast as nalgebra's at `n = 64` and
+//!   1.9-2.3x from 128 on: `cargo xtask bench w4`), with nalgebra types at every interface. Fixed sizes never leave nalgebra. Which code
+//!   runs is one decision per kernel call, by the calling thread's [`KernelPolicy`]
+//!   ([`with_kernel_policy`]), which can also let faer use several threads within a step for
+//!   `n >= ` [`PARALLEL_MIN_DIM`].
 //!
-//! It is not a general linear-algebra library: it has no per-operation backend traits and no
-//! large-matrix kernels (faer comes in behind a feature once a benchmark shows it pays, for state
-//! dimensions of about 32 and more).
+//! It is not a general linear-algebra library: it has no per-operation backend traits, and
+//! faer sits underneath the kernels, not beside them in the API.
 //!
 //! # Notation
 //! `P` is a state covariance (n x n), `F` a transition Jacobian, `Q` a process-noise covariance,
@@ -61,6 +68,7 @@
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod alloc;
+pub mod backend;
 mod covariance;
 mod error;
 mod gaussian;
@@ -69,13 +77,17 @@ mod lyapunov;
 mod psd;
 
 pub use alloc::Alloc;
+pub use backend::{
+    FAER_MIN_DIM, KernelPolicy, PARALLEL_MIN_DIM, kernel_policy, with_kernel_policy,
+};
 pub use covariance::{
     Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once, quad_form_symmetric,
 };
 pub use error::LinalgError;
 pub use gaussian::Gaussian;
 pub use kernels::{
-    all_finite, check_dim, check_finite, joseph_update, propagate, standard_update, symmetrize,
+    all_finite, check_dim, check_finite, innovation_covariance, joseph_update, product, propagate,
+    standard_update, symmetrize,
 };
 pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,

@@ -2,7 +2,9 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix};
 
-use crate::{Alloc, LinalgError, check_dim, check_finite, check_symmetric, propagate, symmetrize};
+use crate::{
+    Alloc, LinalgError, check_dim, check_finite, check_symmetric, product, propagate, symmetrize,
+};
 
 /// Most doublings [`discrete_lyapunov`] runs: `2^64` terms of the series, far beyond any
 /// spectral radius that is below 1 in floating point.
@@ -59,7 +61,7 @@ where
         if inc <= f64::EPSILON * total {
             return Ok(x);
         }
-        power = &power * &power;
+        power = product(&power, &power);
     }
     Err(LinalgError::NotConvergent {
         what: "discrete Lyapunov doubling",
@@ -114,7 +116,7 @@ where
             return Ok(next);
         }
         estimate = next;
-        m = &m * &m;
+        m = product(&m, &m);
         log_scale *= 2.0;
         power *= 2.0;
     }

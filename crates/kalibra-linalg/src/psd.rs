@@ -1,6 +1,5 @@
 //! Square roots of symmetric positive semi-definite matrices.
 
-use nalgebra::linalg::Cholesky;
 use nalgebra::{DefaultAllocator, Dim, OMatrix};
 
 use crate::{Alloc, LinalgError, check_finite};
@@ -140,7 +139,7 @@ pub fn sigma_sqrt<D: Dim>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    if let Some(chol) = Cholesky::new(p.clone()) {
+    if let Some(chol) = crate::covariance::cholesky(p.clone()) {
         let l = chol.unpack();
         // `all_finite` folds over the raw slice (about one instruction per entry, against
         // seven for nalgebra's element iterator): this runs at every UKF step.
@@ -239,7 +238,11 @@ mod tests {
         let (l, rank) = semidefinite_factor(&p, "P").unwrap();
         assert_eq!(rank, 4);
         // Diagonal already in decreasing order: no pivoting, so it is the Cholesky factor.
-        assert_relative_eq!(l, Cholesky::new(p).unwrap().l(), epsilon = 1e-14);
+        assert_relative_eq!(
+            l,
+            nalgebra::linalg::Cholesky::new(p).unwrap().l(),
+            epsilon = 1e-14
+        );
         assert_eq!(sigma_sqrt(&p, "P").unwrap().1, SqrtMethod::Cholesky);
     }
 
