@@ -5,7 +5,7 @@
 //! Cholesky factorisations behind [`Covariance`], [`quad_form_symmetric`] and [`sigma_sqrt`],
 //! the solves with a matrix right-hand side [`Covariance::solve`] and
 //! [`Covariance::solve_right`], and the products of [`discrete_lyapunov`] and
-//! [`spectral_radius`]) asks [`route`] once which code to run. Solves with one vector (the
+//! [`spectral_radius`]) asks `route` once which code to run. Solves with one vector (the
 //! quadratic forms after their factorisation) stay with nalgebra: `O(n^2)` work that faer does
 //! not speed up measurably. Fixed sizes (every dimension a
 //! `Const`) never leave nalgebra: the test is on the types, so the compiler removes the faer
