@@ -32,23 +32,8 @@ struct Cells {
 /// The cells of a per-cell array with `cell_dims` trailing dimensions; a single run may drop
 /// the leading R axis.
 fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
-    let (runs, rest) = match a.shape.len() - cell_dims.min(a.shape.len()) {
-        2 => (a.shape[0], &a.shape[1..]),
-        1 => (1, &a.shape[..]),
-        _ => {
-            let expected = if cell_dims == 1 {
-                "(R, K, dim) or (K, dim)"
-            } else {
-                "(R, K, dim, dim) or (K, dim, dim)"
-            };
-            return Err(format!(
-                "array {array} has shape {:?}; expected {expected}",
-                a.shape
-            ));
-        }
-    };
-    let steps = rest[0];
-    let cell_shape = rest[1..].to_vec();
+    // The shape rules are the streaming NPZ reader's, so both read an array the same way.
+    let (runs, steps, cell_shape) = crate::npz_log::cell_shape(array, &a.shape, cell_dims)?;
     let size: usize = cell_shape.iter().product();
     let logged = |c: &[f64]| !c.iter().all(|v| v.is_nan());
     let cells = if size == 0 {

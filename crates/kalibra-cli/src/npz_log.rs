@@ -149,7 +149,7 @@ fn read_whole(archive: &mut Archive, entry: &str) -> Result<Array, String> {
 
 /// The runs, steps and cell shape of a per-cell array with `cell_dims` trailing dimensions;
 /// a single run may drop the leading R axis.
-fn cell_shape(
+pub(crate) fn cell_shape(
     array: &str,
     shape: &[usize],
     cell_dims: usize,
