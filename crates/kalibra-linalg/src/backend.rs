@@ -6,22 +6,23 @@
 //! the solves with a matrix right-hand side [`Covariance::solve`] and
 //! [`Covariance::solve_right`], the products of [`discrete_lyapunov`] and
 //! [`spectral_radius`], and the UKF's sums [`add_scatter`] and [`add_cross_scatter`]) asks
-//! `route` once which code to run. Solves with one vector (the
-//! quadratic forms after their factorisation) stay with nalgebra: `O(n^2)` work that faer does
-//! not speed up measurably. Fixed sizes (every dimension a
-//! `Const`) never leave nalgebra: the test is on the types, so the compiler removes the faer
-//! branch and the fixed-size code is what it was before faer came in. A `Dyn` kernel whose
-//! largest dimension is at least the policy's threshold ([`FAER_MIN_DIM`] unless the calling
-//! thread chose another [`KernelPolicy`]) runs faer's blocked, vectorised products and
-//! Cholesky factorisation on views of nalgebra's column-major storage: no copy in or out, and
-//! nalgebra types at every interface.
+//! `route` once which code to run. Solves with one vector (the quadratic forms after their
+//! factorisation) stay with nalgebra: `O(n^2)` work that faer does not speed up measurably.
+//!
+//! Fixed sizes (every dimension a `Const`) never leave nalgebra: the test is on the types, so
+//! the compiler removes the faer branch and the fixed-size code is what it was before faer
+//! came in. A `Dyn` kernel whose largest dimension is at least the policy's threshold
+//! ([`FAER_MIN_DIM`] unless the calling thread chose another [`KernelPolicy`]) runs faer's
+//! blocked, vectorised products and Cholesky factorisation on views of nalgebra's
+//! column-major storage: no copy in or out, and nalgebra types at every interface.
 //!
 //! faer's side exploits what the filter algebra knows: a product whose result is symmetric
-//! (`A P A^T` with a symmetric `P`, `H P H^T + R`, the Joseph form) computes only its lower
-//! triangle and mirrors it, which saves a third of `A P A^T`'s work; the Cholesky scratch
-//! faer needs lives in a per-thread buffer reused from call to call, so a kernel allocates no
-//! more than its nalgebra twin (fewer: nalgebra's `a.transpose()` operands are copies, faer's
-//! are views).
+//! (`A P A^T` with a symmetric `P`, `H P H^T + R`, the Joseph form, the sigma-point scatter)
+//! computes only its lower triangle and mirrors it, which saves a third of `A P A^T`'s work;
+//! the Joseph form is re-associated so that every product has `m` as a dimension
+//! (`joseph_update` below); the Cholesky scratch faer needs lives in a per-thread buffer
+//! reused from call to call, so a kernel allocates no more than its nalgebra twin (fewer:
+//! nalgebra's `a.transpose()` operands are copies, faer's are views).
 //!
 //! [`propagate`]: crate::propagate
 //! [`product`]: crate::product
