@@ -1,7 +1,7 @@
 //! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
 //!
 //! `cargo xtask bench [w1|w2|w4|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
-//! [--seed N] [--sizes N,N,...] [--kernels] [--no-python]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
+//! [--seed N] [--sizes N,N,...] [--kernels] [--ukf] [--no-python]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
 //! `--runs` x 51 steps, in `bench_w2`) by default, or only the one named. `--steps` applies to
 //! W1 and eval, `--threads` to W1, W2 and W4, `--seed` to eval only.
 //!
@@ -69,6 +69,9 @@ pub(crate) struct Args {
     /// W4: also time the kernels of the step one by one, faer against nalgebra.
     #[arg(long)]
     pub(crate) kernels: bool,
+    /// W4: also time a UKF on the same problems (n <= 256), faer against nalgebra.
+    #[arg(long)]
+    pub(crate) ukf: bool,
     /// W4: skip the numpy script (no Python, no PyPI).
     #[arg(long)]
     pub(crate) no_python: bool,

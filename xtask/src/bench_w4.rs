@@ -30,7 +30,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail, ensure};
-use kalibra_filters::{Filter, Kf};
+use kalibra_filters::{Filter, Kf, SigmaSet, Ukf};
 use kalibra_linalg::{
     Covariance, DMatrix, DVector, Dyn, KernelPolicy, PARALLEL_MIN_DIM, innovation_covariance,
     joseph_update, product, propagate, quad_form_symmetric, with_kernel_policy,
@@ -355,6 +355,40 @@ fn kernel_ratios(n: usize, budget: f64) -> Result<Vec<(&'static str, f64)>> {
     Ok(out)
 }
 
+/// Best time per step of a UKF (symmetric sigma set, `kappa = 0`) on `problem` under `policy`:
+/// blocks of five steps after two warm-up steps, at least three blocks and `budget` seconds.
+fn ukf_step(problem: &Problem, policy: KernelPolicy, budget: f64) -> Result<f64> {
+    with_kernel_policy(policy, || {
+        let mut ukf = Ukf::new(
+            &problem.dynamics,
+            &problem.measurement,
+            DVector::zeros(problem.n),
+            problem.p0.clone(),
+            SigmaSet::Symmetric { kappa: 0.0 },
+        )?;
+        let zs = &problem.truth.measurements;
+        let mut k = 0;
+        let mut step = |ukf: &mut Ukf<_, _, _, _>| -> Result<()> {
+            ukf.predict()?;
+            ukf.update(&zs[k % zs.len()])?;
+            k += 1;
+            Ok(())
+        };
+        step(&mut ukf)?;
+        step(&mut ukf)?;
+        let (mut best, mut blocks, start) = (f64::INFINITY, 0, Instant::now());
+        while blocks < 3 || start.elapsed().as_secs_f64() < budget {
+            let t = Instant::now();
+            for _ in 0..5 {
+                step(&mut ukf)?;
+            }
+            best = best.min(t.elapsed().as_secs_f64() / 5.0);
+            blocks += 1;
+        }
+        Ok(best)
+    })
+}
+
 /// numpy's time per step for each size, from `xtask/bench/w4_numpy.py`.
 fn numpy_times(
     root: &FsPath,
@@ -523,6 +557,24 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
                 line.push_str(&format!(" {ratio:>16.2}"));
             }
             println!("{line}");
+        }
+    }
+    if args.ukf {
+        println!("  UKF (symmetric sigma set) on the same problems, n <= 256: time per step");
+        println!(
+            "  {:>5} {:>12} {:>12} {:>8}",
+            "n", "nalgebra us", "faer us", "speed-up"
+        );
+        for &n in sizes.iter().filter(|&&n| n <= 256) {
+            let problem = Problem::new(n)?;
+            let faer = ukf_step(&problem, KernelPolicy::faer_from(0), BUDGET / 2.0)?;
+            let nalgebra = ukf_step(&problem, KernelPolicy::NALGEBRA, BUDGET / 2.0)?;
+            println!(
+                "  {n:>5} {:>12.1} {:>12.1} {:>7.2}x",
+                us(nalgebra),
+                us(faer),
+                nalgebra / faer
+            );
         }
     }
     if args.no_python {

@@ -3,7 +3,7 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, SqrtMethod,
-    all_finite, check_finite, propagate, sigma_sqrt, symmetrize,
+    add_cross_scatter, add_scatter, all_finite, check_finite, propagate, sigma_sqrt, symmetrize,
 };
 use std::sync::Arc;
 
@@ -564,9 +564,14 @@ where
                 }
                 let d0 = &x0 - &mean;
                 let mut cov = &d0 * d0.transpose() * w.cov_center;
-                for xi in &self.scratch_x {
-                    let d = xi - &mean;
-                    cov += &d * d.transpose() * w.other;
+                if N::try_to_usize().is_some() {
+                    // Fixed sizes: the loop written out, as in the KF core (see there).
+                    for xi in &self.scratch_x {
+                        let d = xi - &mean;
+                        cov += &d * d.transpose() * w.other;
+                    }
+                } else {
+                    add_scatter(&mut cov, &self.scratch_x, &mean, w.other);
                 }
                 (mean, cov)
             }
@@ -763,6 +768,10 @@ where
 {
     let n = prior.mean.nrows();
     let x = &prior.mean;
+    // Fixed sizes write the sigma-point sums out, run-time sizes call the kernels (which may
+    // hand them to faer): the same arithmetic below the faer threshold, but the kernel calls
+    // changed how the compiler inlined the fixed-size update (W2's UKF step, callgrind).
+    let fixed = N::try_to_usize().is_some() && M::try_to_usize().is_some();
     let (zhat, mut pz) = match spaces.measurement_mean {
         None => {
             // Sigma measurements as residuals from the central one: unwrapped around it.
@@ -776,9 +785,13 @@ where
                 dbar += d * w.other;
             }
             let mut pz = &dbar * dbar.transpose() * w.cov_center;
-            for d in scratch.iter() {
-                let dd = d - &dbar;
-                pz += &dd * dd.transpose() * w.other;
+            if fixed {
+                for d in scratch.iter() {
+                    let dd = d - &dbar;
+                    pz += &dd * dd.transpose() * w.other;
+                }
+            } else {
+                add_scatter(&mut pz, scratch, &dbar, w.other);
             }
             (z0 + &dbar, pz)
         }
@@ -810,9 +823,19 @@ where
     symmetrize(&mut pz);
     // The central point has no state deviation, and the mean cancels between each pair.
     let mut pxz = OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
-    for j in 0..n {
-        let dz = &scratch[j] - &scratch[n + j];
-        pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
+    if fixed {
+        for j in 0..n {
+            let dz = &scratch[j] - &scratch[n + j];
+            pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
+        }
+    } else {
+        add_cross_scatter(
+            &mut pxz,
+            l,
+            &scratch[..n],
+            &scratch[n..],
+            w.spread * w.other,
+        );
     }
     let mut zhat = zhat;
     if spaces.measurement_mean.is_none() {

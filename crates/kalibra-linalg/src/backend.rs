@@ -4,23 +4,25 @@
 //! [`product`], [`innovation_covariance`], [`joseph_update`], [`standard_update`], the
 //! Cholesky factorisations behind [`Covariance`], [`quad_form_symmetric`] and [`sigma_sqrt`],
 //! the solves with a matrix right-hand side [`Covariance::solve`] and
-//! [`Covariance::solve_right`], and the products of [`discrete_lyapunov`] and
-//! [`spectral_radius`]) asks `route` once which code to run. Solves with one vector (the
-//! quadratic forms after their factorisation) stay with nalgebra: `O(n^2)` work that faer does
-//! not speed up measurably. Fixed sizes (every dimension a
-//! `Const`) never leave nalgebra: the test is on the types, so the compiler removes the faer
-//! branch and the fixed-size code is what it was before faer came in. A `Dyn` kernel whose
-//! largest dimension is at least the policy's threshold ([`FAER_MIN_DIM`] unless the calling
-//! thread chose another [`KernelPolicy`]) runs faer's blocked, vectorised products and
-//! Cholesky factorisation on views of nalgebra's column-major storage: no copy in or out, and
-//! nalgebra types at every interface.
+//! [`Covariance::solve_right`], the products of [`discrete_lyapunov`] and
+//! [`spectral_radius`], and the UKF's sums [`add_scatter`] and [`add_cross_scatter`]) asks
+//! `route` once which code to run. Solves with one vector (the quadratic forms after their
+//! factorisation) stay with nalgebra: `O(n^2)` work that faer does not speed up measurably.
+//!
+//! Fixed sizes (every dimension a `Const`) never leave nalgebra: the test is on the types, so
+//! the compiler removes the faer branch and the fixed-size code is what it was before faer
+//! came in. A `Dyn` kernel whose largest dimension is at least the policy's threshold
+//! ([`FAER_MIN_DIM`] unless the calling thread chose another [`KernelPolicy`]) runs faer's
+//! blocked, vectorised products and Cholesky factorisation on views of nalgebra's
+//! column-major storage: no copy in or out, and nalgebra types at every interface.
 //!
 //! faer's side exploits what the filter algebra knows: a product whose result is symmetric
-//! (`A P A^T` with a symmetric `P`, `H P H^T + R`, the Joseph form) computes only its lower
-//! triangle and mirrors it, which saves a third of `A P A^T`'s work; the Cholesky scratch
-//! faer needs lives in a per-thread buffer reused from call to call, so a kernel allocates no
-//! more than its nalgebra twin (fewer: nalgebra's `a.transpose()` operands are copies, faer's
-//! are views).
+//! (`A P A^T` with a symmetric `P`, `H P H^T + R`, the Joseph form, the sigma-point scatter)
+//! computes only its lower triangle and mirrors it, which saves a third of `A P A^T`'s work;
+//! the Joseph form is re-associated so that every product has `m` as a dimension
+//! (`joseph_update` below); the Cholesky scratch faer needs lives in a per-thread buffer
+//! reused from call to call, so a kernel allocates no more than its nalgebra twin (fewer:
+//! nalgebra's `a.transpose()` operands are copies, faer's are views).
 //!
 //! [`propagate`]: crate::propagate
 //! [`product`]: crate::product
@@ -34,6 +36,8 @@
 //! [`sigma_sqrt`]: crate::sigma_sqrt
 //! [`discrete_lyapunov`]: crate::discrete_lyapunov
 //! [`spectral_radius`]: crate::spectral_radius
+//! [`add_scatter`]: crate::add_scatter
+//! [`add_cross_scatter`]: crate::add_cross_scatter
 
 use std::cell::{Cell, RefCell};
 use std::mem::MaybeUninit;
@@ -51,7 +55,7 @@ use faer::linalg::triangular_solve::{
 use faer::{Accum, MatMut, MatRef, Par};
 use nalgebra::allocator::Allocator;
 use nalgebra::linalg::Cholesky;
-use nalgebra::{DefaultAllocator, Dim, OMatrix};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 /// The smallest `Dyn` dimension that the kernels hand to faer by default: the largest
 /// dimension of a kernel's operands (`n` for a state covariance, `m` for the factor of `S`)
@@ -548,6 +552,75 @@ where
     out
 }
 
+/// `acc += w sum_j (x_j - c)(x_j - c)^T`: the deviations packed into one faer matrix, the
+/// lower triangle of `w D D^T` in one product, added to both triangles of `acc`.
+pub(crate) fn add_scatter<D: Dim>(
+    acc: &mut OMatrix<f64, D, D>,
+    points: &[OVector<f64, D>],
+    center: &OVector<f64, D>,
+    weight: f64,
+    par: Par,
+) where
+    DefaultAllocator: Allocator<D, D> + Allocator<D>,
+{
+    let n = center.nrows();
+    assert_eq!(acc.nrows(), n, "scatter and accumulator differ in size");
+    let c = center.as_slice();
+    let mut d = faer::Mat::<f64>::zeros(n, points.len());
+    for (j, x) in points.iter().enumerate() {
+        assert_eq!(x.nrows(), n, "a sigma point differs in size");
+        for (i, (xi, ci)) in x.as_slice().iter().zip(c).enumerate() {
+            d[(i, j)] = xi - ci;
+        }
+    }
+    let mut s = faer::Mat::<f64>::zeros(n, n);
+    let par = par_for(par, n, n);
+    triangular::matmul(
+        s.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        d.as_ref(),
+        BlockStructure::Rectangular,
+        d.as_ref().transpose(),
+        BlockStructure::Rectangular,
+        weight,
+        par,
+    );
+    let a = acc.as_mut_slice();
+    for j in 0..n {
+        a[j + j * n] += s[(j, j)];
+        for i in (j + 1)..n {
+            a[i + j * n] += s[(i, j)];
+            a[j + i * n] += s[(i, j)];
+        }
+    }
+}
+
+/// `acc += w A (U - V)^T` in one faer product.
+pub(crate) fn add_cross_scatter<N: Dim, M: Dim>(
+    acc: &mut OMatrix<f64, N, M>,
+    a: &OMatrix<f64, N, N>,
+    plus: &[OVector<f64, M>],
+    minus: &[OVector<f64, M>],
+    weight: f64,
+    par: Par,
+) where
+    DefaultAllocator: Allocator<N, N> + Allocator<N, M> + Allocator<M>,
+{
+    let m = acc.ncols();
+    let mut dt = faer::Mat::<f64>::zeros(a.ncols(), m);
+    for (j, (u, v)) in plus.iter().zip(minus).enumerate() {
+        assert!(
+            u.nrows() == m && v.nrows() == m,
+            "a sigma measurement differs in size"
+        );
+        for (i, (ui, vi)) in u.as_slice().iter().zip(v.as_slice()).enumerate() {
+            dt[(j, i)] = ui - vi;
+        }
+    }
+    mul(view_mut(acc), Accum::Add, view(a), dt.as_ref(), weight, par);
+}
+
 /// The Cholesky factorisation of the lower triangle of `m` in place, as nalgebra's
 /// `Cholesky` (its upper triangle keeps `m`'s, which nalgebra's factor ignores too). `None`
 /// for a non-positive (or NaN) pivot.
@@ -697,6 +770,35 @@ mod tests {
             };
             let ((f1, f2), (n1, n2)) = (quad(FAER), quad(KernelPolicy::NALGEBRA));
             assert!((f1 - n1).abs() <= 1e-13 * n1 && (f2 - n2).abs() <= 1e-13 * n2);
+            let points: Vec<DVector<f64>> = (0..2 * n)
+                .map(|j| entries(n, 1, seed + 10 + j as u64).column(0).into_owned())
+                .collect();
+            let center: DVector<f64> = entries(n, 1, seed + 5).column(0).into_owned();
+            check(
+                "scatter",
+                both(&|| {
+                    let mut acc = p.clone();
+                    crate::add_scatter(&mut acc, &points, &center, 0.3);
+                    acc
+                }),
+            );
+            let (plus, minus): (Vec<DVector<f64>>, Vec<DVector<f64>>) = (0..n)
+                .map(|j| {
+                    let u = entries(m, 1, seed + 900 + j as u64).column(0).into_owned();
+                    (
+                        u,
+                        entries(m, 1, seed + 700 + j as u64).column(0).into_owned(),
+                    )
+                })
+                .unzip();
+            check(
+                "cross scatter",
+                both(&|| {
+                    let mut acc = pht.clone();
+                    crate::add_cross_scatter(&mut acc, &a, &plus, &minus, 0.7);
+                    acc
+                }),
+            );
             let stable = &a * (0.9 / spectral_radius(&a).unwrap());
             check(
                 "Lyapunov",

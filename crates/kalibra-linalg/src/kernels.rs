@@ -7,7 +7,7 @@
 
 use nalgebra::allocator::Allocator;
 use nalgebra::storage::IsContiguous;
-use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, RawStorage};
+use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage};
 
 use crate::{Alloc, LinalgError, backend};
 
@@ -88,6 +88,74 @@ where
     let mut s = h * &pht + r;
     symmetrize(&mut s);
     (pht, s)
+}
+
+/// `acc += w sum_j (x_j - c)(x_j - c)^T`: the weighted scatter of sigma points about their
+/// mean, as the unscented transform adds it to a covariance.
+///
+/// nalgebra adds one outer product per point; from [`FAER_MIN_DIM`](crate::FAER_MIN_DIM) on
+/// (the larger of the dimension and the number of points) faer packs the deviations into one
+/// matrix and forms the lower triangle of `D D^T` in one product, added to both triangles of
+/// `acc`: `O(n)` allocations of `n x n` temporaries become two.
+///
+/// ```
+/// use kalibra_linalg::{add_scatter, Matrix2, Vector2};
+/// let mut acc = Matrix2::zeros();
+/// add_scatter(&mut acc, &[Vector2::new(1.0, 0.0), Vector2::new(-1.0, 0.0)], &Vector2::zeros(), 0.5);
+/// assert_eq!(acc, Matrix2::new(1.0, 0.0, 0.0, 0.0));
+/// ```
+///
+/// # Panics
+/// If a point or `c` differs in length from `acc` (possible only with `Dyn` sizes).
+#[inline]
+pub fn add_scatter<D: Dim>(
+    acc: &mut OMatrix<f64, D, D>,
+    points: &[OVector<f64, D>],
+    center: &OVector<f64, D>,
+    weight: f64,
+) where
+    DefaultAllocator: Alloc<D>,
+{
+    if let Some(par) = backend::route(center.shape_generic().0, nalgebra::Dyn(points.len())) {
+        return backend::add_scatter(acc, points, center, weight, par);
+    }
+    for x in points {
+        let d = x - center;
+        *acc += &d * d.transpose() * weight;
+    }
+}
+
+/// `acc += w sum_j a_j (u_j - v_j)^T` over the columns `a_j` of `a` and the pairs `u_j`, `v_j`:
+/// the unscented cross-covariance `Pxz` from the columns of the prior's factor and the
+/// differences of the sigma measurements on either side.
+///
+/// nalgebra adds one outer product per column; from
+/// [`FAER_MIN_DIM`](crate::FAER_MIN_DIM) on faer forms `A (U - V)^T` in one product.
+///
+/// # Panics
+/// If `plus` and `minus` do not both hold one vector per column of `a`, or the sizes differ
+/// from `acc`'s (possible only with `Dyn` sizes).
+#[inline]
+pub fn add_cross_scatter<N: Dim, M: Dim>(
+    acc: &mut OMatrix<f64, N, M>,
+    a: &OMatrix<f64, N, N>,
+    plus: &[OVector<f64, M>],
+    minus: &[OVector<f64, M>],
+    weight: f64,
+) where
+    DefaultAllocator: Alloc<N, M>,
+{
+    assert!(
+        plus.len() == a.ncols() && minus.len() == a.ncols(),
+        "one pair of vectors per column"
+    );
+    if let Some(par) = backend::route(a.shape_generic().0, acc.shape_generic().1) {
+        return backend::add_cross_scatter(acc, a, plus, minus, weight, par);
+    }
+    for (j, (u, v)) in plus.iter().zip(minus).enumerate() {
+        let dz = u - v;
+        *acc += a.column(j) * dz.transpose() * weight;
+    }
 }
 
 /// Replaces `m` by `(m + m^T) / 2`, removing the asymmetry that rounding leaves in products.

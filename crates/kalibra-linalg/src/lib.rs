@@ -18,8 +18,9 @@
 //!   factor, for process noise that is often rank-deficient (`Q = G G^T`).
 //! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`innovation_covariance`]
 //!   (`P H^T` and `S`), the gain by [`Covariance::solve_right`], [`joseph_update`],
-//!   [`standard_update`], [`product`], [`symmetrize`], and [`sigma_sqrt`], a matrix square root
-//!   for sigma points with a documented fallback.
+//!   [`standard_update`], [`product`], [`symmetrize`], [`sigma_sqrt`], a matrix square root
+//!   for sigma points with a documented fallback, and the unscented transform's sums of outer
+//!   products [`add_scatter`] and [`add_cross_scatter`].
 //! * [`discrete_lyapunov`]: the stationary covariance `X = A X A^T + Q` by Smith's doubling,
 //!   with a typed error when the series diverges, and [`spectral_radius`] (Gelfand's formula
 //!   by repeated squaring).
@@ -86,8 +87,8 @@ pub use covariance::{
 pub use error::LinalgError;
 pub use gaussian::Gaussian;
 pub use kernels::{
-    all_finite, check_dim, check_finite, innovation_covariance, joseph_update, product, propagate,
-    standard_update, symmetrize,
+    add_cross_scatter, add_scatter, all_finite, check_dim, check_finite, innovation_covariance,
+    joseph_update, product, propagate, standard_update, symmetrize,
 };
 pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,
