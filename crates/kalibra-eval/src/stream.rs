@@ -2,8 +2,10 @@
 //! read row by row) and as the one implementation behind [`Evaluation::evaluate`].
 
 use kalibra_linalg::nalgebra::Cholesky;
-use kalibra_linalg::{DMatrix, DVector, LinalgError, check_symmetric, symmetrize};
-use kalibra_metrics::{Credibility, JHorizon, SquaredErrors, StepMean, j_step};
+use kalibra_linalg::{DMatrix, DVector, LinalgError, SMatrix, check_symmetric, symmetrize};
+use kalibra_metrics::{
+    Credibility, JHorizon, JStep, MetricsError, SquaredErrors, StepMean, j_step,
+};
 use rayon::prelude::*;
 
 use crate::evaluate::{BandCache, FindingTally, reason};
@@ -149,8 +151,96 @@ struct JSide {
     j1: StepMean,
     j2: StepMean,
     failed: usize,
-    /// Per run, the last step fed and its covariance if it was valid.
-    previous: Vec<Option<(usize, DMatrix<f64>)>>,
+    /// Per run, the last step fed if its covariance was valid, and the storage of that
+    /// covariance (kept from cell to cell, so a cell copies into it and allocates nothing).
+    previous: Vec<(Option<usize>, DMatrix<f64>)>,
+    /// The current cell's covariance.
+    current: DMatrix<f64>,
+    /// The last model seen and the products of it that `J1`/`J2` need.
+    model: Option<JModel>,
+    /// `m x n` and `m x m` products of a cell.
+    hp: DMatrix<f64>,
+    a: DMatrix<f64>,
+    c: DMatrix<f64>,
+}
+
+/// [`j_step`] on `m x m` matrices, at a fixed size for `m <= 4` (nalgebra's fixed-size
+/// code: no allocation, where the `Dyn` version allocates each of its temporaries, which
+/// made `J1`/`J2` cost twice the rest of a cell). The operations are the same, in the same
+/// order, so the values are the same to the bit.
+fn j_step_sized(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    c: &DMatrix<f64>,
+) -> Result<JStep, MetricsError> {
+    fn fixed<const M: usize>([a, b, r, c]: [&DMatrix<f64>; 4]) -> Result<JStep, MetricsError> {
+        let s = |x: &DMatrix<f64>| SMatrix::<f64, M, M>::from_column_slice(x.as_slice());
+        j_step(&s(a), &s(b), &s(r), &s(c))
+    }
+    let all = [a, b, r, c];
+    if all.iter().any(|x| x.shape() != a.shape()) {
+        return j_step(a, b, r, c);
+    }
+    match a.nrows() {
+        1 => fixed::<1>(all),
+        2 => fixed::<2>(all),
+        3 => fixed::<3>(all),
+        4 => fixed::<4>(all),
+        _ => j_step(a, b, r, c),
+    }
+}
+
+/// The model matrices of the last cell and the products `J1`/`J2` take from them alone:
+/// while the model stays the same (a constant model, or one per step repeated across runs
+/// in a row), they are converted and multiplied once, not once per cell. The products are
+/// the same expressions as before, so the numbers do not change.
+struct JModel {
+    /// `F`, `H`, `Q`, `R` row by row, one after the other: the key.
+    values: Vec<f64>,
+    h: DMatrix<f64>,
+    r: DMatrix<f64>,
+    /// `H^T`, `H F`, `(H F)^T` and `B = H Q H^T`.
+    ht: DMatrix<f64>,
+    hf: DMatrix<f64>,
+    hft: DMatrix<f64>,
+    b: DMatrix<f64>,
+}
+
+impl JModel {
+    /// Whether `cell` holds the same values, bit for bit.
+    fn is(&self, cell: &ModelCell<'_>) -> bool {
+        let mut at = 0;
+        [cell.f, cell.h, cell.q, cell.r].iter().all(|part| {
+            let same = self.values.get(at..at + part.len()).is_some_and(|v| {
+                v.iter()
+                    .zip(part.iter())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            });
+            at += part.len();
+            same
+        }) && at == self.values.len()
+    }
+
+    fn new(cell: &ModelCell<'_>, (n, m): (usize, usize)) -> Self {
+        let f = DMatrix::from_row_slice(n, n, cell.f);
+        let h = DMatrix::from_row_slice(m, n, cell.h);
+        let q = DMatrix::from_row_slice(n, n, cell.q);
+        let r = DMatrix::from_row_slice(m, m, cell.r);
+        let ht = h.transpose();
+        let hf = &h * &f;
+        let hft = hf.transpose();
+        let b: DMatrix<f64> = &h * &q * &ht;
+        Self {
+            values: [cell.f, cell.h, cell.q, cell.r].concat(),
+            h,
+            r,
+            ht,
+            hf,
+            hft,
+            b,
+        }
+    }
 }
 
 /// An evaluation fed one cell at a time ([`Evaluator::push`]), finished into the same
@@ -259,6 +349,11 @@ impl Evaluation {
                 j2: StepMean::new(0),
                 failed: 0,
                 previous: Vec::new(),
+                current: DMatrix::zeros(0, 0),
+                model: None,
+                hp: DMatrix::zeros(0, 0),
+                a: DMatrix::zeros(0, 0),
+                c: DMatrix::zeros(0, 0),
             }),
             runs: 0,
             steps: 0,
@@ -404,21 +499,35 @@ impl Factor {
     }
 }
 
-/// A cell's matrix as an owned matrix.
-fn owned(dim: usize, cell: MatrixCell<'_>) -> DMatrix<f64> {
+/// Copies a cell's `dim x dim` matrix into `out`, reusing its storage.
+fn fill(out: &mut DMatrix<f64>, dim: usize, cell: MatrixCell<'_>) {
+    if out.shape() != (dim, dim) {
+        *out = DMatrix::zeros(dim, dim);
+    }
     match cell {
-        MatrixCell::Full(v) => DMatrix::from_row_slice(dim, dim, v),
-        MatrixCell::Diagonal(v) => DMatrix::from_diagonal(&DVector::from_column_slice(v)),
+        MatrixCell::Full(v) => {
+            for i in 0..dim {
+                for j in 0..dim {
+                    out[(i, j)] = v[i * dim + j];
+                }
+            }
+        }
+        MatrixCell::Diagonal(v) => {
+            out.fill(0.0);
+            for (i, d) in v.iter().enumerate() {
+                out[(i, i)] = *d;
+            }
+        }
     }
 }
 
-/// A finite model matrix of `rows x cols` from its row-major cell.
-fn model_matrix(
+/// Checks that a model matrix's row-major cell holds `rows x cols` finite values.
+fn check_model(
     array: &'static str,
     at: (usize, usize),
     (rows, cols): (usize, usize),
     values: &[f64],
-) -> Result<DMatrix<f64>, EvalError> {
+) -> Result<(), EvalError> {
     if values.len() != rows * cols {
         return Err(EvalError::CellLength {
             array,
@@ -435,7 +544,7 @@ fn model_matrix(
             step: at.1,
         });
     }
-    Ok(DMatrix::from_row_slice(rows, cols, values))
+    Ok(())
 }
 
 /// What the pure part of a cell gives, computed on any thread: its checked model matrices
@@ -443,7 +552,8 @@ fn model_matrix(
 struct Prepared {
     nees: Option<Result<f64, Reason>>,
     nis: Option<Result<f64, Reason>>,
-    model: Option<[DMatrix<f64>; 4]>,
+    /// Whether the cell's model matrices were logged, are wanted and passed the checks.
+    model: bool,
 }
 
 /// The factorisation storage of one thread.
@@ -538,13 +648,14 @@ impl Evaluator {
         let nu = vector("innovation", at, m.unwrap_or(0), cell.innovation)?;
         let s = square("innovation_cov", at, m.unwrap_or(0), cell.innovation_cov)?;
         let model = match (cell.model, self.contents.model, &self.j) {
-            (Some(c), Some((n, m)), Some(_)) => Some([
-                model_matrix("F", at, (n, n), c.f)?,
-                model_matrix("H", at, (m, n), c.h)?,
-                model_matrix("Q", at, (n, n), c.q)?,
-                model_matrix("R", at, (m, m), c.r)?,
-            ]),
-            _ => None,
+            (Some(c), Some((n, m)), Some(_)) => {
+                check_model("F", at, (n, n), c.f)?;
+                check_model("H", at, (m, n), c.h)?;
+                check_model("Q", at, (n, n), c.q)?;
+                check_model("R", at, (m, m), c.r)?;
+                true
+            }
+            _ => false,
         };
         let mut nees = None;
         if let (Some(_), Some(x), Some(xhat), Some(p)) = (&self.state, truth, estimate, cov)
@@ -593,8 +704,10 @@ impl Evaluator {
         }
         if let Some(j) = &mut self.j {
             let n = self.contents.state_dim().unwrap_or(0);
-            let p = cell.covariance.filter(|_| valid_cov).map(|c| owned(n, c));
-            j.push(at, p, prepared.model)?;
+            let m = self.contents.measurement_dim().unwrap_or(0);
+            let p = cell.covariance.filter(|_| valid_cov);
+            let model = cell.model.filter(|_| prepared.model);
+            j.push(at, (n, m), p, model)?;
         }
         Ok(())
     }
@@ -845,35 +958,55 @@ impl InnovationSide {
 }
 
 impl JSide {
-    /// One cell: its covariance if valid, and its model matrices if logged.
+    /// One cell: its covariance if valid, and its model matrices if logged (both checked).
     fn push(
         &mut self,
         (run, step): (usize, usize),
-        cov: Option<DMatrix<f64>>,
-        model: Option<[DMatrix<f64>; 4]>,
+        (n, m): (usize, usize),
+        cov: Option<MatrixCell<'_>>,
+        model: Option<ModelCell<'_>>,
     ) -> Result<(), EvalError> {
         if run >= self.previous.len() {
-            self.previous.resize(run + 1, None);
+            self.previous
+                .resize_with(run + 1, || (None, DMatrix::zeros(0, 0)));
         }
-        let previous = self.previous[run].take();
-        if let (Some((k, p0)), Some(p1), Some([f, h, q, r])) = (&previous, &cov, &model)
-            && *k + 1 == step
-        {
-            let ht = h.transpose();
-            let hf = h * f;
-            let a: DMatrix<f64> = &hf * p0 * hf.transpose();
-            let b: DMatrix<f64> = h * q * &ht;
-            let c: DMatrix<f64> = h * p1 * &ht;
-            match j_step(&a, &b, r, &c) {
-                Ok(js) => {
-                    self.horizon.push(&js);
-                    self.j1.push(step, js.j1)?;
-                    self.j2.push(step, js.j2)?;
+        if let Some(cov) = cov {
+            fill(&mut self.current, n, cov);
+        }
+        let follows = self.previous[run].0.is_some_and(|k| k + 1 == step);
+        if let (true, Some(_), Some(cell)) = (follows, cov, &model) {
+            if !self.model.as_ref().is_some_and(|j| j.is(cell)) {
+                self.model = Some(JModel::new(cell, (n, m)));
+            }
+            if let Some(jm) = &self.model {
+                if self.hp.shape() != (m, n) {
+                    self.hp = DMatrix::zeros(m, n);
+                    self.a = DMatrix::zeros(m, m);
+                    self.c = DMatrix::zeros(m, m);
                 }
-                Err(_) => self.failed += 1,
+                // A = (H F) P+_{k-1} (H F)^T and C = H P+_k H^T, as products into reused
+                // storage (`mul_to` is the product `*` computes, into a given matrix).
+                jm.hf.mul_to(&self.previous[run].1, &mut self.hp);
+                self.hp.mul_to(&jm.hft, &mut self.a);
+                jm.h.mul_to(&self.current, &mut self.hp);
+                self.hp.mul_to(&jm.ht, &mut self.c);
+                match j_step_sized(&self.a, &jm.b, &jm.r, &self.c) {
+                    Ok(js) => {
+                        self.horizon.push(&js);
+                        self.j1.push(step, js.j1)?;
+                        self.j2.push(step, js.j2)?;
+                    }
+                    Err(_) => self.failed += 1,
+                }
             }
         }
-        self.previous[run] = cov.map(|p| (step, p));
+        let slot = &mut self.previous[run];
+        if cov.is_some() {
+            std::mem::swap(&mut slot.1, &mut self.current);
+            slot.0 = Some(step);
+        } else {
+            slot.0 = None;
+        }
         Ok(())
     }
 

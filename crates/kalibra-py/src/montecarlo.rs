@@ -1,41 +1,270 @@
 //! `kalibra.monte_carlo`: a seeded Monte Carlo of a linear-Gaussian model through kalibra's
 //! Kalman filter, evaluated, entirely in Rust.
 
-use kalibra_filters::{Kf, Start};
-use kalibra_linalg::{DMatrix, DVector, semidefinite_factor};
-use kalibra_models::{LinearGaussian, LinearObservation, sample_with_factor, simulate};
+use kalibra_eval::{Cell, Contents, Evaluation, MatrixCell, ModelCell};
+use kalibra_filters::{Filter, Kf};
+use kalibra_linalg::semidefinite_factor;
+use kalibra_linalg::{
+    Alloc, Const, DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector,
+};
+use kalibra_models::{LinearGaussian, LinearObservation, Simulator, sample_with_factor};
 use kalibra_sim::MonteCarlo;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
+use rayon::prelude::*;
 
 use crate::arrays::{new_array, read};
 use crate::error;
 use crate::eval::{Report, evaluation};
-use crate::filters::run_filter;
 
-/// Why a run failed (a model's or the filter's error, as text).
-#[derive(Debug)]
-struct RunFailure(String);
-
-impl std::fmt::Display for RunFailure {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for RunFailure {}
-
-fn fail(e: impl std::fmt::Display) -> RunFailure {
-    RunFailure(e.to_string())
-}
-
-/// One run's log, row-major per step.
+/// One run's log, row-major per cell.
 struct RunLog {
     truth: Vec<f64>,
     estimate: Vec<f64>,
     covariance: Vec<f64>,
     innovation: Vec<f64>,
     innovation_cov: Vec<f64>,
+}
+
+/// Appends `a` row by row (the log's layout; nalgebra stores columns).
+fn push_rows<R: Dim, C: Dim>(out: &mut Vec<f64>, a: &OMatrix<f64, R, C>)
+where
+    DefaultAllocator: kalibra_linalg::nalgebra::allocator::Allocator<R, C>,
+{
+    for i in 0..a.nrows() {
+        for j in 0..a.ncols() {
+            out.push(a[(i, j)]);
+        }
+    }
+}
+
+/// A study's models and size, as given (column-major `Dyn` matrices).
+struct Setup {
+    f: DMatrix<f64>,
+    h: DMatrix<f64>,
+    q: DMatrix<f64>,
+    r: DMatrix<f64>,
+    fq: DMatrix<f64>,
+    fr: DMatrix<f64>,
+    x0: DVector<f64>,
+    p0: DMatrix<f64>,
+    l0: DMatrix<f64>,
+    runs: usize,
+    steps: usize,
+    seed: u64,
+    threads: usize,
+}
+
+/// Runs simulated and filtered at a time before their cells go to the evaluator: enough to
+/// keep every core busy, few enough that the logs in flight stay small (256 runs of 1000
+/// steps of a 4-state filter are 60 MB), whatever the study's size.
+const CHUNK_RUNS: usize = 256;
+
+/// What a study returns: its report, and its log as arrays when asked for.
+type Outcome = (
+    kalibra_eval::Report,
+    Option<Vec<(String, Vec<usize>, Vec<f64>)>>,
+);
+
+/// The study at state dimension `N` and measurement dimension `M`: `Const` sizes for the
+/// common small models (nalgebra's fixed-size code, no allocation per step), `Dyn` otherwise.
+///
+/// Runs are simulated and filtered in parallel a chunk at a time, each from its own stream
+/// `MonteCarlo::rng(run)`, and their cells go to one [`kalibra_eval::Evaluator`] run after
+/// run, step after step: the order `Evaluation::evaluate` feeds a log in, so the report is
+/// the one `evaluate` gives on the returned log, and the same for any thread count.
+fn study<N: Dim, M: Dim>(
+    setup: &Setup,
+    evaluation: &Evaluation,
+    (nd, md): (N, M),
+    return_log: bool,
+) -> Result<Outcome, String>
+where
+    DefaultAllocator: Alloc<N, M>,
+    // The models are shared by the threads that run the runs.
+    OMatrix<f64, N, N>: Sync,
+    OMatrix<f64, M, N>: Sync,
+    OMatrix<f64, M, M>: Sync,
+    OVector<f64, N>: Sync,
+{
+    let (n, m, steps) = (setup.x0.len(), setup.h.nrows(), setup.steps);
+    let sq =
+        |a: &DMatrix<f64>| OMatrix::<f64, N, N>::from_iterator_generic(nd, nd, a.iter().copied());
+    let obs =
+        |a: &DMatrix<f64>| OMatrix::<f64, M, N>::from_iterator_generic(md, nd, a.iter().copied());
+    let meas =
+        |a: &DMatrix<f64>| OMatrix::<f64, M, M>::from_iterator_generic(md, md, a.iter().copied());
+    let x0 = OVector::<f64, N>::from_iterator_generic(nd, Const::<1>, setup.x0.iter().copied());
+    let (p0, l0) = (sq(&setup.p0), sq(&setup.l0));
+    let model = |what: &str, e: kalibra_models::ModelError| format!("{what}: {e}");
+    let truth_dynamics =
+        LinearGaussian::new(sq(&setup.f), sq(&setup.q)).map_err(|e| model("F, Q", e))?;
+    let truth_sensor =
+        LinearObservation::new(obs(&setup.h), meas(&setup.r)).map_err(|e| model("H, R", e))?;
+    let dynamics =
+        LinearGaussian::new(sq(&setup.f), sq(&setup.fq)).map_err(|e| model("filter_Q", e))?;
+    let sensor =
+        LinearObservation::new(obs(&setup.h), meas(&setup.fr)).map_err(|e| model("filter_R", e))?;
+    Kf::new(&dynamics, &sensor, x0.clone(), p0.clone())
+        .map_err(|e| format!("arguments x0, P0: {e}"))?;
+
+    let mc = MonteCarlo::new(setup.runs, setup.seed);
+    let one = |run: usize| -> Result<RunLog, String> {
+        let mut rng = mc.rng(run);
+        let fail = |e: &dyn std::fmt::Display| format!("run {run} failed: {e}");
+        let start = &x0 + sample_with_factor(&l0, &mut rng);
+        let mut truth =
+            Simulator::new(&truth_dynamics, &truth_sensor, start, 0).map_err(|e| fail(&e))?;
+        let mut kf = Kf::new(&dynamics, &sensor, x0.clone(), p0.clone()).map_err(|e| fail(&e))?;
+        let mut log = RunLog {
+            truth: Vec::with_capacity(steps * n),
+            estimate: Vec::with_capacity(steps * n),
+            covariance: Vec::with_capacity(steps * n * n),
+            innovation: Vec::with_capacity(steps * m),
+            innovation_cov: Vec::with_capacity(steps * m * m),
+        };
+        for k in 0..steps {
+            let (x, z): (OVector<f64, N>, OVector<f64, M>) =
+                truth.step(&mut rng).map_err(|e| fail(&e))?;
+            if k > 0 {
+                kf.predict().map_err(|e| fail(&e))?;
+            }
+            let rec = kf.update(&z).map_err(|e| fail(&e))?;
+            log.innovation.extend(rec.innovation().iter());
+            push_rows(&mut log.innovation_cov, rec.s_matrix());
+            log.truth.extend(x.iter());
+            log.estimate.extend(kf.mean().iter());
+            push_rows(&mut log.covariance, kf.covariance());
+        }
+        Ok(log)
+    };
+
+    let rows = |a: &DMatrix<f64>| a.transpose().iter().copied().collect::<Vec<f64>>();
+    let (f_rows, h_rows, q_rows, r_rows) = (
+        rows(&setup.f),
+        rows(&setup.h),
+        rows(&setup.fq),
+        rows(&setup.fr),
+    );
+    let model_cell = ModelCell {
+        f: &f_rows,
+        h: &h_rows,
+        q: &q_rows,
+        r: &r_rows,
+    };
+    let contents = Contents {
+        truth: Some(n),
+        estimate: Some(n),
+        covariance: Some(n),
+        innovation: Some(m),
+        innovation_cov: Some(m),
+        model: Some((n, m)),
+    };
+    let mut evaluator = evaluation.evaluator(contents).map_err(|e| e.to_string())?;
+    let mut kept: Vec<RunLog> = Vec::new();
+    for first in (0..setup.runs).step_by(CHUNK_RUNS) {
+        let last = (first + CHUNK_RUNS).min(setup.runs);
+        // rayon keeps the order of the runs; the lowest failing run's error is returned.
+        let logs: Vec<RunLog> = (first..last)
+            .into_par_iter()
+            .map(one)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .collect::<Result<_, _>>()?;
+        let mut cells = Vec::with_capacity(logs.len() * steps);
+        for (i, log) in logs.iter().enumerate() {
+            for k in 0..steps {
+                cells.push((
+                    first + i,
+                    k,
+                    Cell {
+                        truth: Some(&log.truth[k * n..(k + 1) * n]),
+                        estimate: Some(&log.estimate[k * n..(k + 1) * n]),
+                        covariance: Some(MatrixCell::Full(
+                            &log.covariance[k * n * n..(k + 1) * n * n],
+                        )),
+                        innovation: Some(&log.innovation[k * m..(k + 1) * m]),
+                        innovation_cov: Some(MatrixCell::Full(
+                            &log.innovation_cov[k * m * m..(k + 1) * m * m],
+                        )),
+                        model: Some(model_cell),
+                    },
+                ));
+            }
+        }
+        evaluator
+            .push_batch(&cells)
+            .map_err(|(_, e)| e.to_string())?;
+        if return_log {
+            kept.extend(logs);
+        }
+    }
+    let report = evaluator.finish(None).map_err(|e| e.to_string())?;
+    if !return_log {
+        return Ok((report, None));
+    }
+    let runs = setup.runs;
+    let gather = |field: fn(&RunLog) -> &Vec<f64>| -> Vec<f64> {
+        kept.iter().flat_map(|l| field(l).iter().copied()).collect()
+    };
+    let arrays = vec![
+        (
+            "truth".to_string(),
+            vec![runs, steps, n],
+            gather(|l| &l.truth),
+        ),
+        (
+            "estimate".to_string(),
+            vec![runs, steps, n],
+            gather(|l| &l.estimate),
+        ),
+        (
+            "covariance".to_string(),
+            vec![runs, steps, n, n],
+            gather(|l| &l.covariance),
+        ),
+        (
+            "innovation".to_string(),
+            vec![runs, steps, m],
+            gather(|l| &l.innovation),
+        ),
+        (
+            "innovation_cov".to_string(),
+            vec![runs, steps, m, m],
+            gather(|l| &l.innovation_cov),
+        ),
+        ("F".to_string(), vec![n, n], f_rows),
+        ("H".to_string(), vec![m, n], h_rows),
+        ("Q".to_string(), vec![n, n], q_rows),
+        ("R".to_string(), vec![m, m], r_rows),
+    ];
+    Ok((report, Some(arrays)))
+}
+
+/// The study at fixed sizes for the common small models, at run-time sizes otherwise.
+fn dispatch(setup: &Setup, evaluation: &Evaluation, return_log: bool) -> Result<Outcome, String> {
+    macro_rules! fixed {
+        ($(($n:literal, $m:literal)),*) => {
+            match (setup.x0.len(), setup.h.nrows()) {
+                $(($n, $m) => study(setup, evaluation, (Const::<$n>, Const::<$m>), return_log),)*
+                (n, m) => study(setup, evaluation, (Dyn(n), Dyn(m)), return_log),
+            }
+        };
+    }
+    fixed!(
+        (1, 1),
+        (2, 1),
+        (2, 2),
+        (3, 1),
+        (3, 2),
+        (3, 3),
+        (4, 1),
+        (4, 2),
+        (4, 3),
+        (4, 4),
+        (6, 2),
+        (6, 3)
+    )
 }
 
 fn square(obj: &Bound<'_, PyAny>, name: &str, dim: Option<usize>) -> PyResult<DMatrix<f64>> {
@@ -145,91 +374,37 @@ fn monte_carlo<'py>(
         None => r.clone(),
     };
     let evaluation = evaluation(confidence, window, groups, lags)?;
-    let model = |what: &str, e: kalibra_models::ModelError| error(format!("{what}: {e}"));
-    let truth_dynamics = LinearGaussian::new(f.clone(), q).map_err(|e| model("F, Q", e))?;
-    let truth_sensor = LinearObservation::new(h.clone(), r).map_err(|e| model("H, R", e))?;
-    let dynamics = LinearGaussian::new(f.clone(), fq.clone()).map_err(|e| model("filter_Q", e))?;
-    let sensor = LinearObservation::new(h.clone(), fr.clone()).map_err(|e| model("filter_R", e))?;
     let (l0, _) = semidefinite_factor(&p0, "initial covariance P0")
         .map_err(|e| error(format!("argument P0: {e}")))?;
-    Kf::new(&dynamics, &sensor, x0.clone(), p0.clone())
-        .map_err(|e| error(format!("arguments x0, P0: {e}")))?;
-
-    let one = |_run: usize, rng: &mut _| -> Result<RunLog, RunFailure> {
-        let start = &x0 + sample_with_factor(&l0, rng);
-        let truth = simulate(&truth_dynamics, &truth_sensor, start, steps, rng).map_err(fail)?;
-        let zs: Vec<Option<DVector<f64>>> = truth.measurements.into_iter().map(Some).collect();
-        let mut kf = Kf::new(&dynamics, &sensor, x0.clone(), p0.clone()).map_err(fail)?;
-        let out = run_filter(&mut kf, &zs, Start::UpdateFirst, |_, _, _| {}).map_err(fail)?;
-        Ok(RunLog {
-            truth: truth
-                .states
-                .iter()
-                .flat_map(|x| x.iter().copied())
-                .collect(),
-            estimate: out.estimate,
-            covariance: out.covariance,
-            innovation: out.innovation,
-            innovation_cov: out.innovation_cov,
-        })
+    let setup = Setup {
+        f,
+        h,
+        q,
+        r,
+        fq,
+        fr,
+        x0,
+        p0,
+        l0,
+        runs,
+        steps,
+        seed,
+        threads,
     };
-    let rows = |mat: &DMatrix<f64>| mat.transpose().iter().copied().collect::<Vec<f64>>();
-    let model_arrays = [
-        ("F", vec![n, n], rows(&f)),
-        ("H", vec![m, n], rows(&h)),
-        ("Q", vec![n, n], rows(&fq)),
-        ("R", vec![m, m], rows(&fr)),
-    ];
     let (report, log) = py
         .detach(|| {
-            let logs = MonteCarlo::new(runs, seed)
-                .threads(threads)
-                .map(one)
-                .map_err(|e| e.to_string())?;
-            let gather = |field: fn(&RunLog) -> &Vec<f64>| -> Vec<f64> {
-                logs.iter().flat_map(|l| field(l).iter().copied()).collect()
-            };
-            let mut arrays = vec![
-                (
-                    "truth".to_string(),
-                    vec![runs, steps, n],
-                    gather(|l| &l.truth),
-                ),
-                (
-                    "estimate".to_string(),
-                    vec![runs, steps, n],
-                    gather(|l| &l.estimate),
-                ),
-                (
-                    "covariance".to_string(),
-                    vec![runs, steps, n, n],
-                    gather(|l| &l.covariance),
-                ),
-                (
-                    "innovation".to_string(),
-                    vec![runs, steps, m],
-                    gather(|l| &l.innovation),
-                ),
-                (
-                    "innovation_cov".to_string(),
-                    vec![runs, steps, m, m],
-                    gather(|l| &l.innovation_cov),
-                ),
-            ];
-            arrays.extend(
-                model_arrays
-                    .iter()
-                    .map(|(name, shape, data)| (name.to_string(), shape.clone(), data.clone())),
-            );
-            // The arrays are copied only when the caller wants them back.
-            let (given, kept) = if return_log {
-                (arrays.clone(), Some(arrays))
-            } else {
-                (arrays, None)
-            };
-            let log = kalibra_cli::input::log_from_arrays(given)?;
-            let report = evaluation.evaluate(&log).map_err(|e| e.to_string())?;
-            Ok::<_, String>((report, kept))
+            let pool = (setup.threads > 0)
+                .then(|| {
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(setup.threads)
+                        .build()
+                        .map_err(|e| format!("build a pool of {} threads: {e}", setup.threads))
+                })
+                .transpose()?;
+            match pool {
+                Some(pool) => pool.install(|| dispatch(&setup, &evaluation, return_log)),
+                None => dispatch(&setup, &evaluation, return_log),
+            }
         })
         .map_err(error)?;
     let report = Bound::new(py, Report::new(report, "monte carlo"))?.into_any();
