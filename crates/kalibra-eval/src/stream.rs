@@ -164,30 +164,43 @@ struct JSide {
     c: DMatrix<f64>,
 }
 
-/// [`j_step`] on `m x m` matrices, at a fixed size for `m <= 4` (nalgebra's fixed-size
-/// code: no allocation, where the `Dyn` version allocates each of its temporaries, which
-/// made `J1`/`J2` cost twice the rest of a cell). The operations are the same, in the same
-/// order, so the values are the same to the bit.
-fn j_step_sized(
-    a: &DMatrix<f64>,
-    b: &DMatrix<f64>,
-    r: &DMatrix<f64>,
-    c: &DMatrix<f64>,
-) -> Result<JStep, MetricsError> {
-    fn fixed<const M: usize>([a, b, r, c]: [&DMatrix<f64>; 4]) -> Result<JStep, MetricsError> {
-        let s = |x: &DMatrix<f64>| SMatrix::<f64, M, M>::from_column_slice(x.as_slice());
-        j_step(&s(a), &s(b), &s(r), &s(c))
+/// One `J1`/`J2` step at fixed sizes for the common small models (`m <= 4`, `n <= 6`):
+/// `A = (H F) P+_{k-1} (H F)^T`, `C = H P+_k H^T` and [`j_step`] on nalgebra's fixed-size
+/// code, which allocates nothing, where the `Dyn` version allocates each temporary (that
+/// made `J1`/`J2` cost twice the rest of a cell). The operations are the `Dyn` path's, in
+/// the same order, so the values are the same to the bit (a test compares the two).
+/// `None` for other sizes.
+fn j_fixed(
+    jm: &JModel,
+    p0: &DMatrix<f64>,
+    p1: &DMatrix<f64>,
+) -> Option<Result<JStep, MetricsError>> {
+    fn at<const M: usize, const N: usize>(
+        jm: &JModel,
+        p0: &DMatrix<f64>,
+        p1: &DMatrix<f64>,
+    ) -> Result<JStep, MetricsError> {
+        let mn = |x: &DMatrix<f64>| SMatrix::<f64, M, N>::from_column_slice(x.as_slice());
+        let nm = |x: &DMatrix<f64>| SMatrix::<f64, N, M>::from_column_slice(x.as_slice());
+        let nn = |x: &DMatrix<f64>| SMatrix::<f64, N, N>::from_column_slice(x.as_slice());
+        let mm = |x: &DMatrix<f64>| SMatrix::<f64, M, M>::from_column_slice(x.as_slice());
+        let a = mn(&jm.hf) * nn(p0) * nm(&jm.hft);
+        let c = mn(&jm.h) * nn(p1) * nm(&jm.ht);
+        j_step(&a, &mm(&jm.b), &mm(&jm.r), &c)
     }
-    let all = [a, b, r, c];
-    if all.iter().any(|x| x.shape() != a.shape()) {
-        return j_step(a, b, r, c);
+    macro_rules! sizes {
+        ($($m:literal: $($n:literal)*;)*) => {
+            match (jm.h.nrows(), jm.h.ncols()) {
+                $($(($m, $n) => Some(at::<$m, $n>(jm, p0, p1)),)*)*
+                _ => None,
+            }
+        };
     }
-    match a.nrows() {
-        1 => fixed::<1>(all),
-        2 => fixed::<2>(all),
-        3 => fixed::<3>(all),
-        4 => fixed::<4>(all),
-        _ => j_step(a, b, r, c),
+    sizes! {
+        1: 1 2 3 4 5 6;
+        2: 1 2 3 4 5 6;
+        3: 1 2 3 4 5 6;
+        4: 1 2 3 4 5 6;
     }
 }
 
@@ -984,13 +997,20 @@ impl JSide {
                     self.a = DMatrix::zeros(m, m);
                     self.c = DMatrix::zeros(m, m);
                 }
-                // A = (H F) P+_{k-1} (H F)^T and C = H P+_k H^T, as products into reused
-                // storage (`mul_to` is the product `*` computes, into a given matrix).
-                jm.hf.mul_to(&self.previous[run].1, &mut self.hp);
-                self.hp.mul_to(&jm.hft, &mut self.a);
-                jm.h.mul_to(&self.current, &mut self.hp);
-                self.hp.mul_to(&jm.ht, &mut self.c);
-                match j_step_sized(&self.a, &jm.b, &jm.r, &self.c) {
+                let outcome = match j_fixed(jm, &self.previous[run].1, &self.current) {
+                    Some(outcome) => outcome,
+                    None => {
+                        // A = (H F) P+_{k-1} (H F)^T and C = H P+_k H^T, as products into
+                        // reused storage (`mul_to` is the product `*` computes, into a
+                        // given matrix).
+                        jm.hf.mul_to(&self.previous[run].1, &mut self.hp);
+                        self.hp.mul_to(&jm.hft, &mut self.a);
+                        jm.h.mul_to(&self.current, &mut self.hp);
+                        self.hp.mul_to(&jm.ht, &mut self.c);
+                        j_step(&self.a, &jm.b, &jm.r, &self.c)
+                    }
+                };
+                match outcome {
                     Ok(js) => {
                         self.horizon.push(&js);
                         self.j1.push(step, js.j1)?;
@@ -1031,5 +1051,59 @@ impl JSide {
             indefinite_updates: summary.indefinite_updates,
             failed_updates: self.failed,
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// `B B^T + I`, symmetric positive definite, from `k x k` values.
+    fn spd(v: &[f64], k: usize) -> DMatrix<f64> {
+        let b = DMatrix::from_column_slice(k, k, &v[..k * k]);
+        &b * b.transpose() + DMatrix::identity(k, k)
+    }
+
+    fn rows(a: &DMatrix<f64>) -> Vec<f64> {
+        a.transpose().iter().copied().collect()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+        /// The fixed-size `J1`/`J2` step gives the `Dyn` path's values to the bit, at every
+        /// size it covers.
+        #[test]
+        fn fixed_size_j_equals_the_dyn_path_bit_for_bit(
+            m in 1usize..=4,
+            n in 1usize..=6,
+            v in proptest::collection::vec(-2.0f64..2.0, 5 * 36 + 24),
+        ) {
+            let f = DMatrix::from_column_slice(n, n, &v[..n * n]);
+            let h = DMatrix::from_column_slice(m, n, &v[36..36 + m * n]);
+            let q = spd(&v[60..], n);
+            let r = spd(&v[96..], m);
+            let p0 = spd(&v[112..], n);
+            let p1 = spd(&v[148..], n);
+            let (fr, hr, qr, rr) = (rows(&f), rows(&h), rows(&q), rows(&r));
+            let cell = ModelCell { f: &fr, h: &hr, q: &qr, r: &rr };
+            let jm = JModel::new(&cell, (n, m));
+            prop_assert!(jm.is(&cell));
+            let fixed = j_fixed(&jm, &p0, &p1).expect("a covered size");
+            let a: DMatrix<f64> = &jm.hf * &p0 * &jm.hft;
+            let c: DMatrix<f64> = &jm.h * &p1 * &jm.ht;
+            let dynamic = j_step(&a, &jm.b, &jm.r, &c);
+            match (fixed, dynamic) {
+                (Ok(x), Ok(y)) => {
+                    for (p, q) in [(x.j1, y.j1), (x.j2, y.j2), (x.tr_n, y.tr_n), (x.tr_b, y.tr_b)] {
+                        prop_assert_eq!(p.to_bits(), q.to_bits());
+                    }
+                    prop_assert_eq!(x.a_plus_b_definite, y.a_plus_b_definite);
+                }
+                (Err(_), Err(_)) => {}
+                (x, y) => prop_assert!(false, "fixed {x:?}, dyn {y:?}"),
+            }
+        }
     }
 }
