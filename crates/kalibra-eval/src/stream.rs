@@ -1072,6 +1072,28 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
+        /// A cell's NEES and NIS are `kalibra_metrics::nees` and `nis` to the bit at every
+        /// size, through the fixed-size factorisation (up to 6) and the `Dyn` one above it.
+        #[test]
+        fn factor_equals_the_metrics_bit_for_bit(
+            dim in 1usize..=8,
+            v in proptest::collection::vec(-3.0f64..3.0, 64 + 8),
+        ) {
+            let p = spd(&v, dim);
+            let x = DVector::from_column_slice(&v[64..64 + dim]);
+            let cell = rows(&p);
+            let mut factor = Factor::new(dim);
+            factor.load(MatrixCell::Full(&cell));
+            let got = factor.nees(x.as_slice(), "P").expect("positive definite");
+            let want = kalibra_metrics::nees(&x, &p).expect("positive definite");
+            prop_assert_eq!(got.to_bits(), want.to_bits());
+            factor.load(MatrixCell::Full(&cell));
+            let got = factor.nis(x.as_slice(), "S").expect("positive definite");
+            let s = kalibra_linalg::Covariance::new(p.clone()).expect("positive definite");
+            let want = kalibra_metrics::nis(&x, &s).expect("positive definite");
+            prop_assert_eq!(got.to_bits(), want.to_bits());
+        }
+
         /// The fixed-size `J1`/`J2` step gives the `Dyn` path's values to the bit, at every
         /// size it covers.
         #[test]
