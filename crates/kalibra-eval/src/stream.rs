@@ -156,12 +156,58 @@ struct JSide {
     previous: Vec<(Option<usize>, DMatrix<f64>)>,
     /// The current cell's covariance.
     current: DMatrix<f64>,
-    /// The last model seen and the products of it that `J1`/`J2` need.
+    /// For the steps computed here rather than in a batch's parallel pass.
+    work: JWork,
+}
+
+/// What a `J1`/`J2` step needs besides its two covariances: the last model seen with its
+/// products, and storage for the cell's products.
+struct JWork {
     model: Option<JModel>,
-    /// `m x n` and `m x m` products of a cell.
+    /// `m x n` and `m x m` products of a cell (the `Dyn` path).
     hp: DMatrix<f64>,
     a: DMatrix<f64>,
     c: DMatrix<f64>,
+}
+
+impl JWork {
+    fn new() -> Self {
+        Self {
+            model: None,
+            hp: DMatrix::zeros(0, 0),
+            a: DMatrix::zeros(0, 0),
+            c: DMatrix::zeros(0, 0),
+        }
+    }
+
+    /// The step from `P+_{k-1}` (`p0`) to `P+_k` (`p1`) under the model `cell`.
+    fn step(
+        &mut self,
+        cell: &ModelCell<'_>,
+        (n, m): (usize, usize),
+        p0: &DMatrix<f64>,
+        p1: &DMatrix<f64>,
+    ) -> Result<JStep, MetricsError> {
+        let jm = match self.model.take() {
+            Some(jm) if jm.is(cell) => self.model.insert(jm),
+            _ => self.model.insert(JModel::new(cell, (n, m))),
+        };
+        if let Some(outcome) = j_fixed(jm, p0, p1) {
+            return outcome;
+        }
+        if self.hp.shape() != (m, n) {
+            self.hp = DMatrix::zeros(m, n);
+            self.a = DMatrix::zeros(m, m);
+            self.c = DMatrix::zeros(m, m);
+        }
+        // A = (H F) P+_{k-1} (H F)^T and C = H P+_k H^T, as products into reused storage
+        // (`mul_to` is the product `*` computes, into a given matrix).
+        jm.hf.mul_to(p0, &mut self.hp);
+        self.hp.mul_to(&jm.hft, &mut self.a);
+        jm.h.mul_to(p1, &mut self.hp);
+        self.hp.mul_to(&jm.ht, &mut self.c);
+        j_step(&self.a, &jm.b, &jm.r, &self.c)
+    }
 }
 
 /// One `J1`/`J2` step at fixed sizes for the common small models (`m <= 4`, `n <= 6`):
@@ -363,10 +409,7 @@ impl Evaluation {
                 failed: 0,
                 previous: Vec::new(),
                 current: DMatrix::zeros(0, 0),
-                model: None,
-                hp: DMatrix::zeros(0, 0),
-                a: DMatrix::zeros(0, 0),
-                c: DMatrix::zeros(0, 0),
+                work: JWork::new(),
             }),
             runs: 0,
             steps: 0,
@@ -591,7 +634,7 @@ impl Evaluator {
     pub fn push(&mut self, run: usize, step: usize, cell: &Cell<'_>) -> Result<(), EvalError> {
         let mut scratch = self.scratch();
         let prepared = self.prepare((run, step), cell, &mut scratch)?;
-        self.accept((run, step), cell, prepared)
+        self.accept((run, step), cell, prepared, None)
     }
 
     /// Feeds the cells of `cells`, each with its run and step, in order: the same as
@@ -625,11 +668,64 @@ impl Evaluator {
                 .flatten()
                 .collect()
         };
+        let mut computed = self.j_pass(cells, &prepared).into_iter();
         for (i, ((run, step, cell), p)) in cells.iter().zip(prepared).enumerate() {
             let p = p.map_err(|e| (i, e))?;
-            self.accept((*run, *step), cell, p).map_err(|e| (i, e))?;
+            let j = computed.next().flatten();
+            self.accept((*run, *step), cell, p, j).map_err(|e| (i, e))?;
         }
         Ok(())
+    }
+
+    /// The `J1`/`J2` steps of a large batch, on every core: for each cell whose predecessor
+    /// in the batch is the same run's previous step, both with a valid covariance, and whose
+    /// model was logged, the step `accept` would compute, computed by the same code. Empty
+    /// for a small batch or a log without a model; `None` where `accept` computes it itself
+    /// (a run's first cell in the batch).
+    fn j_pass(
+        &self,
+        cells: &[(usize, usize, Cell<'_>)],
+        prepared: &[Result<Prepared, EvalError>],
+    ) -> Vec<Option<Result<JStep, MetricsError>>> {
+        if self.j.is_none() || cells.len() < PARALLEL_FROM {
+            return Vec::new();
+        }
+        let n = self.contents.state_dim().unwrap_or(0);
+        let m = self.contents.measurement_dim().unwrap_or(0);
+        // The covariance entered NEES: what makes it `J`'s covariance in `accept`.
+        let valid = |p: &Result<Prepared, EvalError>| {
+            matches!(
+                p,
+                Ok(Prepared {
+                    nees: Some(Ok(_)),
+                    ..
+                })
+            )
+        };
+        let storage = || (JWork::new(), DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
+        (0..cells.len())
+            .into_par_iter()
+            .with_min_len(PARALLEL_FROM / 2)
+            .map_init(storage, |(work, p0, p1), i| {
+                let before = cells.get(i.checked_sub(1)?)?;
+                let (run, step, cell) = &cells[i];
+                let model_logged = matches!(&prepared[i], Ok(p) if p.model);
+                if before.0 != *run || before.1 + 1 != *step || !model_logged {
+                    return None;
+                }
+                if !(valid(&prepared[i - 1]) && valid(&prepared[i])) {
+                    return None;
+                }
+                let (Some(c0), Some(c1), Some(model)) =
+                    (before.2.covariance, cell.covariance, cell.model)
+                else {
+                    return None;
+                };
+                fill(p0, n, c0);
+                fill(p1, n, c1);
+                Some(work.step(&model, (n, m), p0, p1))
+            })
+            .collect()
     }
 
     fn scratch(&self) -> Scratch {
@@ -701,6 +797,7 @@ impl Evaluator {
         (run, step): (usize, usize),
         cell: &Cell<'_>,
         prepared: Prepared,
+        computed: Option<Result<JStep, MetricsError>>,
     ) -> Result<(), EvalError> {
         self.mark(run, step)?;
         let at = (run, step);
@@ -720,7 +817,7 @@ impl Evaluator {
             let m = self.contents.measurement_dim().unwrap_or(0);
             let p = cell.covariance.filter(|_| valid_cov);
             let model = cell.model.filter(|_| prepared.model);
-            j.push(at, (n, m), p, model)?;
+            j.push(at, (n, m), p, model, computed)?;
         }
         Ok(())
     }
@@ -971,13 +1068,15 @@ impl InnovationSide {
 }
 
 impl JSide {
-    /// One cell: its covariance if valid, and its model matrices if logged (both checked).
+    /// One cell: its covariance if valid, its model matrices if logged (both checked), and
+    /// its `J1`/`J2` step if a batch's parallel pass computed it.
     fn push(
         &mut self,
         (run, step): (usize, usize),
         (n, m): (usize, usize),
         cov: Option<MatrixCell<'_>>,
         model: Option<ModelCell<'_>>,
+        computed: Option<Result<JStep, MetricsError>>,
     ) -> Result<(), EvalError> {
         if run >= self.previous.len() {
             self.previous
@@ -988,36 +1087,19 @@ impl JSide {
         }
         let follows = self.previous[run].0.is_some_and(|k| k + 1 == step);
         if let (true, Some(_), Some(cell)) = (follows, cov, &model) {
-            if !self.model.as_ref().is_some_and(|j| j.is(cell)) {
-                self.model = Some(JModel::new(cell, (n, m)));
-            }
-            if let Some(jm) = &self.model {
-                if self.hp.shape() != (m, n) {
-                    self.hp = DMatrix::zeros(m, n);
-                    self.a = DMatrix::zeros(m, m);
-                    self.c = DMatrix::zeros(m, m);
+            let outcome = match computed {
+                Some(outcome) => outcome,
+                None => self
+                    .work
+                    .step(cell, (n, m), &self.previous[run].1, &self.current),
+            };
+            match outcome {
+                Ok(js) => {
+                    self.horizon.push(&js);
+                    self.j1.push(step, js.j1)?;
+                    self.j2.push(step, js.j2)?;
                 }
-                let outcome = match j_fixed(jm, &self.previous[run].1, &self.current) {
-                    Some(outcome) => outcome,
-                    None => {
-                        // A = (H F) P+_{k-1} (H F)^T and C = H P+_k H^T, as products into
-                        // reused storage (`mul_to` is the product `*` computes, into a
-                        // given matrix).
-                        jm.hf.mul_to(&self.previous[run].1, &mut self.hp);
-                        self.hp.mul_to(&jm.hft, &mut self.a);
-                        jm.h.mul_to(&self.current, &mut self.hp);
-                        self.hp.mul_to(&jm.ht, &mut self.c);
-                        j_step(&self.a, &jm.b, &jm.r, &self.c)
-                    }
-                };
-                match outcome {
-                    Ok(js) => {
-                        self.horizon.push(&js);
-                        self.j1.push(step, js.j1)?;
-                        self.j2.push(step, js.j2)?;
-                    }
-                    Err(_) => self.failed += 1,
-                }
+                Err(_) => self.failed += 1,
             }
         }
         let slot = &mut self.previous[run];

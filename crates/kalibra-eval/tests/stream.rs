@@ -3,7 +3,8 @@
 //! rectangle of runs and steps enforced (repeats, gaps, failed cells that leave no trace).
 
 use kalibra_eval::{
-    Cell, Contents, EvalError, Evaluation, FilterLog, Matrices, MatrixCell, Report, Vectors,
+    Cell, Contents, EvalError, Evaluation, FilterLog, Matrices, MatrixCell, ModelCell, Report,
+    Vectors,
 };
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::{Rng, SeedableRng};
@@ -173,6 +174,72 @@ fn cell_by_cell_batched_and_whole_give_the_same_report_to_the_bit() {
             batched.finish(None).unwrap()
         });
         assert_eq!(report, whole, "{threads} threads");
+    }
+}
+
+/// With model matrices, `J1`/`J2` come from consecutive steps of a run: a large batch
+/// computes most of them on several threads, a run's first cell in a batch and single cells
+/// on the calling thread. Batches cut mid-run, a model that changes every few steps, and
+/// covariances that are not positive definite (no `J` across them) give the one-by-one
+/// report to the bit, for 1 and 3 threads.
+#[test]
+fn j_from_batches_and_threads_equals_j_cell_by_cell_to_the_bit() {
+    let mut a = arrays(7, 30, 40);
+    // One covariance in 13 indefinite: NEES refuses it, and `J` skips the steps around it.
+    for i in (0..a.runs * a.steps).step_by(13) {
+        a.cov[i * N * N + 1] = 5.0;
+        a.cov[i * N * N + 2] = 5.0;
+    }
+    let h = [1.0, 0.0];
+    let r = [4.0];
+    // F per step: the same for three steps, then another (the model's cache misses).
+    let fs: Vec<[f64; 4]> = (0..a.steps)
+        .map(|k| [1.0, 1.0 + (k / 3) as f64 * 0.01, 0.0, 1.0])
+        .collect();
+    let q = [0.25, 0.5, 0.5, 1.0];
+    let cell = |run: usize, step: usize| Cell {
+        model: Some(ModelCell {
+            f: &fs[step],
+            h: &h,
+            q: &q,
+            r: &r,
+        }),
+        ..a.cell(run, step)
+    };
+    let contents = Contents {
+        model: Some((N, M)),
+        ..contents()
+    };
+    let evaluation = Evaluation::new();
+    let mut one_by_one = evaluation.evaluator(contents).unwrap();
+    for run in 0..a.runs {
+        for step in 0..a.steps {
+            one_by_one.push(run, step, &cell(run, step)).unwrap();
+        }
+    }
+    let want = one_by_one.finish(None).unwrap();
+    let j = want.j.as_ref().expect("J1/J2 reported");
+    assert!(j.updates > 0 && j.updates < a.runs * (a.steps - 1), "{j:?}");
+
+    let cells: Vec<_> = (0..a.runs)
+        .flat_map(|run| (0..a.steps).map(move |step| (run, step)))
+        .map(|(run, step)| (run, step, cell(run, step)))
+        .collect();
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        for batch in [cells.len(), 700, 513] {
+            let report = pool.install(|| {
+                let mut e = evaluation.evaluator(contents).unwrap();
+                for chunk in cells.chunks(batch) {
+                    e.push_batch(chunk).unwrap();
+                }
+                e.finish(None).unwrap()
+            });
+            assert_eq!(report, want, "{threads} threads, batches of {batch}");
+        }
     }
 }
 
