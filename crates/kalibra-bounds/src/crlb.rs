@@ -42,9 +42,14 @@ where
     /// allowed by [`Pcrlb::bound`] until measurements make it positive definite).
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] if `J_0` is not square, finite and symmetric.
+    /// [`BoundsError::Linalg`] if `J_0` is not square, finite, symmetric and positive
+    /// semi-definite ([`check_covariance`](kalibra_linalg::check_covariance)).
     pub fn from_information(j0: OMatrix<f64, N, N>) -> Result<Self, BoundsError> {
-        kalibra_linalg::check_symmetric(&j0, "initial information J0")?;
+        kalibra_linalg::check_covariance(
+            &j0,
+            "initial information J0",
+            kalibra_linalg::Definiteness::SemiDefinite,
+        )?;
         Ok(Self { info: j0 })
     }
 
@@ -184,6 +189,10 @@ mod tests {
     #[test]
     fn bad_inputs_are_typed_errors() {
         assert!(Pcrlb::new(&Matrix2::new(1.0, 2.0, 2.0, 1.0)).is_err());
+        // Issue 19: an indefinite information matrix was accepted (only symmetry was checked).
+        assert!(Pcrlb::from_information(Matrix2::new(1.0, 2.0, 2.0, 1.0)).is_err());
+        assert!(Pcrlb::from_information(-Matrix2::identity()).is_err());
+        assert!(Pcrlb::from_information(Matrix2::zeros()).is_ok());
         let mut b = Pcrlb::new(&Matrix2::identity()).unwrap();
         assert!(matches!(
             b.predict(&[], &Matrix2::identity()),

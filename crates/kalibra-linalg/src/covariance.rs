@@ -277,6 +277,66 @@ where
     }
 }
 
+/// What a covariance-like input must be beyond symmetric, for [`check_covariance`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Definiteness {
+    /// Positive semi-definite, as [`PsdMatrix`](crate::PsdMatrix) checks it (the pivoted
+    /// factorisation [`semidefinite_factor`](crate::semidefinite_factor) succeeds): noise
+    /// covariances, which are often rank-deficient, and covariances that are only propagated.
+    SemiDefinite,
+    /// Positive definite, as [`Covariance`] checks it (the Cholesky factorisation succeeds):
+    /// covariances that are solved with.
+    Definite,
+}
+
+/// The one check of a covariance-like input that enters a public function: square, finite,
+/// symmetric to [`SYMMETRY_TOLERANCE`] (relative asymmetry `|a_ij - a_ji| / sqrt(|a_ii
+/// a_jj|)`) and positive semi-definite or definite as `definiteness` asks: exactly what
+/// [`PsdMatrix::named`](crate::PsdMatrix::named) or [`Covariance::named`] accept, for a
+/// function that needs the matrix checked but not the type (it factorises a copy and drops
+/// it). Every function of the workspace that takes a covariance checks it through this, one
+/// of those two constructors, or their filters' initial check, so the tolerance and the
+/// definiteness test are the same everywhere.
+///
+/// ```
+/// use kalibra_linalg::{check_covariance, Definiteness, LinalgError, Matrix2};
+///
+/// let rank_one = Matrix2::new(1.0, 1.0, 1.0, 1.0);
+/// check_covariance(&rank_one, "Q", Definiteness::SemiDefinite)?;
+/// assert!(check_covariance(&rank_one, "S", Definiteness::Definite).is_err());
+/// let indefinite = Matrix2::new(1.0, 2.0, 2.0, 1.0);
+/// assert!(matches!(
+///     check_covariance(&indefinite, "Q", Definiteness::SemiDefinite),
+///     Err(LinalgError::NotPositiveSemiDefinite { .. })
+/// ));
+/// let asymmetric = Matrix2::new(1.0, 0.5, 0.0, 1.0);
+/// assert!(matches!(
+///     check_covariance(&asymmetric, "Q", Definiteness::SemiDefinite),
+///     Err(LinalgError::NotSymmetric { .. })
+/// ));
+/// # Ok::<(), LinalgError>(())
+/// ```
+///
+/// # Errors
+/// [`LinalgError::DimensionMismatch`] (not square), [`LinalgError::NonFinite`],
+/// [`LinalgError::NotSymmetric`], and [`LinalgError::NotPositiveSemiDefinite`] or
+/// [`LinalgError::NotPositiveDefinite`], naming `what`.
+pub fn check_covariance<D: Dim>(
+    m: &OMatrix<f64, D, D>,
+    what: &'static str,
+    definiteness: Definiteness,
+) -> Result<(), LinalgError>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    // Through the checked types themselves, so that there is one definition of each check.
+    match definiteness {
+        Definiteness::SemiDefinite => crate::PsdMatrix::named(m.clone(), what).map(drop),
+        Definiteness::Definite => Covariance::named(m.clone(), what).map(drop),
+    }
+}
+
 /// Checks that `m` is square, finite and symmetric to [`SYMMETRY_TOLERANCE`] (relative
 /// asymmetry `|a_ij - a_ji| / sqrt(|a_ii a_jj|)`): the one check every matrix meant as a
 /// covariance passes, before any factorisation.

@@ -81,7 +81,8 @@ pub use backend::{
     FAER_MIN_DIM, KernelPolicy, PARALLEL_MIN_DIM, kernel_policy, with_kernel_policy,
 };
 pub use covariance::{
-    Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once, quad_form_symmetric,
+    Covariance, Definiteness, SYMMETRY_TOLERANCE, check_covariance, check_symmetric,
+    quad_form_once, quad_form_symmetric,
 };
 pub use error::LinalgError;
 pub use gaussian::Gaussian;

@@ -3,7 +3,8 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix};
 
 use crate::{
-    Alloc, LinalgError, check_dim, check_finite, check_symmetric, product, propagate, symmetrize,
+    Alloc, Definiteness, LinalgError, check_covariance, check_dim, check_finite, product,
+    propagate, symmetrize,
 };
 
 /// Most doublings [`discrete_lyapunov`] runs: `2^64` terms of the series, far beyond any
@@ -22,8 +23,9 @@ pub const LYAPUNOV_MAX_DOUBLINGS: usize = 64;
 ///
 /// # Errors
 /// [`LinalgError::DimensionMismatch`] if `A` and `Q` differ in size or are not square,
-/// [`LinalgError::NonFinite`] for non-finite input, [`LinalgError::NotSymmetric`] for an
-/// asymmetric `Q`, and [`LinalgError::NotConvergent`] when the series does not converge in
+/// [`LinalgError::NonFinite`] for non-finite input, [`LinalgError::NotSymmetric`] or
+/// [`LinalgError::NotPositiveSemiDefinite`] for a `Q` that is not a covariance (the check of
+/// [`check_covariance`](crate::check_covariance)), and [`LinalgError::NotConvergent`] when the series does not converge in
 /// [`LYAPUNOV_MAX_DOUBLINGS`] doublings (a spectral radius of 1 or more on a direction `Q`
 /// excites: the stationary covariance is unbounded).
 ///
@@ -46,8 +48,7 @@ where
     check_dim(a.nrows(), q.nrows(), "Lyapunov noise Q")?;
     check_dim(a.nrows(), q.ncols(), "Lyapunov noise Q")?;
     check_finite(a, "Lyapunov matrix A")?;
-    check_finite(q, "Lyapunov noise Q")?;
-    check_symmetric(q, "Lyapunov noise Q")?;
+    check_covariance(q, "Lyapunov noise Q", Definiteness::SemiDefinite)?;
     let mut x = q.clone();
     let mut power = a.clone();
     for _ in 0..LYAPUNOV_MAX_DOUBLINGS {
@@ -175,5 +176,27 @@ mod tests {
         assert!(
             discrete_lyapunov(&DMatrix::<f64>::identity(2, 2), &DMatrix::identity(3, 3)).is_err()
         );
+    }
+
+    /// Issue 19: an indefinite or negative noise covariance was accepted and gave an
+    /// indefinite "stationary covariance" as `Ok`.
+    #[test]
+    fn a_noise_covariance_that_is_not_one_is_refused() {
+        let a = Matrix2::identity() * 0.5;
+        for q in [
+            Matrix2::new(1.0, 2.0, 2.0, 1.0),
+            Matrix2::new(-1.0, 0.0, 0.0, 1.0),
+            -Matrix2::identity(),
+        ] {
+            assert!(
+                matches!(
+                    discrete_lyapunov(&a, &q),
+                    Err(LinalgError::NotPositiveSemiDefinite { .. })
+                ),
+                "{q}"
+            );
+        }
+        // Rank-deficient noise is a covariance.
+        assert!(discrete_lyapunov(&a, &Matrix2::new(1.0, 1.0, 1.0, 1.0)).is_ok());
     }
 }
