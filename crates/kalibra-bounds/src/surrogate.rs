@@ -378,12 +378,21 @@ where
         self.cov.matrix()
     }
 
-    /// Whether `e` lies inside: `e^T P^-1 e <= t`.
+    /// Whether `e` lies inside: `e^T P^-1 e <= t`. A finite `e` whose form lies beyond f64's
+    /// range is outside.
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] for a wrongly sized `e` (`Dyn`).
+    /// [`BoundsError::Linalg`] for a wrongly sized (`Dyn`) or non-finite `e` (a NaN point is
+    /// neither inside nor outside; before, it came back as `Ok(false)`).
     pub fn contains(&self, e: &OVector<f64, N>) -> Result<bool, BoundsError> {
-        Ok(self.cov.quad_form(e)? <= self.threshold)
+        check_dim(self.cov.dim(), e.nrows(), "point")?;
+        check_finite(e, "point")?;
+        match self.cov.quad_form(e) {
+            Ok(q) => Ok(q <= self.threshold),
+            // The point is finite, so the form overflowed: far outside.
+            Err(kalibra_linalg::LinalgError::NonFinite { .. }) => Ok(false),
+            Err(other) => Err(other.into()),
+        }
     }
 }
 
@@ -502,6 +511,17 @@ mod tests {
         );
         assert!(e.contains(&Vector2::new(1.0, 1.0)).unwrap());
         assert!(!e.contains(&Vector2::new(2.0, 2.0)).unwrap());
+        // Issue 19: a NaN point was Ok(false); a huge finite one is outside.
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert!(matches!(
+                e.contains(&Vector2::new(bad, 0.0)),
+                Err(BoundsError::Linalg(
+                    kalibra_linalg::LinalgError::NonFinite { .. }
+                ))
+            ));
+        }
+        assert!(!e.contains(&Vector2::new(1e200, 1e200)).unwrap());
+        assert!(e.contains(&Vector2::new(1e-310, 0.0)).unwrap());
         assert!(Ellipsoid::new(Matrix2::identity(), 1.0).is_err());
 
         let mut avg = ErgodicAverage::new(kalibra_linalg::U2, kalibra_linalg::U1);

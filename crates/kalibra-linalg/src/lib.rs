@@ -75,6 +75,7 @@ mod gaussian;
 mod kernels;
 mod lyapunov;
 mod psd;
+mod scale;
 
 pub use alloc::Alloc;
 pub use backend::{
@@ -94,6 +95,7 @@ pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,
 };
 pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
+pub use scale::{binary_exponent, ldexp};
 
 pub use nalgebra;
 pub use nalgebra::{

@@ -82,15 +82,24 @@ pub const SPECTRAL_MAX_SQUARINGS: usize = 60;
 /// about `m ln(2^j) / 2^j`, below `1e-13` after the iterations run. It stops when an estimate
 /// changes by less than `4 eps` relative.
 ///
+/// # Scale
+/// Right across f64's range, subnormal entries to 1e308: `A` is first scaled by the power of
+/// two that brings its largest entry into `[1, 2)` (exact), the norm in the iteration is the
+/// largest entry (a sum of squares would underflow or overflow), and the result is scaled
+/// back. So `spectral_radius(2^p A) == 2^p spectral_radius(A)` to the bit wherever the result
+/// is a normal number. (Before, `1e308 I`, `1e-308 I` and subnormal matrices gave 0.)
+///
 /// # Errors
 /// [`LinalgError::DimensionMismatch`] for a non-square `A`, [`LinalgError::NonFinite`] for
-/// non-finite entries.
+/// non-finite entries, and for a spectral radius beyond f64's range (up to `n` times the
+/// largest entry: `2e308` for a 2 x 2 matrix of `1e308`s).
 ///
 /// ```
 /// use kalibra_linalg::{spectral_radius, Matrix2};
 /// // Eigenvalues 0.5 and -0.9, far from normal.
 /// let a = Matrix2::new(0.5, 100.0, 0.0, -0.9);
 /// assert!((spectral_radius(&a)? - 0.9).abs() < 1e-12);
+/// assert!((spectral_radius(&(Matrix2::identity() * 1e-310))? / 1e-310 - 1.0).abs() < 1e-12);
 /// # Ok::<(), kalibra_linalg::LinalgError>(())
 /// ```
 pub fn spectral_radius<N: Dim>(a: &OMatrix<f64, N, N>) -> Result<f64, LinalgError>
@@ -99,13 +108,17 @@ where
 {
     check_dim(a.nrows(), a.ncols(), "matrix A")?;
     check_finite(a, "matrix A")?;
-    // m = A^(2^j) / exp(log_scale).
-    let mut m = a.clone();
+    // Zero matrix (or empty): rho = 0.
+    let Some(exponent) = crate::binary_exponent(a.amax()) else {
+        return Ok(0.0);
+    };
+    // m = A^(2^j) 2^-(exponent 2^j) / exp(log_scale), entries at most 1 in magnitude.
+    let mut m = a.map(|v| crate::ldexp(v, -exponent));
     let mut log_scale = 0.0_f64;
     let mut power = 1.0_f64;
     let mut estimate = f64::INFINITY;
     for _ in 0..SPECTRAL_MAX_SQUARINGS {
-        let norm = m.norm();
+        let norm = m.amax();
         if norm == 0.0 {
             // Nilpotent: some power vanished exactly.
             return Ok(0.0);
@@ -114,14 +127,22 @@ where
         log_scale += norm.ln();
         let next = (log_scale / power).exp();
         if (next - estimate).abs() <= 4.0 * f64::EPSILON * next {
-            return Ok(next);
+            estimate = next;
+            break;
         }
         estimate = next;
         m = product(&m, &m);
         log_scale *= 2.0;
         power *= 2.0;
     }
-    Ok(estimate)
+    let rho = crate::ldexp(estimate, exponent);
+    if rho.is_finite() {
+        Ok(rho)
+    } else {
+        Err(LinalgError::NonFinite {
+            what: "spectral radius (beyond f64's range)",
+        })
+    }
 }
 
 #[cfg(test)]
@@ -166,6 +187,59 @@ mod tests {
         assert_eq!(spectral_radius(&nilpotent).unwrap(), 0.0);
         assert!((spectral_radius(&Matrix2::identity()).unwrap() - 1.0).abs() < 1e-15);
         assert!(spectral_radius(&DMatrix::<f64>::zeros(2, 3)).is_err());
+    }
+
+    /// Issue 19, point 5: right from subnormal to 1e308 scales, against nalgebra's
+    /// eigenvalues. Before, `1e308 I`, `1e-308 I` and subnormal matrices gave 0 (the Frobenius
+    /// norm overflowed or underflowed).
+    #[test]
+    fn spectral_radius_agrees_with_eigenvalues_at_every_scale() {
+        use crate::ldexp;
+        for seed in 0..24usize {
+            let n = 1 + seed % 6;
+            let a = DMatrix::from_fn(n, n, |i, j| {
+                ((i * 31 + j * 17 + seed * 7919 + (i * j * seed) % 13) % 101) as f64 / 25.0 - 2.0
+            });
+            let want = a
+                .complex_eigenvalues()
+                .iter()
+                .map(|z| z.norm())
+                .fold(0.0, f64::max);
+            let rho = spectral_radius(&a).unwrap();
+            assert!(
+                (rho - want).abs() <= 1e-9 * want.max(1e-300),
+                "seed {seed}: {rho} vs {want}\n{a}"
+            );
+            // A power of two commutes with every step: the same bits, scaled.
+            for p in [-1010, -900, -600, -100, 100, 600, 900, 1015] {
+                let scaled = a.map(|v| ldexp(v, p));
+                let want = ldexp(rho, p);
+                match spectral_radius(&scaled) {
+                    Ok(got) => assert_eq!(got, want, "seed {seed}, 2^{p}"),
+                    Err(e) => assert!(!want.is_finite(), "seed {seed}, 2^{p}: {e}"),
+                }
+            }
+        }
+        for (scale, n) in [
+            (1e308, 2),
+            (1e-308, 3),
+            (1e-310, 2),
+            (5e-324, 4),
+            (1.7e308, 1),
+        ] {
+            let rho = spectral_radius(&(DMatrix::<f64>::identity(n, n) * scale)).unwrap();
+            assert!((rho / scale - 1.0).abs() < 1e-12, "{scale:e}: {rho:e}");
+            let rotation = Matrix2::new(0.0, -scale, scale, 0.0);
+            let rho = spectral_radius(&rotation).unwrap();
+            assert!((rho / scale - 1.0).abs() < 1e-12, "{scale:e}: {rho:e}");
+        }
+        // A radius beyond f64's range is an error, not inf or 0.
+        assert!(matches!(
+            spectral_radius(&Matrix2::repeat(1e308)),
+            Err(LinalgError::NonFinite { .. })
+        ));
+        assert_eq!(spectral_radius(&DMatrix::<f64>::zeros(0, 0)).unwrap(), 0.0);
+        assert_eq!(spectral_radius(&Matrix2::repeat(0.0)).unwrap(), 0.0);
     }
 
     #[test]

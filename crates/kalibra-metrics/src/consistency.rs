@@ -37,7 +37,9 @@ where
 /// record keeps one).
 ///
 /// # Errors
-/// [`MetricsError::Linalg`] if the sizes differ (`Dyn`).
+/// [`MetricsError::Linalg`] if the sizes differ (`Dyn`), the innovation holds NaN or an
+/// infinity (before, the NIS came back as NaN or inf inside `Ok`), or its form lies beyond
+/// f64's range.
 pub fn nis<M: Dim>(innovation: &OVector<f64, M>, s: &Covariance<M>) -> Result<f64, MetricsError>
 where
     DefaultAllocator: Alloc<M>,
