@@ -32,10 +32,13 @@ where
     /// Starts from the prior covariance `P0`: `J_0 = P0^-1`.
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] unless `P0` is symmetric positive definite.
+    /// [`BoundsError::Linalg`] unless `P0` is symmetric positive definite with an inverse
+    /// within f64's range.
     pub fn new(p0: &OMatrix<f64, N, N>) -> Result<Self, BoundsError> {
         let p0 = Covariance::named(p0.clone(), "initial covariance P0")?;
-        Ok(Self { info: p0.inverse() })
+        let info = p0.inverse();
+        check_finite(&info, "initial information P0^-1 (beyond f64's range)")?;
+        Ok(Self { info })
     }
 
     /// Starts from a given information matrix `J_0` (zero for no prior information is not
@@ -62,9 +65,11 @@ where
     ///
     /// # Errors
     /// [`BoundsError::Linalg`] if `J_k` is not positive definite (the state is not yet
-    /// determined by the prior and the measurements).
+    /// determined by the prior and the measurements) or its inverse lies beyond f64's range.
     pub fn bound(&self) -> Result<OMatrix<f64, N, N>, BoundsError> {
-        Ok(Covariance::named(self.info.clone(), "Fisher information J")?.inverse())
+        let bound = Covariance::named(self.info.clone(), "Fisher information J")?.inverse();
+        check_finite(&bound, "bound J^-1 (beyond f64's range)")?;
+        Ok(bound)
     }
 
     /// The transition `k -> k + 1` with process noise `Q_k`:
@@ -73,7 +78,8 @@ where
     ///
     /// # Errors
     /// [`BoundsError::EmptySample`] for no samples; [`BoundsError::Linalg`] if `Q_k` is not
-    /// positive definite, a size differs, or `J + D11` is not positive definite.
+    /// positive definite, a size differs, `J + D11` is not positive definite, or the new
+    /// information lies beyond f64's range; `J` is unchanged on error.
     pub fn predict(
         &mut self,
         f_samples: &[OMatrix<f64, N, N>],
@@ -106,6 +112,9 @@ where
         let x = inner.solve(&qinv_f.transpose())?; // (J + D11)^-1 E[F]^T Q^-1
         let mut next = q.inverse() - qinv_f * x;
         symmetrize(&mut next);
+        // Nothing changes unless the new information is finite (a Q near the smallest
+        // subnormal has an inverse beyond f64's range).
+        check_finite(&next, "Fisher information J (beyond f64's range)")?;
         self.info = next;
         Ok(())
     }
@@ -115,7 +124,8 @@ where
     ///
     /// # Errors
     /// [`BoundsError::EmptySample`] for no samples; [`BoundsError::Linalg`] if an `R_k` is not
-    /// positive definite or a size differs.
+    /// positive definite, a size differs, or the new information lies beyond f64's range; `J`
+    /// is unchanged on error.
     pub fn add_measurement<M: Dim>(
         &mut self,
         samples: &[MeasurementSample<N, M>],
@@ -138,8 +148,10 @@ where
             sum += h.transpose() * r.solve(h)?;
         }
         sum /= samples.len() as f64;
-        self.info += sum;
-        symmetrize(&mut self.info);
+        let mut next = &self.info + sum;
+        symmetrize(&mut next);
+        check_finite(&next, "Fisher information J (beyond f64's range)")?;
+        self.info = next;
         Ok(())
     }
 }

@@ -73,6 +73,19 @@ where
 /// Most squarings [`spectral_radius`] runs.
 pub const SPECTRAL_MAX_SQUARINGS: usize = 60;
 
+/// `|m|_F` without underflow: entries at most 1 in magnitude (the iteration's), the largest
+/// divided out first when it is small enough for squares to underflow.
+fn frobenius_norm<N: Dim>(m: &OMatrix<f64, N, N>) -> f64
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let big = m.amax();
+    if big == 0.0 || big >= 1e-100 {
+        return m.norm();
+    }
+    big * (m / big).norm()
+}
+
 /// The spectral radius `rho(A)` (largest eigenvalue modulus) of a square matrix, by Gelfand's
 /// formula `rho = lim |A^k|^(1/k)` along `k = 2^j`: repeated squaring with the norm divided
 /// out at every step (so nothing overflows) and its logarithm accumulated.
@@ -84,9 +97,12 @@ pub const SPECTRAL_MAX_SQUARINGS: usize = 60;
 ///
 /// # Scale
 /// Right across f64's range, subnormal entries to 1e308: `A` is first scaled by the power of
-/// two that brings its largest entry into `[1, 2)` (exact), the norm in the iteration is the
-/// largest entry (a sum of squares would underflow or overflow), and the result is scaled
-/// back. So `spectral_radius(2^p A) == 2^p spectral_radius(A)` to the bit wherever the result
+/// two that brings its largest entry into `[1, 2)` (exact), the Frobenius norm in the
+/// iteration is taken with the largest entry divided out where a sum of squares could
+/// underflow, and the result is scaled back. (The Frobenius norm, not the largest entry, for
+/// the estimates: `|B^2| = |B|^2` holds for it only when `B` is rank one, where the estimate
+/// is exact, while the largest entry of `B^2` can equal the square of `B`'s by coincidence and
+/// stop the iteration at a wrong value.) So `spectral_radius(2^p A) == 2^p spectral_radius(A)` to the bit wherever the result
 /// is a normal number. (Before, `1e308 I`, `1e-308 I` and subnormal matrices gave 0.)
 ///
 /// # Errors
@@ -112,13 +128,13 @@ where
     let Some(exponent) = crate::binary_exponent(a.amax()) else {
         return Ok(0.0);
     };
-    // m = A^(2^j) 2^-(exponent 2^j) / exp(log_scale), entries at most 1 in magnitude.
+    // m = A^(2^j) 2^-(exponent 2^j) / exp(log_scale), Frobenius norm 1 after each division.
     let mut m = a.map(|v| crate::ldexp(v, -exponent));
     let mut log_scale = 0.0_f64;
     let mut power = 1.0_f64;
     let mut estimate = f64::INFINITY;
     for _ in 0..SPECTRAL_MAX_SQUARINGS {
-        let norm = m.amax();
+        let norm = frobenius_norm(&m);
         if norm == 0.0 {
             // Nilpotent: some power vanished exactly.
             return Ok(0.0);
@@ -187,6 +203,22 @@ mod tests {
         assert_eq!(spectral_radius(&nilpotent).unwrap(), 0.0);
         assert!((spectral_radius(&Matrix2::identity()).unwrap() - 1.0).abs() < 1e-15);
         assert!(spectral_radius(&DMatrix::<f64>::zeros(2, 3)).is_err());
+        // Found by the adversarial suite with the largest entry as the iteration's norm: the
+        // largest entry of A^2 is the square of A's (9.89...), so the first two estimates
+        // agreed and the iteration stopped at 9.89 instead of 11.595.
+        let a = Matrix3::new(
+            0.0,
+            0.0,
+            4.961929881939764,
+            5.050040461752875,
+            0.0,
+            0.0,
+            0.0,
+            9.138940954463893,
+            9.891819944247835,
+        );
+        let rho = spectral_radius(&a).unwrap();
+        assert!((rho - 11.595119079207477).abs() < 1e-12, "{rho}");
     }
 
     /// Issue 19, point 5: right from subnormal to 1e308 scales, against nalgebra's

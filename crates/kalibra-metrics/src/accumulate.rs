@@ -197,7 +197,8 @@ impl SquaredErrors {
     /// # Errors
     /// [`MetricsError::StepOutOfRange`] beyond the horizon, [`MetricsError::DimensionMismatch`]
     /// for a wrong length, [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or
-    /// infinite component. Nothing is stored on error.
+    /// infinite component, or one whose square would take the step's sum beyond f64's range
+    /// (the MSE stays finite). Nothing is stored on error.
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         if error.len() != self.dim {
@@ -207,16 +208,22 @@ impl SquaredErrors {
                 found: error.len(),
             });
         }
-        if !error.iter().all(|e| e.is_finite()) {
+        let sums = &mut self.sum[step * self.dim..(step + 1) * self.dim];
+        if !error
+            .iter()
+            .zip(sums.iter())
+            .all(|(e, s)| (s + e * e).is_finite())
+        {
             return Err(MetricsError::NonFiniteSample {
-                what: "squared errors",
+                what: if error.iter().all(|e| e.is_finite()) {
+                    "squared errors (sum beyond f64's range)"
+                } else {
+                    "squared errors"
+                },
                 index: step,
             });
         }
-        for (s, e) in self.sum[step * self.dim..(step + 1) * self.dim]
-            .iter_mut()
-            .zip(error)
-        {
+        for (s, e) in sums.iter_mut().zip(error) {
             *s += e * e;
         }
         self.count[step] += 1;
@@ -271,11 +278,11 @@ impl SquaredErrors {
     /// # Errors
     /// As [`SquaredErrors::mse`].
     pub fn rmse_group(&self, step: usize, group: &[usize]) -> Result<f64, MetricsError> {
-        let mut total = 0.0;
-        for &i in group {
-            total += self.mse(step, i)?;
-        }
-        Ok(total.sqrt())
+        let mses = group
+            .iter()
+            .map(|&i| self.mse(step, i))
+            .collect::<Result<Vec<f64>, _>>()?;
+        Ok(root_sum(&mses))
     }
 
     /// The group RMSE at every step.
@@ -304,13 +311,34 @@ impl SquaredErrors {
             });
         }
         let len = range.len() as f64;
-        let mut total = 0.0;
-        for k in range {
-            let r = self.rmse_group(k, group)?;
-            total += r * r;
-        }
-        Ok((total / len).sqrt())
+        let rmses = range
+            .map(|k| self.rmse_group(k, group))
+            .collect::<Result<Vec<f64>, _>>()?;
+        Ok(root_mean_square(&rmses, len))
     }
+}
+
+/// `sqrt(sum_i v_i)` of non-negative finite values (a group's MSEs), computed the plain way
+/// and, only where the sum leaves f64's range, with the largest value divided out first, so
+/// that a finite answer comes back finite.
+fn root_sum(values: &[f64]) -> f64 {
+    let plain = values.iter().fold(0.0, |t, v| t + v).sqrt();
+    if plain.is_finite() {
+        return plain;
+    }
+    let big = values.iter().fold(0.0f64, |m, &v| m.max(v));
+    big.sqrt() * values.iter().map(|v| v / big).sum::<f64>().sqrt()
+}
+
+/// `sqrt(sum_i v_i^2 / len)` of non-negative finite values (RMSEs over steps), plain and, only
+/// where a square leaves f64's range, with the largest value divided out first.
+fn root_mean_square(values: &[f64], len: f64) -> f64 {
+    let plain = (values.iter().fold(0.0, |t, v| t + v * v) / len).sqrt();
+    if plain.is_finite() {
+        return plain;
+    }
+    let big = values.iter().fold(0.0f64, |m, &v| m.max(v));
+    big * (values.iter().map(|v| (v / big) * (v / big)).sum::<f64>() / len).sqrt()
 }
 
 impl Merge for SquaredErrors {

@@ -77,7 +77,7 @@ mod whiteness;
 mod window;
 
 pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
-pub use consistency::{ChiSquareBand, WILSON_HILFERTY_FROM, nees, nis};
+pub use consistency::{CHI_SQUARE_MIN_DOF, ChiSquareBand, WILSON_HILFERTY_FROM, nees, nis};
 pub use credibility::{
     Credibility, CredibilityAverage, CredibilityStep, consistent_median_nees, median,
 };

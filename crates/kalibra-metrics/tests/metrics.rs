@@ -191,3 +191,51 @@ fn nis_and_nees_of_non_finite_vectors_are_errors() {
             .is_err()
     );
 }
+
+/// Issue 19, found by the adversarial suite: subnormal degrees of freedom panicked inside
+/// statrs, a confidence whose upper tail rounds to 1 gave an infinite bound, and degrees of
+/// freedom near f64::MAX an infinite or NaN bound, all inside `Ok`. Every `Ok` band is finite.
+#[test]
+fn chi_square_bands_at_extreme_parameters_are_finite_or_errors() {
+    for dof in [5e-324, 1e-308, 1e-10, 1e-3, 0.5, 3.0, 1e7, 1e300, f64::MAX] {
+        for samples in [1usize, 2, 5, 1 << 40, usize::MAX] {
+            for confidence in [0.95, 1.0 - 1e-16, 1e-300, 0.5] {
+                let band =
+                    std::panic::catch_unwind(|| ChiSquareBand::for_mean(dof, samples, confidence))
+                        .unwrap_or_else(|_| panic!("panic at {dof:e} {samples} {confidence}"));
+                if let Ok(b) = band {
+                    assert!(
+                        b.lower.is_finite() && b.upper.is_finite() && b.lower <= b.upper,
+                        "{dof:e} {samples} {confidence}: {b:?}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(ChiSquareBand::for_mean(5e-324, 2, 0.95).is_err());
+    assert!(ChiSquareBand::for_mean(2.0, 10, 1.0 - 1e-16).is_err());
+    assert!(ChiSquareBand::for_mean(1e-3, 1, 0.95).is_ok());
+}
+
+/// Issue 19, found by the adversarial suite: a squared error beyond f64's range made the RMSE
+/// inf inside `Ok`; it is refused, and MSEs near f64::MAX still give a finite group RMSE.
+#[test]
+fn squared_errors_stay_finite() {
+    let mut acc = SquaredErrors::new(1, 2);
+    assert!(matches!(
+        acc.push_slice(0, &[0.0, 2e300]),
+        Err(MetricsError::NonFiniteSample { index: 0, .. })
+    ));
+    assert!(acc.mse(0, 0).is_err(), "nothing stored");
+    // Each square within range (1.44e308), their sum beyond it.
+    acc.push_slice(0, &[1.2e154, 1.2e154]).unwrap();
+    let group = acc.rmse_group(0, &[0, 1]).unwrap();
+    assert!((group / (1.2e154 * 2f64.sqrt()) - 1.0).abs() < 1e-15);
+    let mut big = SquaredErrors::new(2, 2);
+    for k in 0..2 {
+        big.push_slice(k, &[1.2e154, 1.2e154]).unwrap();
+    }
+    let over_time = big.rmse_over_time(&[0, 1], 0..2).unwrap();
+    assert!(over_time.is_finite());
+    assert!((over_time / (1.2e154 * 2f64.sqrt()) - 1.0).abs() < 1e-15);
+}
