@@ -67,7 +67,7 @@ fn final_anees(study: usize, r_filter: f64) -> f64 {
             },
         )
         .unwrap();
-    acc.mean(0)
+    acc.mean(0).expect("every run pushed step 0")
 }
 
 #[test]

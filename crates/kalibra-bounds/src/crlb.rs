@@ -32,19 +32,27 @@ where
     /// Starts from the prior covariance `P0`: `J_0 = P0^-1`.
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] unless `P0` is symmetric positive definite.
+    /// [`BoundsError::Linalg`] unless `P0` is symmetric positive definite with an inverse
+    /// within f64's range.
     pub fn new(p0: &OMatrix<f64, N, N>) -> Result<Self, BoundsError> {
         let p0 = Covariance::named(p0.clone(), "initial covariance P0")?;
-        Ok(Self { info: p0.inverse() })
+        let info = p0.inverse();
+        check_finite(&info, "initial information P0^-1 (beyond f64's range)")?;
+        Ok(Self { info })
     }
 
     /// Starts from a given information matrix `J_0` (zero for no prior information is not
     /// allowed by [`Pcrlb::bound`] until measurements make it positive definite).
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] if `J_0` is not square, finite and symmetric.
+    /// [`BoundsError::Linalg`] if `J_0` is not square, finite, symmetric and positive
+    /// semi-definite ([`check_covariance`](kalibra_linalg::check_covariance)).
     pub fn from_information(j0: OMatrix<f64, N, N>) -> Result<Self, BoundsError> {
-        kalibra_linalg::check_symmetric(&j0, "initial information J0")?;
+        kalibra_linalg::check_covariance(
+            &j0,
+            "initial information J0",
+            kalibra_linalg::Definiteness::SemiDefinite,
+        )?;
         Ok(Self { info: j0 })
     }
 
@@ -57,9 +65,11 @@ where
     ///
     /// # Errors
     /// [`BoundsError::Linalg`] if `J_k` is not positive definite (the state is not yet
-    /// determined by the prior and the measurements).
+    /// determined by the prior and the measurements) or its inverse lies beyond f64's range.
     pub fn bound(&self) -> Result<OMatrix<f64, N, N>, BoundsError> {
-        Ok(Covariance::named(self.info.clone(), "Fisher information J")?.inverse())
+        let bound = Covariance::named(self.info.clone(), "Fisher information J")?.inverse();
+        check_finite(&bound, "bound J^-1 (beyond f64's range)")?;
+        Ok(bound)
     }
 
     /// The transition `k -> k + 1` with process noise `Q_k`:
@@ -68,7 +78,8 @@ where
     ///
     /// # Errors
     /// [`BoundsError::EmptySample`] for no samples; [`BoundsError::Linalg`] if `Q_k` is not
-    /// positive definite, a size differs, or `J + D11` is not positive definite.
+    /// positive definite, a size differs, `J + D11` is not positive definite, or the new
+    /// information lies beyond f64's range; `J` is unchanged on error.
     pub fn predict(
         &mut self,
         f_samples: &[OMatrix<f64, N, N>],
@@ -101,6 +112,9 @@ where
         let x = inner.solve(&qinv_f.transpose())?; // (J + D11)^-1 E[F]^T Q^-1
         let mut next = q.inverse() - qinv_f * x;
         symmetrize(&mut next);
+        // Nothing changes unless the new information is finite (a Q near the smallest
+        // subnormal has an inverse beyond f64's range).
+        check_finite(&next, "Fisher information J (beyond f64's range)")?;
         self.info = next;
         Ok(())
     }
@@ -110,7 +124,8 @@ where
     ///
     /// # Errors
     /// [`BoundsError::EmptySample`] for no samples; [`BoundsError::Linalg`] if an `R_k` is not
-    /// positive definite or a size differs.
+    /// positive definite, a size differs, or the new information lies beyond f64's range; `J`
+    /// is unchanged on error.
     pub fn add_measurement<M: Dim>(
         &mut self,
         samples: &[MeasurementSample<N, M>],
@@ -133,8 +148,10 @@ where
             sum += h.transpose() * r.solve(h)?;
         }
         sum /= samples.len() as f64;
-        self.info += sum;
-        symmetrize(&mut self.info);
+        let mut next = &self.info + sum;
+        symmetrize(&mut next);
+        check_finite(&next, "Fisher information J (beyond f64's range)")?;
+        self.info = next;
         Ok(())
     }
 }
@@ -184,6 +201,10 @@ mod tests {
     #[test]
     fn bad_inputs_are_typed_errors() {
         assert!(Pcrlb::new(&Matrix2::new(1.0, 2.0, 2.0, 1.0)).is_err());
+        // Issue 19: an indefinite information matrix was accepted (only symmetry was checked).
+        assert!(Pcrlb::from_information(Matrix2::new(1.0, 2.0, 2.0, 1.0)).is_err());
+        assert!(Pcrlb::from_information(-Matrix2::identity()).is_err());
+        assert!(Pcrlb::from_information(Matrix2::zeros()).is_ok());
         let mut b = Pcrlb::new(&Matrix2::identity()).unwrap();
         assert!(matches!(
             b.predict(&[], &Matrix2::identity()),

@@ -54,5 +54,5 @@ mod surrogate;
 
 pub use crlb::{MeasurementSample, Pcrlb};
 pub use error::BoundsError;
-pub use observability::observability_singular_values;
+pub use observability::{OBSERVABILITY_SVD_MAX_ITERATIONS, observability_singular_values};
 pub use surrogate::{Ellipsoid, ErgodicAverage, Surrogate, gaussian_half_widths};

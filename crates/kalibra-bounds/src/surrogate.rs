@@ -21,8 +21,8 @@
 //! Quantiles come from statrs.
 
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, check_dim, check_finite,
-    discrete_lyapunov, product, propagate, spectral_radius, symmetrize,
+    Alloc, Covariance, DefaultAllocator, Definiteness, Dim, OMatrix, OVector, check_covariance,
+    check_dim, check_finite, discrete_lyapunov, product, propagate, spectral_radius, symmetrize,
 };
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 
@@ -152,8 +152,11 @@ where
     /// ```
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] for wrongly sized (`Dyn`), non-finite or asymmetric input;
-    /// [`BoundsError::Unstable`] if the spectral radius of `C` is not below 1.
+    /// [`BoundsError::Linalg`] for wrongly sized (`Dyn`) or non-finite input, and for a `q` or
+    /// `r` that is not a covariance (asymmetric beyond
+    /// [`SYMMETRY_TOLERANCE`](kalibra_linalg::SYMMETRY_TOLERANCE), indefinite or negative:
+    /// [`check_covariance`], semi-definite); [`BoundsError::Unstable`] if the spectral radius
+    /// of `C` is not below 1.
     pub fn new(
         gain: &OMatrix<f64, N, M>,
         jacobian: &OMatrix<f64, N, N>,
@@ -167,13 +170,14 @@ where
         check_dim(gain.ncols(), h.nrows(), "measurement matrix rows")?;
         check_dim(n, h.ncols(), "measurement matrix columns")?;
         check_dim(n, q.nrows(), "process noise Q")?;
+        check_dim(n, q.ncols(), "process noise Q columns")?;
         check_dim(h.nrows(), r.nrows(), "measurement noise R")?;
-        for (m, what) in [(jacobian, "Jacobian"), (q, "process noise Q")] {
-            check_finite(m, what)?;
-        }
+        check_dim(h.nrows(), r.ncols(), "measurement noise R columns")?;
+        check_finite(jacobian, "Jacobian")?;
         check_finite(gain, "gain")?;
         check_finite(h, "measurement matrix H")?;
-        check_finite(r, "measurement noise R")?;
+        check_covariance(q, "process noise Q", Definiteness::SemiDefinite)?;
+        check_covariance(r, "measurement noise R", Definiteness::SemiDefinite)?;
         let mut i_kh = -(gain * h);
         for i in 0..n {
             i_kh[(i, i)] += 1.0;
@@ -245,7 +249,8 @@ where
     /// `cov_{k+1} = C cov_k C^T + cov(eta)` (the paper's finite-horizon surrogate).
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] for a wrongly sized, non-finite or asymmetric `initial`.
+    /// [`BoundsError::Linalg`] for a wrongly sized `initial` or one that is not a covariance
+    /// ([`check_covariance`], semi-definite).
     pub fn covariance_after(
         &self,
         steps: usize,
@@ -253,8 +258,7 @@ where
     ) -> Result<OMatrix<f64, N, N>, BoundsError> {
         check_dim(self.c.nrows(), initial.nrows(), "initial covariance")?;
         check_dim(self.c.nrows(), initial.ncols(), "initial covariance")?;
-        check_finite(initial, "initial covariance")?;
-        kalibra_linalg::check_symmetric(initial, "initial covariance")?;
+        check_covariance(initial, "initial covariance", Definiteness::SemiDefinite)?;
         let mut cov = initial.clone();
         for _ in 0..steps {
             cov = propagate(&self.c, &cov) + &self.eta_cov;
@@ -374,12 +378,21 @@ where
         self.cov.matrix()
     }
 
-    /// Whether `e` lies inside: `e^T P^-1 e <= t`.
+    /// Whether `e` lies inside: `e^T P^-1 e <= t`. A finite `e` whose form lies beyond f64's
+    /// range is outside.
     ///
     /// # Errors
-    /// [`BoundsError::Linalg`] for a wrongly sized `e` (`Dyn`).
+    /// [`BoundsError::Linalg`] for a wrongly sized (`Dyn`) or non-finite `e` (a NaN point is
+    /// neither inside nor outside; before, it came back as `Ok(false)`).
     pub fn contains(&self, e: &OVector<f64, N>) -> Result<bool, BoundsError> {
-        Ok(self.cov.quad_form(e)? <= self.threshold)
+        check_dim(self.cov.dim(), e.nrows(), "point")?;
+        check_finite(e, "point")?;
+        match self.cov.quad_form(e) {
+            Ok(q) => Ok(q <= self.threshold),
+            // The point is finite, so the form overflowed: far outside.
+            Err(kalibra_linalg::LinalgError::NonFinite { .. }) => Ok(false),
+            Err(other) => Err(other.into()),
+        }
     }
 }
 
@@ -419,6 +432,60 @@ mod tests {
         assert!((hw[0] - 1.959_963_984_540_054 * direct[(0, 0)].sqrt()).abs() < 1e-12);
     }
 
+    /// Issue 19: the docs promised an error for asymmetric noise that never came, and
+    /// indefinite or negative `Q` and `R` gave a surrogate as `Ok`.
+    #[test]
+    fn noise_that_is_not_a_covariance_is_refused() {
+        use kalibra_linalg::LinalgError;
+        let f = Matrix2::new(1.0, 0.5, 0.0, 0.95);
+        let h = Matrix1x2::new(1.0, 0.0);
+        let k = Matrix2x1::new(0.4, 0.2);
+        let q = Matrix2::new(0.02, 0.03, 0.03, 0.1);
+        let r = Matrix1::new(0.5);
+        assert!(Surrogate::new(&k, &f, &h, &q, &r).is_ok());
+        let asymmetric = Matrix2::new(0.02, 0.03, 0.0, 0.1);
+        assert!(matches!(
+            Surrogate::new(&k, &f, &h, &asymmetric, &r),
+            Err(BoundsError::Linalg(LinalgError::NotSymmetric { .. }))
+        ));
+        for bad in [Matrix2::new(1.0, 2.0, 2.0, 1.0), -q] {
+            assert!(matches!(
+                Surrogate::new(&k, &f, &h, &bad, &r),
+                Err(BoundsError::Linalg(
+                    LinalgError::NotPositiveSemiDefinite { .. }
+                ))
+            ));
+        }
+        assert!(matches!(
+            Surrogate::new(&k, &f, &h, &q, &Matrix1::new(-0.5)),
+            Err(BoundsError::Linalg(
+                LinalgError::NotPositiveSemiDefinite { .. }
+            ))
+        ));
+        let s = Surrogate::new(&k, &f, &h, &q, &r).unwrap();
+        assert!(
+            s.covariance_after(3, &Matrix2::new(1.0, 2.0, 2.0, 1.0))
+                .is_err()
+        );
+        // Dyn sizes that disagree: a mismatch, not a panic inside nalgebra.
+        let dq = DMatrix::<f64>::identity(2, 3);
+        let d = |m: &Matrix2<f64>| DMatrix::from_column_slice(2, 2, m.as_slice());
+        assert!(matches!(
+            Surrogate::new(
+                &DMatrix::from_column_slice(2, 1, k.as_slice()),
+                &d(&f),
+                &DMatrix::from_column_slice(1, 2, h.as_slice()),
+                &dq,
+                &DMatrix::from_column_slice(1, 1, r.as_slice()),
+            ),
+            Err(BoundsError::Linalg(LinalgError::DimensionMismatch {
+                expected: 2,
+                found: 3,
+                ..
+            }))
+        ));
+    }
+
     #[test]
     fn an_unobserved_unit_root_is_unstable() {
         let f = Matrix2::new(1.0, 0.0, 0.0, 0.5);
@@ -444,6 +511,17 @@ mod tests {
         );
         assert!(e.contains(&Vector2::new(1.0, 1.0)).unwrap());
         assert!(!e.contains(&Vector2::new(2.0, 2.0)).unwrap());
+        // Issue 19: a NaN point was Ok(false); a huge finite one is outside.
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert!(matches!(
+                e.contains(&Vector2::new(bad, 0.0)),
+                Err(BoundsError::Linalg(
+                    kalibra_linalg::LinalgError::NonFinite { .. }
+                ))
+            ));
+        }
+        assert!(!e.contains(&Vector2::new(1e200, 1e200)).unwrap());
+        assert!(e.contains(&Vector2::new(1e-310, 0.0)).unwrap());
         assert!(Ellipsoid::new(Matrix2::identity(), 1.0).is_err());
 
         let mut avg = ErgodicAverage::new(kalibra_linalg::U2, kalibra_linalg::U1);

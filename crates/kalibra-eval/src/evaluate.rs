@@ -378,13 +378,12 @@ fn per_step_stats(
     for k in 0..means.steps() {
         let c = means.count(k) as usize;
         counts.push(c);
-        if c == 0 {
-            values.push(None);
-            band.push(None);
-        } else {
-            values.push(Some(means.mean(k)));
-            band.push(Some(bands.get(dof, c)?));
-        }
+        let mean = means.mean(k);
+        band.push(match mean {
+            Some(_) => Some(bands.get(dof, c)?),
+            None => None,
+        });
+        values.push(mean);
     }
     Ok((values, band, counts))
 }

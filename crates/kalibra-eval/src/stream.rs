@@ -1117,11 +1117,7 @@ impl JSide {
             return Ok(None);
         }
         let summary = self.horizon.summary(self.horizon.updates())?;
-        let series = |s: &StepMean| -> Vec<Option<f64>> {
-            (0..steps)
-                .map(|k| (s.count(k) > 0).then(|| s.mean(k)))
-                .collect()
-        };
+        let series = |s: &StepMean| -> Vec<Option<f64>> { (0..steps).map(|k| s.mean(k)).collect() };
         Ok(Some(crate::JReport {
             j1_per_step: series(&self.j1),
             j2_per_step: series(&self.j2),

@@ -52,7 +52,8 @@ where
     ///
     /// # Errors
     /// [`FilterError::Initial`] if `x0`, `p0` or `gain` has the wrong size or is not finite,
-    /// or `p0` is not symmetric positive semi-definite.
+    /// or `p0` is not symmetric positive semi-definite; [`FilterError::DimensionMismatch`] for
+    /// a measurement model built for another state dimension (as [`crate::Kf::new`]).
     pub fn new(
         dynamics: D,
         measurement: H,
@@ -88,6 +89,7 @@ where
             &options,
             "the constant-gain KF with an as-given initial covariance",
         )?;
+        crate::kalman::check_model_sizes(&dynamics, &measurement)?;
         let mut core = KalmanCore::new(
             dynamics.state_dim(),
             measurement.meas_dim(),
@@ -109,13 +111,24 @@ where
     /// ([`steady_state`]). For a linear time-invariant model it is the KF's limiting gain.
     ///
     /// # Errors
-    /// As [`steady_state`].
+    /// As [`steady_state`]; [`FilterError::DimensionMismatch`] for models built for different
+    /// state dimensions or an `x_lin` of another size (`Dyn`), [`FilterError::NonFinite`] for a
+    /// non-finite `x_lin`.
     pub fn steady_state_gain(
         dynamics: &D,
         measurement: &H,
         k: usize,
         x_lin: &OVector<f64, N>,
     ) -> Result<OMatrix<f64, N, M>, FilterError> {
+        crate::kalman::check_model_sizes(dynamics, measurement)?;
+        kalibra_linalg::check_dim(
+            dynamics.state_dim().value(),
+            x_lin.nrows(),
+            "linearisation point",
+        )
+        .map_err(|e| FilterError::at(k, e))?;
+        kalibra_linalg::check_finite(x_lin, "linearisation point")
+            .map_err(|e| FilterError::at(k, e))?;
         Ok(steady_state(
             &dynamics.jacobian(k, x_lin),
             &measurement.jacobian(k, x_lin),

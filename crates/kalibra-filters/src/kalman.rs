@@ -68,7 +68,9 @@ macro_rules! constructors {
             ///
             /// # Errors
             /// [`FilterError::Initial`] if `x0` or `p0` has the wrong size, is not finite, or
-            /// `p0` is not symmetric positive semi-definite.
+            /// `p0` is not symmetric positive semi-definite;
+            /// [`FilterError::DimensionMismatch`] if the measurement model is built for
+            /// another state dimension than the dynamics ([`Measurement::expected_state_dim`]).
             pub fn new(
                 dynamics: D,
                 measurement: H,
@@ -110,7 +112,8 @@ macro_rules! constructors {
             /// ignored (it is [`InitialCheck::AsGiven`]); `first_step` and `update` apply.
             ///
             /// # Errors
-            /// [`FilterError::Initial`] if `x0` or `p0` has the wrong size or is not finite.
+            /// [`FilterError::Initial`] if `x0` or `p0` has the wrong size or is not finite;
+            /// [`FilterError::DimensionMismatch`] as `new`.
             pub fn as_given(
                 dynamics: D,
                 measurement: H,
@@ -138,6 +141,7 @@ macro_rules! constructors {
                 p0: OMatrix<f64, N, N>,
                 options: FilterOptions,
             ) -> Result<Self, FilterError> {
+                check_model_sizes(&dynamics, &measurement)?;
                 let core = KalmanCore::new(
                     dynamics.state_dim(),
                     measurement.meas_dim(),
@@ -168,6 +172,29 @@ macro_rules! constructors {
 
 constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
+
+/// Checks that the measurement model is built for the dynamics' state (issue 19, point 3): a
+/// `Dyn` model of another state size is a [`FilterError::DimensionMismatch`] naming both sizes
+/// at construction, not a panic inside nalgebra at the first step. Models that do not say
+/// their state size ([`Measurement::expected_state_dim`] is `None`) pass.
+pub(crate) fn check_model_sizes<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
+    dynamics: &D,
+    measurement: &H,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    match measurement.expected_state_dim() {
+        Some(found) if found != dynamics.state_dim().value() => {
+            Err(FilterError::DimensionMismatch {
+                what: "measurement model's state (the dynamics' state dimension expected)",
+                expected: dynamics.state_dim().value(),
+                found,
+            })
+        }
+        _ => Ok(()),
+    }
+}
 
 /// The update shared by the KF and the EKF; they differ only in where `H_k` comes from.
 pub(crate) fn measurement_update<'a, const AS_GIVEN: bool, N: Dim, M: Dim, H: Measurement<N, M>>(

@@ -253,15 +253,14 @@ where
     ///
     /// In the records of a filter started with [`InitialCheck::AsGiven`] it is computed by LU
     /// with the `S` the update used; it can then be negative, and is NaN if `S` is singular.
-    // The record is built by the filter's update, which sizes the innovation and S from the
-    // same measurement dimension, so the quadratic form's dimension check cannot fail.
-    #[allow(clippy::expect_used)]
+    /// Otherwise it is finite, or `+inf` when the finite innovation's form lies beyond f64's
+    /// range.
     pub fn nis(&self) -> f64 {
         match self.s_as_given() {
-            None => self
-                .s
-                .quad_form(&self.innovation)
-                .expect("innovation and S share the dimension M"),
+            // The record is built by the filter's update, which sizes the innovation and S from
+            // the same measurement dimension and checks the innovation finite, so the one
+            // error left is a form beyond f64's range.
+            None => self.s.quad_form(&self.innovation).unwrap_or(f64::INFINITY),
             Some(s) => nis_as_given(s, &self.innovation),
         }
     }

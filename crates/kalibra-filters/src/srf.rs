@@ -116,7 +116,10 @@ where
     /// A shifted Rayleigh filter at step 0 with initial mean `x0` and covariance `p0`.
     ///
     /// # Errors
-    /// [`FilterError::Initial`] for a bad initial estimate (as [`crate::Kf::new`]).
+    /// [`FilterError::Initial`] for a bad initial estimate (as [`crate::Kf::new`]);
+    /// [`FilterError::DimensionMismatch`] for a bearing sensor built for another state
+    /// dimension than the dynamics, whose coordinates may lie outside the filter's state (as
+    /// [`crate::Kf::new`]).
     pub fn new(
         dynamics: D,
         bearing: B,
@@ -140,6 +143,7 @@ where
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
         crate::core::reject_as_given(&options, "the SRF with an as-given initial covariance")?;
+        crate::kalman::check_model_sizes(&dynamics, &bearing)?;
         let core = KalmanCore::new(dynamics.state_dim(), U1, x0, p0, options)?;
         Ok(Self {
             dynamics,

@@ -2,8 +2,8 @@
 //! the discrete Riccati recursion and its gain.
 
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, OMatrix, check_dim, check_finite, joseph_update,
-    product, propagate, symmetrize,
+    Alloc, Covariance, DefaultAllocator, Definiteness, Dim, OMatrix, check_covariance, check_dim,
+    check_finite, joseph_update, product, propagate, symmetrize,
 };
 
 use crate::FilterError;
@@ -44,7 +44,10 @@ where
 ///
 /// # Errors
 /// [`FilterError::DimensionMismatch`] for inconsistent sizes (`Dyn`), [`FilterError::NonFinite`]
-/// for non-finite input, [`FilterError::NotPositiveDefinite`] if `S` is singular,
+/// for non-finite input, [`FilterError::NotPositiveDefinite`] at step 0 for a `Q` or `R` that
+/// is not symmetric positive semi-definite
+/// ([`check_covariance`](kalibra_linalg::check_covariance)) and at a later step if `S` is
+/// singular,
 /// [`FilterError::NotConvergent`] if the recursion has not converged after
 /// [`RICCATI_MAX_ITERATIONS`] (the model is not detectable).
 ///
@@ -71,12 +74,14 @@ where
     let at = |e| FilterError::at(0, e);
     check_dim(f.nrows(), f.ncols(), "transition matrix F").map_err(at)?;
     check_dim(f.nrows(), q.nrows(), "process noise Q").map_err(at)?;
+    check_dim(f.nrows(), q.ncols(), "process noise Q columns").map_err(at)?;
     check_dim(f.nrows(), h.ncols(), "measurement matrix H").map_err(at)?;
     check_dim(h.nrows(), r.nrows(), "measurement noise R").map_err(at)?;
+    check_dim(h.nrows(), r.ncols(), "measurement noise R columns").map_err(at)?;
     check_finite(f, "transition matrix F").map_err(at)?;
     check_finite(h, "measurement matrix H").map_err(at)?;
-    check_finite(q, "process noise Q").map_err(at)?;
-    check_finite(r, "measurement noise R").map_err(at)?;
+    check_covariance(q, "process noise Q", Definiteness::SemiDefinite).map_err(at)?;
+    check_covariance(r, "measurement noise R", Definiteness::SemiDefinite).map_err(at)?;
     let mut prior = q.clone();
     symmetrize(&mut prior);
     for iteration in 1..=RICCATI_MAX_ITERATIONS {

@@ -412,7 +412,9 @@ where
     ///
     /// # Errors
     /// [`FilterError::Initial`] for a bad initial estimate (as [`crate::Kf::new`]),
-    /// [`FilterError::InvalidParameter`] for a sigma set invalid at this dimension.
+    /// [`FilterError::DimensionMismatch`] for a measurement model built for another state
+    /// dimension (as [`crate::Kf::new`]), [`FilterError::InvalidParameter`] for a sigma set
+    /// invalid at this dimension.
     pub fn new(
         dynamics: D,
         measurement: H,
@@ -442,6 +444,7 @@ where
             &options,
             "the UKF with an as-given initial covariance (sigma points need P's square root)",
         )?;
+        crate::kalman::check_model_sizes(&dynamics, &measurement)?;
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
         set.weights(n.value())?;
         let core = KalmanCore::new(n, m, x0, p0, options)?;
@@ -886,7 +889,7 @@ fn criterion_value<N: Dim, M: Dim, H: Measurement<N, M>>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    let nis = c.s.quad_form(&c.nu).unwrap_or(f64::NAN);
+    let nis = quad_or_non_finite(&c.s, &c.nu);
     if criterion == KappaCriterion::MaximumLikelihood {
         return c.s.log_det() + nis;
     }
@@ -899,7 +902,7 @@ where
         _ => f64::NAN,
     };
     let e = measurement.residual(z, &measurement.measure(k, &c.mean));
-    let meas_term = r.map_or(f64::NAN, |r| r.quad_form(&e).unwrap_or(f64::NAN));
+    let meas_term = r.map_or(f64::NAN, |r| quad_or_non_finite(r, &e));
     match criterion {
         KappaCriterion::PureMap => prior_term + meas_term,
         _ => prior_term + meas_term - nis - 0.5 * c.s.log_det(),
@@ -924,4 +927,19 @@ where
     fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
         self.unscented_update(z)
     }
+}
+
+/// `v^T S^-1 v` as a score term: `+inf` when it lies beyond f64's range, NaN for a non-finite
+/// `v` (what the unchecked form gave before `quad_form` refused both).
+fn quad_or_non_finite<M: Dim>(s: &Covariance<M>, v: &OVector<f64, M>) -> f64
+where
+    DefaultAllocator: Alloc<M>,
+{
+    s.quad_form(v).unwrap_or_else(|_| {
+        if v.iter().all(|x| x.is_finite()) {
+            f64::INFINITY
+        } else {
+            f64::NAN
+        }
+    })
 }

@@ -484,3 +484,68 @@ fn constant_gain_kf_rejects_a_bad_gain_and_keeps_its_gain() {
     .unwrap();
     assert_eq!(*cgkf.gain(), gain);
 }
+
+/// Issue 19: `steady_state` accepted noise covariances that are not covariances (asymmetric,
+/// indefinite, negative) and returned `Ok`; now they are refused at step 0 by the shared
+/// check, naming the matrix.
+#[test]
+fn steady_state_refuses_noise_that_is_not_a_covariance() {
+    use kalibra_filters::steady_state;
+    let f = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+    let h = kalibra_linalg::nalgebra::Matrix1x2::new(1.0, 0.0);
+    let r = kalibra_linalg::Matrix1::new(1.0);
+    let q = Matrix2::new(0.25, 0.5, 0.5, 1.0);
+    assert!(steady_state(&f, &h, &q, &r).is_ok());
+    for bad_q in [
+        Matrix2::new(0.25, 0.5, 0.0, 1.0),
+        Matrix2::new(1.0, 2.0, 2.0, 1.0),
+        -q,
+    ] {
+        assert!(
+            matches!(
+                steady_state(&f, &h, &bad_q, &r),
+                Err(FilterError::NotPositiveDefinite {
+                    what: "process noise Q",
+                    step: 0
+                })
+            ),
+            "{bad_q}"
+        );
+    }
+    assert!(matches!(
+        steady_state(&f, &h, &q, &kalibra_linalg::Matrix1::new(-1.0)),
+        Err(FilterError::NotPositiveDefinite {
+            what: "measurement noise R",
+            step: 0
+        })
+    ));
+}
+
+/// Issue 19, point 3: `Dyn` sizes that disagree are a `DimensionMismatch` naming both sizes,
+/// not a panic inside nalgebra.
+#[test]
+fn steady_state_checks_dyn_sizes() {
+    use kalibra_filters::steady_state;
+    let f = DMatrix::<f64>::identity(2, 2) * 0.5;
+    let h = DMatrix::<f64>::identity(1, 2);
+    let (q, r) = (
+        DMatrix::<f64>::identity(2, 2),
+        DMatrix::<f64>::identity(1, 1),
+    );
+    assert!(steady_state(&f, &h, &q, &r).is_ok());
+    let mismatch = |e| matches!(e, Err(FilterError::DimensionMismatch { .. }));
+    assert!(mismatch(steady_state(&f, &h, &DMatrix::identity(2, 3), &r)));
+    assert!(mismatch(steady_state(&f, &h, &DMatrix::identity(3, 3), &r)));
+    assert!(mismatch(steady_state(&f, &h, &q, &DMatrix::identity(1, 2))));
+    assert!(mismatch(steady_state(&f, &h, &q, &DMatrix::identity(2, 2))));
+    assert!(mismatch(steady_state(&f, &DMatrix::identity(1, 3), &q, &r)));
+    assert!(mismatch(steady_state(&DMatrix::identity(2, 3), &h, &q, &r)));
+    assert_eq!(
+        steady_state(&f, &h, &DMatrix::identity(2, 3), &r).err(),
+        Some(FilterError::DimensionMismatch {
+            what: "process noise Q columns",
+            expected: 2,
+            found: 3
+        })
+    );
+}

@@ -131,7 +131,8 @@ where
     ///
     /// # Errors
     /// [`LinalgError::DimensionMismatch`] if `b` has the wrong number of rows (possible only with
-    /// `Dyn` dimensions).
+    /// `Dyn` dimensions); [`LinalgError::NonFinite`] naming `"right-hand side"` for a non-finite
+    /// `b`, and `"solution"` for a solution beyond f64's range.
     pub fn solve<C: Dim, S>(
         &self,
         b: &Matrix<f64, D, C, S>,
@@ -141,12 +142,14 @@ where
         DefaultAllocator: nalgebra::allocator::Allocator<D, C>,
     {
         crate::check_dim(self.dim(), b.nrows(), "right-hand side")?;
-        if let Some(par) = backend::route(b.shape_generic().0, b.shape_generic().1) {
+        let x = if let Some(par) = backend::route(b.shape_generic().0, b.shape_generic().1) {
             let mut x = b.clone_owned();
             backend::cholesky_solve_in_place(self.chol.l_dirty(), &mut x, par);
-            return Ok(x);
-        }
-        Ok(self.chol.solve(b))
+            x
+        } else {
+            self.chol.solve(b)
+        };
+        finite_solution(x, b.iter().all(|v| v.is_finite()))
     }
 
     /// Solves `x C = b` for `x`, that is `b C^-1`, with the stored factor: the Kalman gain
@@ -162,7 +165,7 @@ where
     ///
     /// # Errors
     /// [`LinalgError::DimensionMismatch`] if `b` has the wrong number of columns (possible only
-    /// with `Dyn` dimensions).
+    /// with `Dyn` dimensions); [`LinalgError::NonFinite`] as [`Covariance::solve`].
     pub fn solve_right<R: Dim>(
         &self,
         b: &OMatrix<f64, R, D>,
@@ -172,19 +175,23 @@ where
             nalgebra::allocator::Allocator<R, D> + nalgebra::allocator::Allocator<D, R>,
     {
         crate::check_dim(self.dim(), b.ncols(), "right-hand side columns")?;
-        if let Some(par) = backend::route(b.shape_generic().0, b.shape_generic().1) {
+        let x = if let Some(par) = backend::route(b.shape_generic().0, b.shape_generic().1) {
             let mut x = b.clone();
             backend::cholesky_solve_right_in_place(self.chol.l_dirty(), &mut x, par);
-            return Ok(x);
-        }
-        Ok(self.chol.solve(&b.transpose()).transpose())
+            x
+        } else {
+            self.chol.solve(&b.transpose()).transpose()
+        };
+        finite_solution(x, crate::all_finite(b))
     }
 
     /// The quadratic form `v^T C^-1 v`, computed as `|L^-1 v|^2` (one triangular solve).
     ///
     /// # Errors
     /// [`LinalgError::DimensionMismatch`] if `v` has the wrong length (possible only with `Dyn`
-    /// dimensions).
+    /// dimensions); [`LinalgError::NonFinite`] naming `"vector"` if `v` holds NaN or an
+    /// infinity, and naming `"quadratic form"` if the form of a finite `v` lies beyond f64's
+    /// range (before, both came back as a NaN or an infinity inside `Ok`).
     pub fn quad_form<S>(&self, v: &Matrix<f64, D, U1, S>) -> Result<f64, LinalgError>
     where
         S: Storage<f64, D, U1>,
@@ -197,7 +204,18 @@ where
         self.chol
             .l_dirty()
             .solve_lower_triangular_unchecked_mut(&mut w);
-        Ok(w.norm_squared())
+        let q = w.norm_squared();
+        if q.is_finite() {
+            return Ok(q);
+        }
+        // A non-finite input always reaches the result: look for the culprit only then.
+        Err(LinalgError::NonFinite {
+            what: if v.iter().all(|x| x.is_finite()) {
+                "quadratic form"
+            } else {
+                "vector"
+            },
+        })
     }
 
     /// `ln det C`, from the factor's diagonal.
@@ -208,15 +226,41 @@ where
     /// `tr(C^-1 B)` for a square `B` of the same size, by a solve.
     ///
     /// # Errors
-    /// [`LinalgError::DimensionMismatch`] if `b` has the wrong size.
+    /// [`LinalgError::DimensionMismatch`] if `b` has the wrong size; [`LinalgError::NonFinite`]
+    /// for a non-finite `b` or a trace beyond f64's range.
     pub fn trace_solve(&self, b: &OMatrix<f64, D, D>) -> Result<f64, LinalgError> {
         crate::check_dim(self.dim(), b.ncols(), "matrix")?;
-        Ok(self.solve(b)?.trace())
+        let t = self.solve(b)?.trace();
+        if t.is_finite() {
+            Ok(t)
+        } else {
+            Err(LinalgError::NonFinite { what: "trace" })
+        }
     }
 
     /// The explicit inverse. Prefer [`Covariance::solve`]; this exists for reporting.
     pub fn inverse(&self) -> OMatrix<f64, D, D> {
         self.chol.inverse()
+    }
+}
+
+/// `Ok(x)` if the solution `x` is finite; otherwise the error names the right-hand side when
+/// it was not finite, or the solution (beyond f64's range).
+fn finite_solution<R: Dim, C: Dim>(
+    x: OMatrix<f64, R, C>,
+    rhs_finite: bool,
+) -> Result<OMatrix<f64, R, C>, LinalgError>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<R, C>,
+{
+    if crate::all_finite(&x) {
+        Ok(x)
+    } else if rhs_finite {
+        Err(LinalgError::NonFinite { what: "solution" })
+    } else {
+        Err(LinalgError::NonFinite {
+            what: "right-hand side",
+        })
     }
 }
 
@@ -274,6 +318,66 @@ where
         Ok(q)
     } else {
         Err(LinalgError::NotPositiveDefinite { what })
+    }
+}
+
+/// What a covariance-like input must be beyond symmetric, for [`check_covariance`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Definiteness {
+    /// Positive semi-definite, as [`PsdMatrix`](crate::PsdMatrix) checks it (the pivoted
+    /// factorisation [`semidefinite_factor`](crate::semidefinite_factor) succeeds): noise
+    /// covariances, which are often rank-deficient, and covariances that are only propagated.
+    SemiDefinite,
+    /// Positive definite, as [`Covariance`] checks it (the Cholesky factorisation succeeds):
+    /// covariances that are solved with.
+    Definite,
+}
+
+/// The one check of a covariance-like input that enters a public function: square, finite,
+/// symmetric to [`SYMMETRY_TOLERANCE`] (relative asymmetry `|a_ij - a_ji| / sqrt(|a_ii
+/// a_jj|)`) and positive semi-definite or definite as `definiteness` asks: exactly what
+/// [`PsdMatrix::named`](crate::PsdMatrix::named) or [`Covariance::named`] accept, for a
+/// function that needs the matrix checked but not the type (it factorises a copy and drops
+/// it). Every function of the workspace that takes a covariance checks it through this, one
+/// of those two constructors, or their filters' initial check, so the tolerance and the
+/// definiteness test are the same everywhere.
+///
+/// ```
+/// use kalibra_linalg::{check_covariance, Definiteness, LinalgError, Matrix2};
+///
+/// let rank_one = Matrix2::new(1.0, 1.0, 1.0, 1.0);
+/// check_covariance(&rank_one, "Q", Definiteness::SemiDefinite)?;
+/// assert!(check_covariance(&rank_one, "S", Definiteness::Definite).is_err());
+/// let indefinite = Matrix2::new(1.0, 2.0, 2.0, 1.0);
+/// assert!(matches!(
+///     check_covariance(&indefinite, "Q", Definiteness::SemiDefinite),
+///     Err(LinalgError::NotPositiveSemiDefinite { .. })
+/// ));
+/// let asymmetric = Matrix2::new(1.0, 0.5, 0.0, 1.0);
+/// assert!(matches!(
+///     check_covariance(&asymmetric, "Q", Definiteness::SemiDefinite),
+///     Err(LinalgError::NotSymmetric { .. })
+/// ));
+/// # Ok::<(), LinalgError>(())
+/// ```
+///
+/// # Errors
+/// [`LinalgError::DimensionMismatch`] (not square), [`LinalgError::NonFinite`],
+/// [`LinalgError::NotSymmetric`], and [`LinalgError::NotPositiveSemiDefinite`] or
+/// [`LinalgError::NotPositiveDefinite`], naming `what`.
+pub fn check_covariance<D: Dim>(
+    m: &OMatrix<f64, D, D>,
+    what: &'static str,
+    definiteness: Definiteness,
+) -> Result<(), LinalgError>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    // Through the checked types themselves, so that there is one definition of each check.
+    match definiteness {
+        Definiteness::SemiDefinite => crate::PsdMatrix::named(m.clone(), what).map(drop),
+        Definiteness::Definite => Covariance::named(m.clone(), what).map(drop),
     }
 }
 

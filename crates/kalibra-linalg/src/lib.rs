@@ -76,13 +76,15 @@ mod gaussian;
 mod kernels;
 mod lyapunov;
 mod psd;
+mod scale;
 
 pub use alloc::Alloc;
 pub use backend::{
     FAER_MIN_DIM, KernelPolicy, PARALLEL_MIN_DIM, kernel_policy, with_kernel_policy,
 };
 pub use covariance::{
-    Covariance, SYMMETRY_TOLERANCE, check_symmetric, quad_form_once, quad_form_symmetric,
+    Covariance, Definiteness, SYMMETRY_TOLERANCE, check_covariance, check_symmetric,
+    quad_form_once, quad_form_symmetric,
 };
 pub use error::LinalgError;
 pub use gaussian::Gaussian;
@@ -94,6 +96,7 @@ pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,
 };
 pub use psd::{PIVOT_TOLERANCE, PsdMatrix, SqrtMethod, semidefinite_factor, sigma_sqrt};
+pub use scale::{binary_exponent, ldexp};
 
 pub use nalgebra;
 pub use nalgebra::{

@@ -3,7 +3,8 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix};
 
 use crate::{
-    Alloc, LinalgError, check_dim, check_finite, check_symmetric, product, propagate, symmetrize,
+    Alloc, Definiteness, LinalgError, check_covariance, check_dim, check_finite, product,
+    propagate, symmetrize,
 };
 
 /// Most doublings [`discrete_lyapunov`] runs: `2^64` terms of the series, far beyond any
@@ -22,8 +23,9 @@ pub const LYAPUNOV_MAX_DOUBLINGS: usize = 64;
 ///
 /// # Errors
 /// [`LinalgError::DimensionMismatch`] if `A` and `Q` differ in size or are not square,
-/// [`LinalgError::NonFinite`] for non-finite input, [`LinalgError::NotSymmetric`] for an
-/// asymmetric `Q`, and [`LinalgError::NotConvergent`] when the series does not converge in
+/// [`LinalgError::NonFinite`] for non-finite input, [`LinalgError::NotSymmetric`] or
+/// [`LinalgError::NotPositiveSemiDefinite`] for a `Q` that is not a covariance (the check of
+/// [`check_covariance`](crate::check_covariance)), and [`LinalgError::NotConvergent`] when the series does not converge in
 /// [`LYAPUNOV_MAX_DOUBLINGS`] doublings (a spectral radius of 1 or more on a direction `Q`
 /// excites: the stationary covariance is unbounded).
 ///
@@ -46,8 +48,7 @@ where
     check_dim(a.nrows(), q.nrows(), "Lyapunov noise Q")?;
     check_dim(a.nrows(), q.ncols(), "Lyapunov noise Q")?;
     check_finite(a, "Lyapunov matrix A")?;
-    check_finite(q, "Lyapunov noise Q")?;
-    check_symmetric(q, "Lyapunov noise Q")?;
+    check_covariance(q, "Lyapunov noise Q", Definiteness::SemiDefinite)?;
     let mut x = q.clone();
     let mut power = a.clone();
     for _ in 0..LYAPUNOV_MAX_DOUBLINGS {
@@ -72,6 +73,19 @@ where
 /// Most squarings [`spectral_radius`] runs.
 pub const SPECTRAL_MAX_SQUARINGS: usize = 60;
 
+/// `|m|_F` without underflow: entries at most 1 in magnitude (the iteration's), the largest
+/// divided out first when it is small enough for squares to underflow.
+fn frobenius_norm<N: Dim>(m: &OMatrix<f64, N, N>) -> f64
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let big = m.amax();
+    if big == 0.0 || big >= 1e-100 {
+        return m.norm();
+    }
+    big * (m / big).norm()
+}
+
 /// The spectral radius `rho(A)` (largest eigenvalue modulus) of a square matrix, by Gelfand's
 /// formula `rho = lim |A^k|^(1/k)` along `k = 2^j`: repeated squaring with the norm divided
 /// out at every step (so nothing overflows) and its logarithm accumulated.
@@ -81,15 +95,27 @@ pub const SPECTRAL_MAX_SQUARINGS: usize = 60;
 /// about `m ln(2^j) / 2^j`, below `1e-13` after the iterations run. It stops when an estimate
 /// changes by less than `4 eps` relative.
 ///
+/// # Scale
+/// Right across f64's range, subnormal entries to 1e308: `A` is first scaled by the power of
+/// two that brings its largest entry into `[1, 2)` (exact), the Frobenius norm in the
+/// iteration is taken with the largest entry divided out where a sum of squares could
+/// underflow, and the result is scaled back. (The Frobenius norm, not the largest entry, for
+/// the estimates: `|B^2| = |B|^2` holds for it only when `B` is rank one, where the estimate
+/// is exact, while the largest entry of `B^2` can equal the square of `B`'s by coincidence and
+/// stop the iteration at a wrong value.) So `spectral_radius(2^p A) == 2^p spectral_radius(A)` to the bit wherever the result
+/// is a normal number. (Before, `1e308 I`, `1e-308 I` and subnormal matrices gave 0.)
+///
 /// # Errors
 /// [`LinalgError::DimensionMismatch`] for a non-square `A`, [`LinalgError::NonFinite`] for
-/// non-finite entries.
+/// non-finite entries, and for a spectral radius beyond f64's range (up to `n` times the
+/// largest entry: `2e308` for a 2 x 2 matrix of `1e308`s).
 ///
 /// ```
 /// use kalibra_linalg::{spectral_radius, Matrix2};
 /// // Eigenvalues 0.5 and -0.9, far from normal.
 /// let a = Matrix2::new(0.5, 100.0, 0.0, -0.9);
 /// assert!((spectral_radius(&a)? - 0.9).abs() < 1e-12);
+/// assert!((spectral_radius(&(Matrix2::identity() * 1e-310))? / 1e-310 - 1.0).abs() < 1e-12);
 /// # Ok::<(), kalibra_linalg::LinalgError>(())
 /// ```
 pub fn spectral_radius<N: Dim>(a: &OMatrix<f64, N, N>) -> Result<f64, LinalgError>
@@ -98,13 +124,17 @@ where
 {
     check_dim(a.nrows(), a.ncols(), "matrix A")?;
     check_finite(a, "matrix A")?;
-    // m = A^(2^j) / exp(log_scale).
-    let mut m = a.clone();
+    // Zero matrix (or empty): rho = 0.
+    let Some(exponent) = crate::binary_exponent(a.amax()) else {
+        return Ok(0.0);
+    };
+    // m = A^(2^j) 2^-(exponent 2^j) / exp(log_scale), Frobenius norm 1 after each division.
+    let mut m = a.map(|v| crate::ldexp(v, -exponent));
     let mut log_scale = 0.0_f64;
     let mut power = 1.0_f64;
     let mut estimate = f64::INFINITY;
     for _ in 0..SPECTRAL_MAX_SQUARINGS {
-        let norm = m.norm();
+        let norm = frobenius_norm(&m);
         if norm == 0.0 {
             // Nilpotent: some power vanished exactly.
             return Ok(0.0);
@@ -113,14 +143,22 @@ where
         log_scale += norm.ln();
         let next = (log_scale / power).exp();
         if (next - estimate).abs() <= 4.0 * f64::EPSILON * next {
-            return Ok(next);
+            estimate = next;
+            break;
         }
         estimate = next;
         m = product(&m, &m);
         log_scale *= 2.0;
         power *= 2.0;
     }
-    Ok(estimate)
+    let rho = crate::ldexp(estimate, exponent);
+    if rho.is_finite() {
+        Ok(rho)
+    } else {
+        Err(LinalgError::NonFinite {
+            what: "spectral radius (beyond f64's range)",
+        })
+    }
 }
 
 #[cfg(test)]
@@ -165,6 +203,75 @@ mod tests {
         assert_eq!(spectral_radius(&nilpotent).unwrap(), 0.0);
         assert!((spectral_radius(&Matrix2::identity()).unwrap() - 1.0).abs() < 1e-15);
         assert!(spectral_radius(&DMatrix::<f64>::zeros(2, 3)).is_err());
+        // Found by the adversarial suite with the largest entry as the iteration's norm: the
+        // largest entry of A^2 is the square of A's (9.89...), so the first two estimates
+        // agreed and the iteration stopped at 9.89 instead of 11.595.
+        let a = Matrix3::new(
+            0.0,
+            0.0,
+            4.961929881939764,
+            5.050040461752875,
+            0.0,
+            0.0,
+            0.0,
+            9.138940954463893,
+            9.891819944247835,
+        );
+        let rho = spectral_radius(&a).unwrap();
+        assert!((rho - 11.595119079207477).abs() < 1e-12, "{rho}");
+    }
+
+    /// Issue 19, point 5: right from subnormal to 1e308 scales, against nalgebra's
+    /// eigenvalues. Before, `1e308 I`, `1e-308 I` and subnormal matrices gave 0 (the Frobenius
+    /// norm overflowed or underflowed).
+    #[test]
+    fn spectral_radius_agrees_with_eigenvalues_at_every_scale() {
+        use crate::ldexp;
+        for seed in 0..24usize {
+            let n = 1 + seed % 6;
+            let a = DMatrix::from_fn(n, n, |i, j| {
+                ((i * 31 + j * 17 + seed * 7919 + (i * j * seed) % 13) % 101) as f64 / 25.0 - 2.0
+            });
+            let want = a
+                .complex_eigenvalues()
+                .iter()
+                .map(|z| z.norm())
+                .fold(0.0, f64::max);
+            let rho = spectral_radius(&a).unwrap();
+            assert!(
+                (rho - want).abs() <= 1e-9 * want.max(1e-300),
+                "seed {seed}: {rho} vs {want}\n{a}"
+            );
+            // A power of two commutes with every step: the same bits, scaled.
+            for p in [-1010, -900, -600, -100, 100, 600, 900, 1015] {
+                let scaled = a.map(|v| ldexp(v, p));
+                let want = ldexp(rho, p);
+                match spectral_radius(&scaled) {
+                    Ok(got) => assert_eq!(got, want, "seed {seed}, 2^{p}"),
+                    Err(e) => assert!(!want.is_finite(), "seed {seed}, 2^{p}: {e}"),
+                }
+            }
+        }
+        for (scale, n) in [
+            (1e308, 2),
+            (1e-308, 3),
+            (1e-310, 2),
+            (5e-324, 4),
+            (1.7e308, 1),
+        ] {
+            let rho = spectral_radius(&(DMatrix::<f64>::identity(n, n) * scale)).unwrap();
+            assert!((rho / scale - 1.0).abs() < 1e-12, "{scale:e}: {rho:e}");
+            let rotation = Matrix2::new(0.0, -scale, scale, 0.0);
+            let rho = spectral_radius(&rotation).unwrap();
+            assert!((rho / scale - 1.0).abs() < 1e-12, "{scale:e}: {rho:e}");
+        }
+        // A radius beyond f64's range is an error, not inf or 0.
+        assert!(matches!(
+            spectral_radius(&Matrix2::repeat(1e308)),
+            Err(LinalgError::NonFinite { .. })
+        ));
+        assert_eq!(spectral_radius(&DMatrix::<f64>::zeros(0, 0)).unwrap(), 0.0);
+        assert_eq!(spectral_radius(&Matrix2::repeat(0.0)).unwrap(), 0.0);
     }
 
     #[test]
@@ -175,5 +282,27 @@ mod tests {
         assert!(
             discrete_lyapunov(&DMatrix::<f64>::identity(2, 2), &DMatrix::identity(3, 3)).is_err()
         );
+    }
+
+    /// Issue 19: an indefinite or negative noise covariance was accepted and gave an
+    /// indefinite "stationary covariance" as `Ok`.
+    #[test]
+    fn a_noise_covariance_that_is_not_one_is_refused() {
+        let a = Matrix2::identity() * 0.5;
+        for q in [
+            Matrix2::new(1.0, 2.0, 2.0, 1.0),
+            Matrix2::new(-1.0, 0.0, 0.0, 1.0),
+            -Matrix2::identity(),
+        ] {
+            assert!(
+                matches!(
+                    discrete_lyapunov(&a, &q),
+                    Err(LinalgError::NotPositiveSemiDefinite { .. })
+                ),
+                "{q}"
+            );
+        }
+        // Rank-deficient noise is a covariance.
+        assert!(discrete_lyapunov(&a, &Matrix2::new(1.0, 1.0, 1.0, 1.0)).is_ok());
     }
 }

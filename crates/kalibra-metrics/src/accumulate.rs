@@ -77,16 +77,22 @@ impl StepMean {
     /// # Errors
     /// [`MetricsError::StepOutOfRange`] beyond the horizon;
     /// [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or infinite value, which
-    /// would poison every later mean at the step. Nothing is stored on error.
+    /// would poison every later mean at the step, and for a value that would take the step's
+    /// sum beyond f64's range (the mean stays finite). Nothing is stored on error.
     pub fn push(&mut self, step: usize, value: f64) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
-        if !value.is_finite() {
+        let sum = self.sum[step] + value;
+        if !sum.is_finite() {
             return Err(MetricsError::NonFiniteSample {
-                what: "step mean",
+                what: if value.is_finite() {
+                    "step mean (sum beyond f64's range)"
+                } else {
+                    "step mean"
+                },
                 index: step,
             });
         }
-        self.sum[step] += value;
+        self.sum[step] = sum;
         self.count[step] += 1;
         Ok(())
     }
@@ -96,16 +102,29 @@ impl StepMean {
         self.count.get(step).copied().unwrap_or(0)
     }
 
-    /// The mean at `step`; NaN where nothing was pushed.
-    pub fn mean(&self, step: usize) -> f64 {
+    /// The mean at `step`, finite; `None` where nothing was pushed (and beyond the horizon).
+    /// (Before issue 19 an empty step's mean was NaN, which looked like a number to every
+    /// caller that did not test for it.)
+    ///
+    /// ```
+    /// use kalibra_metrics::StepMean;
+    /// let mut m = StepMean::new(2);
+    /// m.push(0, 3.0)?;
+    /// m.push(0, 5.0)?;
+    /// assert_eq!(m.mean(0), Some(4.0));
+    /// assert_eq!(m.mean(1), None);
+    /// assert_eq!(m.means(), vec![Some(4.0), None]);
+    /// # Ok::<(), kalibra_metrics::MetricsError>(())
+    /// ```
+    pub fn mean(&self, step: usize) -> Option<f64> {
         match self.count.get(step) {
-            Some(&c) if c > 0 => self.sum[step] / c as f64,
-            _ => f64::NAN,
+            Some(&c) if c > 0 => Some(self.sum[step] / c as f64),
+            _ => None,
         }
     }
 
-    /// The means at every step.
-    pub fn means(&self) -> Vec<f64> {
+    /// The means at every step, `None` where nothing was pushed.
+    pub fn means(&self) -> Vec<Option<f64>> {
         (0..self.steps()).map(|k| self.mean(k)).collect()
     }
 }
@@ -178,7 +197,8 @@ impl SquaredErrors {
     /// # Errors
     /// [`MetricsError::StepOutOfRange`] beyond the horizon, [`MetricsError::DimensionMismatch`]
     /// for a wrong length, [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or
-    /// infinite component. Nothing is stored on error.
+    /// infinite component, or one whose square would take the step's sum beyond f64's range
+    /// (the MSE stays finite). Nothing is stored on error.
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         if error.len() != self.dim {
@@ -188,16 +208,22 @@ impl SquaredErrors {
                 found: error.len(),
             });
         }
-        if !error.iter().all(|e| e.is_finite()) {
+        let sums = &mut self.sum[step * self.dim..(step + 1) * self.dim];
+        if !error
+            .iter()
+            .zip(sums.iter())
+            .all(|(e, s)| (s + e * e).is_finite())
+        {
             return Err(MetricsError::NonFiniteSample {
-                what: "squared errors",
+                what: if error.iter().all(|e| e.is_finite()) {
+                    "squared errors (sum beyond f64's range)"
+                } else {
+                    "squared errors"
+                },
                 index: step,
             });
         }
-        for (s, e) in self.sum[step * self.dim..(step + 1) * self.dim]
-            .iter_mut()
-            .zip(error)
-        {
+        for (s, e) in sums.iter_mut().zip(error) {
             *s += e * e;
         }
         self.count[step] += 1;
@@ -252,11 +278,11 @@ impl SquaredErrors {
     /// # Errors
     /// As [`SquaredErrors::mse`].
     pub fn rmse_group(&self, step: usize, group: &[usize]) -> Result<f64, MetricsError> {
-        let mut total = 0.0;
-        for &i in group {
-            total += self.mse(step, i)?;
-        }
-        Ok(total.sqrt())
+        let mses = group
+            .iter()
+            .map(|&i| self.mse(step, i))
+            .collect::<Result<Vec<f64>, _>>()?;
+        Ok(root_sum(&mses))
     }
 
     /// The group RMSE at every step.
@@ -285,13 +311,34 @@ impl SquaredErrors {
             });
         }
         let len = range.len() as f64;
-        let mut total = 0.0;
-        for k in range {
-            let r = self.rmse_group(k, group)?;
-            total += r * r;
-        }
-        Ok((total / len).sqrt())
+        let rmses = range
+            .map(|k| self.rmse_group(k, group))
+            .collect::<Result<Vec<f64>, _>>()?;
+        Ok(root_mean_square(&rmses, len))
     }
+}
+
+/// `sqrt(sum_i v_i)` of non-negative finite values (a group's MSEs), computed the plain way
+/// and, only where the sum leaves f64's range, with the largest value divided out first, so
+/// that a finite answer comes back finite.
+fn root_sum(values: &[f64]) -> f64 {
+    let plain = values.iter().fold(0.0, |t, v| t + v).sqrt();
+    if plain.is_finite() {
+        return plain;
+    }
+    let big = values.iter().fold(0.0f64, |m, &v| m.max(v));
+    big.sqrt() * values.iter().map(|v| v / big).sum::<f64>().sqrt()
+}
+
+/// `sqrt(sum_i v_i^2 / len)` of non-negative finite values (RMSEs over steps), plain and, only
+/// where a square leaves f64's range, with the largest value divided out first.
+fn root_mean_square(values: &[f64], len: f64) -> f64 {
+    let plain = (values.iter().fold(0.0, |t, v| t + v * v) / len).sqrt();
+    if plain.is_finite() {
+        return plain;
+    }
+    let big = values.iter().fold(0.0f64, |m, &v| m.max(v));
+    big * (values.iter().map(|v| (v / big) * (v / big)).sum::<f64>() / len).sqrt()
 }
 
 impl Merge for SquaredErrors {
@@ -310,9 +357,44 @@ impl Merge for SquaredErrors {
     }
 }
 
-/// Plain mean of a series, ignoring nothing: a NaN in the series gives NaN.
-pub fn time_average(series: &[f64]) -> f64 {
-    series.iter().sum::<f64>() / series.len() as f64
+/// Plain mean of a series (a time average of per-step statistics), computed without
+/// overflow: the terms are divided by the length before they are summed, so a series of values
+/// near `f64::MAX` has its finite mean.
+///
+/// ```
+/// use kalibra_metrics::time_average;
+/// assert_eq!(time_average(&[1.0, 2.0, 6.0])?, 3.0);
+/// assert_eq!(time_average(&[f64::MAX, f64::MAX])?, f64::MAX);
+/// assert!(time_average(&[]).is_err());
+/// assert!(time_average(&[1.0, f64::NAN]).is_err());
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
+/// ```
+///
+/// # Errors
+/// [`MetricsError::Empty`] for an empty series (before issue 19 it was NaN);
+/// [`MetricsError::NonFiniteSample`] naming the first NaN or infinite value.
+pub fn time_average(series: &[f64]) -> Result<f64, MetricsError> {
+    if series.is_empty() {
+        return Err(MetricsError::Empty {
+            what: "series to average",
+        });
+    }
+    if let Some(index) = series.iter().position(|v| !v.is_finite()) {
+        return Err(MetricsError::NonFiniteSample {
+            what: "time average",
+            index,
+        });
+    }
+    let n = series.len() as f64;
+    let sum: f64 = series.iter().sum();
+    if sum.is_finite() {
+        return Ok(sum / n);
+    }
+    // Beyond f64's range only as a sum: halve and divide first, so the sum stays within
+    // range, then double; the mean of finite values is finite, and where the doubling rounds
+    // past f64::MAX the mean is within rounding of it.
+    let half: f64 = series.iter().map(|v| 0.5 * v / n).sum();
+    Ok((2.0 * half).clamp(-f64::MAX, f64::MAX))
 }
 
 #[cfg(test)]

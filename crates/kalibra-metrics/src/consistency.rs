@@ -37,7 +37,9 @@ where
 /// record keeps one).
 ///
 /// # Errors
-/// [`MetricsError::Linalg`] if the sizes differ (`Dyn`).
+/// [`MetricsError::Linalg`] if the sizes differ (`Dyn`), the innovation holds NaN or an
+/// infinity (before, the NIS came back as NaN or inf inside `Ok`), or its form lies beyond
+/// f64's range.
 pub fn nis<M: Dim>(innovation: &OVector<f64, M>, s: &Covariance<M>) -> Result<f64, MetricsError>
 where
     DefaultAllocator: Alloc<M>,
@@ -56,16 +58,23 @@ pub struct ChiSquareBand {
     pub confidence: f64,
 }
 
+/// The smallest degrees of freedom [`ChiSquareBand::for_mean`] accepts: below it the
+/// chi-square quantiles of statrs lose their accuracy, and at subnormal values it panicked.
+/// Consistency statistics have a dimension as degrees of freedom, at least 1.
+pub const CHI_SQUARE_MIN_DOF: f64 = 1e-3;
+
 /// Total degrees of freedom from which [`ChiSquareBand`] uses the Wilson-Hilferty
 /// approximation instead of statrs' inverse CDF (see [`ChiSquareBand::for_mean`]).
 pub const WILSON_HILFERTY_FROM: f64 = 1e7;
 
 /// The `p` quantile of chi-square with `k` degrees of freedom by Wilson and Hilferty's cube
 /// of a normal, for large `k`.
-fn wilson_hilferty(k: f64, p: f64) -> f64 {
+/// The same quantile divided by the number of samples, `dof` being `k / samples`: computed
+/// as `dof (...)^3`, finite even where `k` is not.
+fn wilson_hilferty_mean(dof: f64, k: f64, p: f64) -> f64 {
     let z = Normal::standard().inverse_cdf(p);
     let a = 2.0 / (9.0 * k);
-    k * (1.0 - a + z * a.sqrt()).powi(3)
+    dof * (1.0 - a + z * a.sqrt()).powi(3)
 }
 
 impl ChiSquareBand {
@@ -92,10 +101,12 @@ impl ChiSquareBand {
     /// bounds coincide, and at `1e300` it panics).
     ///
     /// # Errors
-    /// [`MetricsError::InvalidParameter`] for `dof <= 0` or not finite, `samples == 0`, or a
-    /// confidence outside (0, 1).
+    /// [`MetricsError::InvalidParameter`] for `dof` below [`CHI_SQUARE_MIN_DOF`] or not finite
+    /// (statrs panicked on subnormal degrees of freedom), `samples == 0`, a confidence outside
+    /// (0, 1) or so close to 1 that `(1 + confidence) / 2` rounds to 1 (the upper quantile is
+    /// then infinite), or a band beyond f64's range (`dof` near `f64::MAX`).
     pub fn for_mean(dof: f64, samples: usize, confidence: f64) -> Result<Self, MetricsError> {
-        if !(dof.is_finite() && dof > 0.0) {
+        if !(dof.is_finite() && dof >= CHI_SQUARE_MIN_DOF) {
             return Err(MetricsError::InvalidParameter {
                 name: "degrees of freedom",
                 value: dof,
@@ -115,12 +126,41 @@ impl ChiSquareBand {
         }
         let total = dof * samples as f64;
         let tail = (1.0 - confidence) / 2.0;
-        let (lower, upper) = if total >= WILSON_HILFERTY_FROM {
-            (
-                wilson_hilferty(total, tail),
-                wilson_hilferty(total, 1.0 - tail),
-            )
-        } else {
+        if 1.0 - tail >= 1.0 {
+            return Err(MetricsError::InvalidParameter {
+                name: "confidence",
+                value: confidence,
+            });
+        }
+        let band = Self::quantiles(dof, samples, total, tail, confidence)?;
+        if !(band.lower.is_finite() && band.upper.is_finite()) {
+            return Err(MetricsError::InvalidParameter {
+                name: "degrees of freedom (band beyond f64's range)",
+                value: dof,
+            });
+        }
+        Ok(band)
+    }
+
+    /// The band's quantiles, unchecked (see [`ChiSquareBand::for_mean`]).
+    fn quantiles(
+        dof: f64,
+        samples: usize,
+        total: f64,
+        tail: f64,
+        confidence: f64,
+    ) -> Result<Self, MetricsError> {
+        if total >= WILSON_HILFERTY_FROM {
+            // The band of the mean directly, `dof (1 - a + z sqrt(a))^3`: the total's quantile
+            // divided by the samples would overflow for a total beyond f64's range (dof near
+            // f64::MAX, or usize::MAX samples), where the band itself is finite.
+            return Ok(Self {
+                lower: wilson_hilferty_mean(dof, total, tail),
+                upper: wilson_hilferty_mean(dof, total, 1.0 - tail),
+                confidence,
+            });
+        }
+        let (lower, upper) = {
             let chi2 = ChiSquared::new(total).map_err(|_| MetricsError::InvalidParameter {
                 name: "degrees of freedom",
                 value: total,
@@ -169,7 +209,9 @@ mod band_tests {
         let chi2 = ChiSquared::new(k).unwrap();
         let half_width = 1.96 * (2.0 * k).sqrt();
         for p in [0.025, 0.975] {
-            assert!((chi2.inverse_cdf(p) - wilson_hilferty(k, p)).abs() < 1e-9 * half_width);
+            assert!(
+                (chi2.inverse_cdf(p) - wilson_hilferty_mean(k, k, p)).abs() < 1e-9 * half_width
+            );
         }
         for dof in [1e8, 1e12, 1e15, 1e18] {
             let b = ChiSquareBand::for_mean(dof, 1, 0.95).unwrap();

@@ -306,10 +306,11 @@ impl Credibility {
         let nci = nci_of_step(errors, nees, self.dim)?;
         Ok(CredibilityStep {
             runs,
-            anees: nees.iter().sum::<f64>() / runs as f64 / n,
+            // Without overflow for NEES values near f64::MAX (a plain sum gave inf).
+            anees: crate::time_average(nees)? / n,
             nci: nci.value,
             nci_skipped: nci.skipped,
-            median_nees: median(nees) / n,
+            median_nees: median(nees)? / n,
             mse: mse_matrix(errors, self.dim),
             mse_rank: nci.rank,
         })
@@ -411,25 +412,38 @@ fn mse_matrix(errors: &[f64], dim: usize) -> DMatrix<f64> {
 }
 
 /// The median of a sample, with the even-length convention of numpy and most texts (the mean
-/// of the two middle values); NaN for an empty sample. Sorts a copy by `total_cmp`, so NaNs
-/// sort last rather than panicking.
+/// of the two middle values). Sorts a copy by `total_cmp`.
 ///
 /// ```
 /// use kalibra_metrics::median;
-/// assert_eq!(median(&[5.0, 1.0, 3.0]), 3.0);
-/// assert_eq!(median(&[5.0, 1.0, 3.0, 7.0]), 4.0);
-/// assert!(median(&[]).is_nan());
+/// assert_eq!(median(&[5.0, 1.0, 3.0])?, 3.0);
+/// assert_eq!(median(&[5.0, 1.0, 3.0, 7.0])?, 4.0);
+/// assert!(median(&[]).is_err());
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
-pub fn median(values: &[f64]) -> f64 {
+///
+/// # Errors
+/// [`MetricsError::Empty`] for an empty sample and [`MetricsError::NonFiniteSample`] for a
+/// NaN or infinite value (before issue 19 both gave NaN, or a NaN sorted to the middle).
+pub fn median(values: &[f64]) -> Result<f64, MetricsError> {
+    if values.is_empty() {
+        return Err(MetricsError::Empty { what: "sample" });
+    }
+    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+        return Err(MetricsError::NonFiniteSample {
+            what: "median",
+            index,
+        });
+    }
     let mut sorted = values.to_vec();
     sorted.sort_unstable_by(f64::total_cmp);
     let mid = sorted.len() / 2;
-    match sorted.len() {
-        0 => f64::NAN,
-        len if len % 2 == 1 => sorted[mid],
+    Ok(if sorted.len() % 2 == 1 {
+        sorted[mid]
+    } else {
         // Halving each term cannot overflow, and equals halving the sum for normal numbers.
-        _ => 0.5 * sorted[mid - 1] + 0.5 * sorted[mid],
-    }
+        0.5 * sorted[mid - 1] + 0.5 * sorted[mid]
+    })
 }
 
 /// NCI of one step and what it was computed with.
@@ -636,7 +650,8 @@ mod tests {
         }
         for k in 0..2 {
             let anees = cred.step_summary(k).unwrap().anees;
-            assert!((anees - mean.mean(k)).abs() <= 1e-14 * mean.mean(k));
+            let m = mean.mean(k).unwrap();
+            assert!((anees - m).abs() <= 1e-14 * m);
         }
     }
 
@@ -771,8 +786,9 @@ mod tests {
         let s = cred.step_summary(0).unwrap();
         assert_eq!(s.median_nees, 2.0);
         assert_eq!(s.anees, 2.0);
-        assert_eq!(median(&[2.0]), 2.0);
-        assert!(median(&[]).is_nan());
+        assert_eq!(median(&[2.0]), Ok(2.0));
+        assert!(median(&[]).is_err());
+        assert!(median(&[1.0, f64::NAN, 2.0]).is_err());
     }
 
     #[test]

@@ -12,34 +12,7 @@
 /// squares, or sums of a few million of them, would leave f64's range.
 const LIMIT: i32 = 480;
 
-/// The binary exponent `k` of `x != 0`: `|x| = f 2^k` with `f` in `[1, 2)`, subnormals
-/// included.
-fn exponent(x: f64) -> i32 {
-    let bits = x.abs().to_bits();
-    let field = ((bits >> 52) & 0x7ff) as i32;
-    if field == 0 {
-        // Subnormal: the value is `mantissa 2^-1074`.
-        let mantissa = bits & ((1u64 << 52) - 1);
-        63 - mantissa.leading_zeros() as i32 - 1074
-    } else {
-        field - 1023
-    }
-}
-
-/// `x 2^k`, exact whenever the result is representable: applied in steps so that no
-/// intermediate power of two leaves the range.
-pub(crate) fn ldexp(x: f64, k: i32) -> f64 {
-    let (mut x, mut k) = (x, k);
-    while k > 1000 {
-        x *= 2f64.powi(1000);
-        k -= 1000;
-    }
-    while k < -1000 {
-        x *= 2f64.powi(-1000);
-        k += 1000;
-    }
-    x * 2f64.powi(k)
-}
+pub(crate) use kalibra_linalg::ldexp;
 
 /// The exponent of the largest magnitude in `values` if it is extreme (beyond `2^480` or
 /// below `2^-480`, zero excepted), `None` for ordinary data (and for all-zero or empty).
@@ -48,7 +21,7 @@ pub(crate) fn extreme_exponent(values: &[f64]) -> Option<i32> {
     if largest == 0.0 || !largest.is_finite() {
         return None;
     }
-    let k = exponent(largest);
+    let k = kalibra_linalg::binary_exponent(largest)?;
     (k.abs() > LIMIT).then_some(k)
 }
 
@@ -62,18 +35,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn exponents_and_exact_scaling() {
-        assert_eq!(exponent(1.0), 0);
-        assert_eq!(exponent(-3.0), 1);
-        assert_eq!(exponent(f64::MAX), 1023);
-        assert_eq!(exponent(f64::MIN_POSITIVE), -1022);
-        assert_eq!(exponent(5e-324), -1074);
-        for x in [1e308, 3.7e-310, 5e-324, 1.25, -7e200] {
-            let k = exponent(x);
-            let s = ldexp(x, -k);
-            assert!((1.0..2.0).contains(&s.abs()), "{x:e}");
-            assert_eq!(ldexp(s, k), x, "{x:e}");
-        }
+    fn extreme_exponents() {
         assert_eq!(extreme_exponent(&[1.0, -1e100, 0.0]), None);
         assert_eq!(extreme_exponent(&[1e-200, 1e300]), Some(996));
         assert_eq!(extreme_exponent(&[0.0, 1e-300]), Some(-997));

@@ -29,7 +29,10 @@ proptest! {
         for k in 0..steps {
             prop_assert_eq!(ma.count(k), mw.count(k));
             if mw.count(k) > 0 {
-                prop_assert!((ma.mean(k) - mw.mean(k)).abs() <= 1e-12 * (1.0 + mw.mean(k).abs()));
+                match (ma.mean(k), mw.mean(k)) {
+                    (Some(a), Some(w)) => prop_assert!((a - w).abs() <= 1e-12 * (1.0 + w.abs())),
+                    (a, w) => prop_assert_eq!(a, w),
+                }
                 for i in 0..3 {
                     let (x, y) = (a.mse(k, i).unwrap(), whole.mse(k, i).unwrap());
                     prop_assert!((x - y).abs() <= 1e-12 * (1.0 + y));
@@ -63,7 +66,7 @@ fn rmse_over_time_is_root_mean_of_mse() {
         acc.rmse_over_time(&[0], 2..2),
         Err(MetricsError::InvalidParameter { .. })
     ));
-    assert!((time_average(&[1.0, 2.0, 6.0]) - 3.0).abs() < 1e-15);
+    assert!((time_average(&[1.0, 2.0, 6.0]).unwrap() - 3.0).abs() < 1e-15);
 }
 
 #[test]
@@ -106,7 +109,23 @@ fn typed_errors_for_bad_input() {
         ChiSquareBand::for_mean(2.0, 10, 1.0),
         Err(MetricsError::InvalidParameter { .. })
     ));
-    assert!(StepMean::new(2).mean(0).is_nan());
+    assert_eq!(StepMean::new(2).mean(0), None);
+    // Issue 19: a sum beyond f64's range would have made the mean inf; it is refused and the
+    // accumulator stays as it was.
+    let mut m = StepMean::new(1);
+    m.push(0, f64::MAX).unwrap();
+    assert!(matches!(
+        m.push(0, f64::MAX),
+        Err(MetricsError::NonFiniteSample { index: 0, .. })
+    ));
+    assert_eq!(m.mean(0), Some(f64::MAX));
+    assert_eq!(m.count(0), 1);
+    assert!(matches!(time_average(&[]), Err(MetricsError::Empty { .. })));
+    assert_eq!(time_average(&[f64::MAX; 3]), Ok(f64::MAX));
+    assert!(matches!(
+        time_average(&[0.0, f64::INFINITY]),
+        Err(MetricsError::NonFiniteSample { index: 1, .. })
+    ));
 }
 
 #[test]
@@ -117,4 +136,106 @@ fn chi_square_band_matches_tabulated_quantiles() {
     assert!((b.upper * 25.0 - 129.5612).abs() < 1e-3, "{b:?}");
     let n = ChiSquareBand::for_normalized_mean(4.0, 25, 0.95).unwrap();
     assert!((n.lower - b.lower / 4.0).abs() < 1e-15 && n.contains(1.0) && !n.contains(1.5));
+}
+
+/// Issue 19: the NIS and NEES of a NaN or infinite vector came back as a NaN or an infinity
+/// inside `Ok`; a form beyond f64's range of a finite vector did too.
+#[test]
+fn nis_and_nees_of_non_finite_vectors_are_errors() {
+    use kalibra_linalg::{Covariance, LinalgError};
+    use kalibra_metrics::nis;
+    let p = Matrix2::new(2.0, 0.5, 0.5, 1.0);
+    let s = Covariance::new(p).unwrap();
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let v = Vector2::new(1.0, bad);
+        assert!(matches!(
+            nis(&v, &s),
+            Err(MetricsError::Linalg(LinalgError::NonFinite {
+                what: "vector"
+            }))
+        ));
+        assert!(matches!(
+            s.quad_form(&v),
+            Err(LinalgError::NonFinite { .. })
+        ));
+        assert!(nees(&v, &p).is_err());
+    }
+    let huge = Vector2::new(1e300, -1e300);
+    assert!(matches!(
+        nis(
+            &huge,
+            &Covariance::new(Matrix2::identity() * 1e-300).unwrap()
+        ),
+        Err(MetricsError::Linalg(LinalgError::NonFinite {
+            what: "quadratic form"
+        }))
+    ));
+    // Extremes whose form is finite are computed.
+    let q = nis(
+        &Vector2::new(1e150, 0.0),
+        &Covariance::new(Matrix2::identity()).unwrap(),
+    );
+    assert!((q.unwrap() / 1e300 - 1.0).abs() < 1e-12);
+    let tiny = Covariance::new(Matrix2::identity() * 1e-300).unwrap();
+    assert!((nis(&Vector2::new(1e-150, 0.0), &tiny).unwrap() - 1.0).abs() < 1e-12);
+    // Solves refuse what would come back non-finite.
+    assert!(matches!(
+        s.solve(&Vector2::new(f64::NAN, 0.0)),
+        Err(LinalgError::NonFinite {
+            what: "right-hand side"
+        })
+    ));
+    assert!(tiny.solve(&Vector2::new(1e300, 0.0)).is_err());
+    assert!(
+        s.trace_solve(&(Matrix2::identity() * f64::INFINITY))
+            .is_err()
+    );
+}
+
+/// Issue 19, found by the adversarial suite: subnormal degrees of freedom panicked inside
+/// statrs, a confidence whose upper tail rounds to 1 gave an infinite bound, and degrees of
+/// freedom near f64::MAX an infinite or NaN bound, all inside `Ok`. Every `Ok` band is finite.
+#[test]
+fn chi_square_bands_at_extreme_parameters_are_finite_or_errors() {
+    for dof in [5e-324, 1e-308, 1e-10, 1e-3, 0.5, 3.0, 1e7, 1e300, f64::MAX] {
+        for samples in [1usize, 2, 5, 1 << 40, usize::MAX] {
+            for confidence in [0.95, 1.0 - 1e-16, 1e-300, 0.5] {
+                let band =
+                    std::panic::catch_unwind(|| ChiSquareBand::for_mean(dof, samples, confidence))
+                        .unwrap_or_else(|_| panic!("panic at {dof:e} {samples} {confidence}"));
+                if let Ok(b) = band {
+                    assert!(
+                        b.lower.is_finite() && b.upper.is_finite() && b.lower <= b.upper,
+                        "{dof:e} {samples} {confidence}: {b:?}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(ChiSquareBand::for_mean(5e-324, 2, 0.95).is_err());
+    assert!(ChiSquareBand::for_mean(2.0, 10, 1.0 - 1e-16).is_err());
+    assert!(ChiSquareBand::for_mean(1e-3, 1, 0.95).is_ok());
+}
+
+/// Issue 19, found by the adversarial suite: a squared error beyond f64's range made the RMSE
+/// inf inside `Ok`; it is refused, and MSEs near f64::MAX still give a finite group RMSE.
+#[test]
+fn squared_errors_stay_finite() {
+    let mut acc = SquaredErrors::new(1, 2);
+    assert!(matches!(
+        acc.push_slice(0, &[0.0, 2e300]),
+        Err(MetricsError::NonFiniteSample { index: 0, .. })
+    ));
+    assert!(acc.mse(0, 0).is_err(), "nothing stored");
+    // Each square within range (1.44e308), their sum beyond it.
+    acc.push_slice(0, &[1.2e154, 1.2e154]).unwrap();
+    let group = acc.rmse_group(0, &[0, 1]).unwrap();
+    assert!((group / (1.2e154 * 2f64.sqrt()) - 1.0).abs() < 1e-15);
+    let mut big = SquaredErrors::new(2, 2);
+    for k in 0..2 {
+        big.push_slice(k, &[1.2e154, 1.2e154]).unwrap();
+    }
+    let over_time = big.rmse_over_time(&[0, 1], 0..2).unwrap();
+    assert!(over_time.is_finite());
+    assert!((over_time / (1.2e154 * 2f64.sqrt()) - 1.0).abs() < 1e-15);
 }

@@ -389,6 +389,10 @@ where
         U1
     }
 
+    fn expected_state_dim(&self) -> Option<usize> {
+        Some(self.n.value())
+    }
+
     fn measure(&self, k: usize, x: &OVector<f64, N>) -> OVector<f64, U1> {
         let d = self.relative_position(k, x);
         OVector::<f64, U1>::new(self.reference.angle(d[0], d[1]))

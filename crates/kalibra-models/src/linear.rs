@@ -152,6 +152,9 @@ where
     fn meas_dim(&self) -> M {
         self.h.shape_generic().0
     }
+    fn expected_state_dim(&self) -> Option<usize> {
+        Some(self.h.ncols())
+    }
     fn measure(&self, _k: usize, x: &OVector<f64, N>) -> OVector<f64, M> {
         &self.h * x
     }

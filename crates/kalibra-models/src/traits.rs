@@ -114,6 +114,17 @@ where
     /// The measurement dimension.
     fn meas_dim(&self) -> M;
 
+    /// The state dimension the model is built for, when it knows it. Filters compare it with
+    /// their dynamics' state dimension at construction, so that `Dyn` models built for
+    /// different states (an `H` with another number of columns, a bearing whose coordinates
+    /// lie outside the filter's state) are a `DimensionMismatch` naming both sizes there,
+    /// instead of a panic inside nalgebra at the first step. The default, `None`, claims
+    /// nothing (with `Const` sizes the types already agree); every model of this crate that
+    /// takes a run-time state size returns it.
+    fn expected_state_dim(&self) -> Option<usize> {
+        None
+    }
+
     /// `h_k(x)`, without noise. A moving platform enters here through `k`.
     fn measure(&self, k: usize, x: &OVector<f64, N>) -> OVector<f64, M>;
 
@@ -206,6 +217,9 @@ where
 {
     fn meas_dim(&self) -> M {
         (**self).meas_dim()
+    }
+    fn expected_state_dim(&self) -> Option<usize> {
+        (**self).expected_state_dim()
     }
     fn measure(&self, k: usize, x: &OVector<f64, N>) -> OVector<f64, M> {
         (**self).measure(k, x)

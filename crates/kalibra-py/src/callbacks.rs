@@ -159,6 +159,10 @@ impl Measurement<Dyn, Dyn> for PyMeasurement<'_> {
         Dyn(self.r.nrows())
     }
 
+    fn expected_state_dim(&self) -> Option<usize> {
+        Some(self.n)
+    }
+
     fn measure(&self, k: usize, x: &DVector<f64>) -> DVector<f64> {
         let m = self.r.nrows();
         DVector::from_vec(call(self.failure, self.h, "h", Args::State(x, k), &[m]))

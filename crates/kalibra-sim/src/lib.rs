@@ -26,7 +26,7 @@
 //! let mean = mc.accumulate(|| StepMean::new(1), |_run, rng, acc| {
 //!     acc.push(0, rng.random::<f64>())
 //! })?;
-//! assert!((mean.mean(0) - 0.5).abs() < 0.05);
+//! assert!(mean.mean(0).is_some_and(|m| (m - 0.5).abs() < 0.05));
 //! assert_eq!(mc.threads(1).accumulate(|| StepMean::new(1), |_, rng, acc| acc.push(0, rng.random::<f64>()))?, mean);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```

@@ -11,8 +11,8 @@
 use std::ops::RangeInclusive;
 
 use kalibra_linalg::{
-    Alloc, Const, Covariance, DefaultAllocator, Dim, Gaussian, LinalgError, OMatrix, OVector,
-    PsdMatrix, SMatrix, SVector, check_finite,
+    Alloc, Const, Covariance, DefaultAllocator, Definiteness, Dim, Gaussian, LinalgError, OMatrix,
+    OVector, PsdMatrix, SMatrix, SVector, check_covariance, check_finite,
 };
 use kalibra_models::{Dynamics, Measurement, ModelError};
 use rayon::prelude::*;
@@ -255,7 +255,9 @@ where
 ///
 /// # Errors
 /// [`TuningError::TooShort`] for no pairs; [`TuningError::Linalg`] for a `q_guess` that is not
-/// square, matrices whose rows or columns differ from it, or non-finite entries.
+/// square, matrices whose rows or columns differ from it, and for a `q_guess`, prior or
+/// posterior that is not a covariance (non-finite, asymmetric or indefinite:
+/// [`check_covariance`], semi-definite).
 pub fn q_ad<'a, N: Dim>(
     q_guess: &OMatrix<f64, N, N>,
     steps: impl IntoIterator<Item = (&'a OMatrix<f64, N, N>, &'a OMatrix<f64, N, N>)>,
@@ -263,6 +265,8 @@ pub fn q_ad<'a, N: Dim>(
 where
     DefaultAllocator: Alloc<N>,
 {
+    kalibra_linalg::check_dim(q_guess.nrows(), q_guess.ncols(), "Q guess (square)")?;
+    check_covariance(q_guess, "Q guess", Definiteness::SemiDefinite)?;
     let mut sum = q_guess.clone() * 0.0;
     let mut count = 0usize;
     for (prior, posterior) in steps {
@@ -274,6 +278,12 @@ where
             q_guess.ncols(),
             posterior.ncols(),
             "posterior covariance columns",
+        )?;
+        check_covariance(prior, "prior covariance", Definiteness::SemiDefinite)?;
+        check_covariance(
+            posterior,
+            "posterior covariance",
+            Definiteness::SemiDefinite,
         )?;
         sum += prior - posterior;
         count += 1;
@@ -325,6 +335,33 @@ mod tests {
         ));
         let wide_guess = DMatrix::<f64>::zeros(2, 3);
         assert!(q_ad(&wide_guess, [(&wide, &wide)]).is_err());
+    }
+
+    /// Issue 19, point 4: `q_ad`'s covariances go through the shared check (before, an
+    /// indefinite or asymmetric guess or pair was averaged into an `Ok`).
+    #[test]
+    fn q_ad_refuses_matrices_that_are_not_covariances() {
+        let q = Matrix2::new(1.0, 0.0, 0.0, 1.0);
+        let p = Matrix2::new(2.0, 0.5, 0.5, 1.0);
+        assert!(q_ad(&q, [(&p, &q)]).is_ok());
+        let indefinite = Matrix2::new(1.0, 2.0, 2.0, 1.0);
+        let asymmetric = Matrix2::new(2.0, 0.5, 0.0, 1.0);
+        for (guess, prior, posterior) in [
+            (&indefinite, &p, &q),
+            (&q, &indefinite, &q),
+            (&q, &p, &asymmetric),
+        ] {
+            assert!(
+                matches!(
+                    q_ad(guess, [(prior, posterior)]),
+                    Err(TuningError::Linalg(
+                        LinalgError::NotPositiveSemiDefinite { .. }
+                            | LinalgError::NotSymmetric { .. }
+                    ))
+                ),
+                "{guess} {prior} {posterior}"
+            );
+        }
     }
 
     /// An absurd grid is refused before anything is allocated; the largest allowed is built.

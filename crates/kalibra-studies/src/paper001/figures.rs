@@ -11,7 +11,7 @@ use crate::figure::{Annotation, Figure, Series};
 fn per_filter(
     p: &ProblemResult,
     mut fig: Figure,
-    pick: impl Fn(&crate::paper001::FilterResult) -> &[f64],
+    pick: impl Fn(&crate::paper001::FilterResult) -> Vec<Option<f64>>,
 ) -> Figure {
     for name in FILTERS {
         let values = pick(&p.filters[name]);
@@ -22,8 +22,7 @@ fn per_filter(
             .labels
             .iter()
             .zip(values)
-            .filter(|(_, v)| v.is_finite())
-            .map(|(&k, &v)| (k as f64, v))
+            .filter_map(|(&k, v)| v.filter(|v| v.is_finite()).map(|v| (k as f64, v)))
             .collect();
         let mut s = Series::line(name, points);
         if name == "UKF-MAP" {
@@ -32,6 +31,11 @@ fn per_filter(
         fig = fig.series(s);
     }
     fig
+}
+
+/// A series with every value present.
+fn some(values: &[f64]) -> Vec<Option<f64>> {
+    values.iter().copied().map(Some).collect()
 }
 
 /// The SVG figures, as (file name, contents).
@@ -52,13 +56,13 @@ pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
         .log_y();
         out.push((
             format!("rmse_pos_{tag}.svg"),
-            per_filter(p, fig, |f| &f.rmse_pos_steps),
+            per_filter(p, fig, |f| some(&f.rmse_pos_steps)),
         ));
         if p.filters["EKF"].rmse_vel.is_some() {
             let fig = Figure::new(format!("problem {problem}: velocity RMSE"), "k", unit.1).log_y();
             out.push((
                 format!("rmse_vel_{tag}.svg"),
-                per_filter(p, fig, |f| &f.rmse_vel_steps),
+                per_filter(p, fig, |f| some(&f.rmse_vel_steps)),
             ));
         }
         let fig = Figure::new(
@@ -72,7 +76,7 @@ pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
         });
         out.push((
             format!("nci_{tag}.svg"),
-            per_filter(p, fig, |f| &f.nci_steps),
+            per_filter(p, fig, |f| some(&f.nci_steps)),
         ));
         let fig = Figure::new(
             format!("problem {problem}: ANEES with its 95% band"),
@@ -90,7 +94,7 @@ pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
         });
         out.push((
             format!("anees_{tag}.svg"),
-            per_filter(p, fig, |f| &f.anees_steps),
+            per_filter(p, fig, |f| some(&f.anees_steps)),
         ));
         let fig = Figure::new(
             format!("problem {problem}: mean kappa of the unscented filters"),
@@ -99,7 +103,7 @@ pub(super) fn figures(report: &Report) -> Vec<(String, Figure)> {
         );
         out.push((
             format!("kappa_{tag}.svg"),
-            per_filter(p, fig, |f| &f.mean_kappa_steps),
+            per_filter(p, fig, |f| f.mean_kappa_steps.clone()),
         ));
     }
     out

@@ -87,7 +87,7 @@ pub struct FilterResult {
     pub anees_median_steps: Vec<f64>,
     /// Per step: the mean chosen kappa (adaptive filters), or the fixed one (UKF); empty for
     /// the EKF and SRF.
-    pub mean_kappa_steps: Vec<f64>,
+    pub mean_kappa_steps: Vec<Option<f64>>,
     /// Seed-to-seed spread of each time average (this seed and the extra ones).
     pub spread: BTreeMap<&'static str, Spread>,
 }
@@ -319,7 +319,7 @@ where
     let pos = acc.errors[which].rmse_series(scenario.position_indices())?;
     let cred = acc.credibility[which].over_time(0..steps)?;
     let mut out = BTreeMap::from([
-        ("rmse_pos", time_average(&pos)),
+        ("rmse_pos", time_average(&pos)?),
         ("nci", cred.nci),
         ("anees", cred.anees),
         ("anees_median", cred.median_nees),
@@ -327,7 +327,7 @@ where
     if let Some(vel) = scenario.velocity_indices() {
         out.insert(
             "rmse_vel",
-            time_average(&acc.errors[which].rmse_series(vel)?),
+            time_average(&acc.errors[which].rmse_series(vel)?)?,
         );
     }
     Ok(out)

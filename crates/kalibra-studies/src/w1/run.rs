@@ -144,8 +144,15 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
     )?;
     let anees_band = ChiSquareBand::for_normalized_mean(4.0, config.runs, config.confidence)?;
     let anis_band = ChiSquareBand::for_normalized_mean(2.0, config.runs, config.confidence)?;
-    let anees = nees_acc.means();
-    let anis = nis_acc.means();
+    // Every run pushes every step, so no step's mean is missing.
+    let complete = |means: Vec<Option<f64>>, what| {
+        means
+            .into_iter()
+            .collect::<Option<Vec<f64>>>()
+            .ok_or(kalibra_metrics::MetricsError::Empty { what })
+    };
+    let anees = complete(nees_acc.means(), "NEES at a step")?;
+    let anis = complete(nis_acc.means(), "NIS at a step")?;
     let inside = |v: &[f64], b: &ChiSquareBand| {
         v.iter().filter(|x| b.contains(**x)).count() as f64 / v.len() as f64
     };
@@ -153,8 +160,8 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
         config: *config,
         anees_inside: inside(&anees, &anees_band),
         anis_inside: inside(&anis, &anis_band),
-        anees_time_average: time_average(&anees),
-        anis_time_average: time_average(&anis),
+        anees_time_average: time_average(&anees)?,
+        anis_time_average: time_average(&anis)?,
         anees_band: anees_band.into(),
         anis_band: anis_band.into(),
         anees,
