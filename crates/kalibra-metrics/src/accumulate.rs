@@ -17,12 +17,24 @@ pub trait Merge {
     /// If the two accumulators were built with different shapes (a programming error: partial
     /// accumulators of one study come from one constructor).
     fn merge(&mut self, other: &Self);
+
+    /// Whether `other` has this accumulator's shape, so [`Merge::merge`] would not panic.
+    /// Partial accumulators read from outside (a shard's file) are checked with it before
+    /// they are merged. The default says yes: an accumulator of one shape only (or one that
+    /// never panics in `merge`) needs nothing else.
+    fn fits(&self, _other: &Self) -> bool {
+        true
+    }
 }
 
 impl<A: Merge, B: Merge> Merge for (A, B) {
     fn merge(&mut self, other: &Self) {
         self.0.merge(&other.0);
         self.1.merge(&other.1);
+    }
+
+    fn fits(&self, other: &Self) -> bool {
+        self.0.fits(&other.0) && self.1.fits(&other.1)
     }
 }
 
@@ -31,6 +43,10 @@ impl<A: Merge, B: Merge, C: Merge> Merge for (A, B, C) {
         self.0.merge(&other.0);
         self.1.merge(&other.1);
         self.2.merge(&other.2);
+    }
+
+    fn fits(&self, other: &Self) -> bool {
+        self.0.fits(&other.0) && self.1.fits(&other.1) && self.2.fits(&other.2)
     }
 }
 
@@ -43,10 +59,49 @@ fn check_step(step: usize, steps: usize) -> Result<(), MetricsError> {
 }
 
 /// The mean over runs of a scalar at each step (NEES, NIS, any per-step statistic).
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Serialised (serde, for a Monte Carlo shard's partial result) as its sums and counts per
+/// step, `{"sum": [...], "count": [...]}`; deserialising checks that the two have one length and
+/// the sums are finite.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "StepMeanData")]
 pub struct StepMean {
     sum: Vec<f64>,
     count: Vec<u64>,
+}
+
+/// [`StepMean`] as read, before its invariants are checked.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StepMeanData {
+    sum: Vec<f64>,
+    count: Vec<u64>,
+}
+
+impl TryFrom<StepMeanData> for StepMean {
+    type Error = String;
+
+    fn try_from(d: StepMeanData) -> Result<Self, String> {
+        if d.sum.len() != d.count.len() {
+            return Err(format!(
+                "a step mean with {} sums and {} counts",
+                d.sum.len(),
+                d.count.len()
+            ));
+        }
+        check_finite_sums(&d.sum)?;
+        Ok(Self {
+            sum: d.sum,
+            count: d.count,
+        })
+    }
+}
+
+fn check_finite_sums(sums: &[f64]) -> Result<(), String> {
+    match sums.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(format!("sum {i} is not finite")),
+        None => Ok(()),
+    }
 }
 
 impl StepMean {
@@ -130,6 +185,10 @@ impl StepMean {
 }
 
 impl Merge for StepMean {
+    fn fits(&self, other: &Self) -> bool {
+        self.steps() == other.steps()
+    }
+
     fn merge(&mut self, other: &Self) {
         assert_eq!(
             self.steps(),
@@ -156,11 +215,45 @@ impl Merge for StepMean {
 /// assert_eq!(acc.rmse_group(0, &[0, 1])?, 5.0); // sqrt(mean over runs of 3^2 + 4^2)
 /// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Serialised (serde) as `{"dim": n, "sum": [...], "count": [...]}`, the sums step-major;
+/// deserialising checks the lengths (`sum` holds `dim` values per step) and finiteness.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "SquaredErrorsData")]
 pub struct SquaredErrors {
     dim: usize,
     sum: Vec<f64>,
     count: Vec<u64>,
+}
+
+/// [`SquaredErrors`] as read, before its invariants are checked.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SquaredErrorsData {
+    dim: usize,
+    sum: Vec<f64>,
+    count: Vec<u64>,
+}
+
+impl TryFrom<SquaredErrorsData> for SquaredErrors {
+    type Error = String;
+
+    fn try_from(d: SquaredErrorsData) -> Result<Self, String> {
+        if d.count.len().checked_mul(d.dim) != Some(d.sum.len()) {
+            return Err(format!(
+                "squared errors of dimension {} with {} sums for {} steps",
+                d.dim,
+                d.sum.len(),
+                d.count.len()
+            ));
+        }
+        check_finite_sums(&d.sum)?;
+        Ok(Self {
+            dim: d.dim,
+            sum: d.sum,
+            count: d.count,
+        })
+    }
 }
 
 impl SquaredErrors {
@@ -342,6 +435,10 @@ fn root_mean_square(values: &[f64], len: f64) -> f64 {
 }
 
 impl Merge for SquaredErrors {
+    fn fits(&self, other: &Self) -> bool {
+        (self.steps(), self.dim) == (other.steps(), other.dim)
+    }
+
     fn merge(&mut self, other: &Self) {
         assert_eq!(
             (self.steps(), self.dim),

@@ -101,13 +101,59 @@ const EIGEN_ITERATIONS_PER_DIM: usize = 60;
 /// assert!((s.nci - 10.0 * 2f64.log10()).abs() < 1e-12);
 /// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Serialised (serde) as `{"dim": n, "errors": [[...], ...], "nees": [[...], ...]}`, per step
+/// the runs' errors (`dim` values each) and their NEES; deserialising checks that the lengths
+/// agree and every value is finite.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "CredibilityData")]
 pub struct Credibility {
     dim: usize,
     /// Per step, the errors of the runs pushed there, one after the other (`dim` values each).
     errors: Vec<Vec<f64>>,
     /// Per step, the NEES of the same runs, in the same order.
     nees: Vec<Vec<f64>>,
+}
+
+/// [`Credibility`] as read, before its invariants are checked.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CredibilityData {
+    dim: usize,
+    errors: Vec<Vec<f64>>,
+    nees: Vec<Vec<f64>>,
+}
+
+impl TryFrom<CredibilityData> for Credibility {
+    type Error = String;
+
+    fn try_from(d: CredibilityData) -> Result<Self, String> {
+        if d.errors.len() != d.nees.len() {
+            return Err(format!(
+                "credibility with {} steps of errors and {} of NEES",
+                d.errors.len(),
+                d.nees.len()
+            ));
+        }
+        for (k, (e, n)) in d.errors.iter().zip(&d.nees).enumerate() {
+            if n.len().checked_mul(d.dim) != Some(e.len()) {
+                return Err(format!(
+                    "credibility step {k}: {} error values for {} runs of dimension {}",
+                    e.len(),
+                    n.len(),
+                    d.dim
+                ));
+            }
+            if e.iter().chain(n).any(|v| !v.is_finite()) {
+                return Err(format!("credibility step {k}: a value is not finite"));
+            }
+        }
+        Ok(Self {
+            dim: d.dim,
+            errors: d.errors,
+            nees: d.nees,
+        })
+    }
 }
 
 /// The credibility statistics of one step (see [`Credibility`]).
@@ -348,6 +394,10 @@ impl Credibility {
 }
 
 impl Merge for Credibility {
+    fn fits(&self, other: &Self) -> bool {
+        (self.steps(), self.dim) == (other.steps(), other.dim)
+    }
+
     /// Appends `other`'s runs after this accumulator's, step by step.
     fn merge(&mut self, other: &Self) {
         assert_eq!(

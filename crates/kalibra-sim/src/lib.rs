@@ -34,10 +34,12 @@
 // Library code returns typed errors; an unwrap or expect must say why it cannot fail
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+mod shard;
 mod tuning;
 
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
+pub use shard::{PARTIAL_FORMAT_VERSION, Partial, Shard, ShardError, StudyId, config_hash, merge};
 pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};
 
 use kalibra_metrics::Merge;
@@ -139,19 +141,11 @@ impl MonteCarlo {
         Make: Fn() -> A + Sync + Send,
         One: Fn(usize, &mut ChaCha8Rng, &mut A) -> Result<(), E> + Sync + Send,
     {
-        let blocks = self.runs.clamp(1, MAX_BLOCKS);
+        let blocks = self.blocks();
         self.in_pool(|| {
             let parts: Vec<Result<A, SimError<E>>> = (0..blocks)
                 .into_par_iter()
-                .map(|b| {
-                    let mut acc = make();
-                    for run in self.block(b, blocks) {
-                        let mut rng = self.rng(run);
-                        one(run, &mut rng, &mut acc)
-                            .map_err(|source| SimError::Run { run, source })?;
-                    }
-                    Ok(acc)
-                })
+                .map(|b| self.run_block(b, blocks, &make, &one))
                 .collect();
             let mut parts = parts.into_iter();
             let mut total = parts.next().unwrap_or_else(|| Ok(make()))?;
@@ -160,6 +154,29 @@ impl MonteCarlo {
             }
             Ok(total)
         })
+    }
+
+    /// Block `b` of `blocks` into a fresh accumulator, its runs in order: the one piece of
+    /// work that [`MonteCarlo::accumulate`] and [`MonteCarlo::accumulate_shard`] share, so a
+    /// shard's blocks are the one-process blocks to the bit.
+    fn run_block<A, E, Make, One>(
+        &self,
+        b: usize,
+        blocks: usize,
+        make: &Make,
+        one: &One,
+    ) -> Result<A, SimError<E>>
+    where
+        E: std::error::Error + Send + 'static,
+        Make: Fn() -> A,
+        One: Fn(usize, &mut ChaCha8Rng, &mut A) -> Result<(), E>,
+    {
+        let mut acc = make();
+        for run in self.block(b, blocks) {
+            let mut rng = self.rng(run);
+            one(run, &mut rng, &mut acc).map_err(|source| SimError::Run { run, source })?;
+        }
+        Ok(acc)
     }
 
     /// Runs the study and returns each run's output, in run order.

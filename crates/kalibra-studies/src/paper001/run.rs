@@ -159,6 +159,14 @@ impl Acc {
 }
 
 impl Merge for Acc {
+    fn fits(&self, other: &Self) -> bool {
+        (0..FILTERS.len()).all(|i| {
+            self.errors[i].fits(&other.errors[i])
+                && self.credibility[i].fits(&other.credibility[i])
+                && self.kappa[i].fits(&other.kappa[i])
+        })
+    }
+
     fn merge(&mut self, other: &Self) {
         for i in 0..FILTERS.len() {
             self.errors[i].merge(&other.errors[i]);
