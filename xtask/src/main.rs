@@ -3,6 +3,10 @@
 //! * `cargo xtask reproduce [STUDY ...] [--quick] [--out DIR] [--seed N] [--threads N]`: runs
 //!   the studies of `kalibra_studies::REGISTRY` (all, or those named) and writes each one's
 //!   Markdown report, `results.json` and SVG figures, and `index.md`, under `target/reproduce/`.
+//! * `cargo xtask reproduce STUDY... --shard I/S --out DIR`: runs shard I of S of each study's
+//!   Monte Carlo and writes its partial result to `DIR/<study>/shard-I-of-S.json`;
+//!   `cargo xtask merge DIR... [--out DIR]` merges all shards into the reports and index the
+//!   unsharded run writes, bit for bit (docs/distributed.md).
 //! * `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs
 //!   the benchmark workloads through the public API and through hand-written nalgebra loops in
 //!   the same process, and prints steps per second and their ratio.
@@ -40,12 +44,15 @@ enum Command {
     Reproduce(reproduce::Args),
     /// Time the library against hand-written nalgebra loops on the benchmark workloads.
     Bench(bench::Args),
+    /// Merge the shard files of `reproduce STUDY --shard I/S` into the unsharded reports.
+    Merge(reproduce::MergeArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Reproduce(args) => reproduce::main(&args),
         Command::Bench(args) => bench::main(&args),
+        Command::Merge(args) => reproduce::merge(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

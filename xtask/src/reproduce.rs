@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use kalibra_sim::Shard;
 use kalibra_studies::REGISTRY;
 use kalibra_studies::claims::{Claim, Verdict};
 use kalibra_studies::study::{Options, Outcome, Reproduce, Size};
@@ -30,6 +31,34 @@ pub struct Args {
     /// Worker threads (0: every core); the results do not depend on it.
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Run only shard I of S of each named study's Monte Carlo (0 <= I < S) and write its
+    /// partial result to DIR/<study>/shard-I-of-S.json; `cargo xtask merge` turns the S
+    /// partials into the report the unsharded run writes, to the bit.
+    #[arg(long, value_name = "I/S", value_parser = parse_shard, requires = "studies")]
+    shard: Option<Shard>,
+}
+
+/// `cargo xtask merge` arguments.
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// Directories holding shard files (`<study>/shard-I-of-S.json`, as `reproduce --shard`
+    /// writes them), for instance one per machine; every shard of a study must be present.
+    #[arg(value_name = "DIR", required = true)]
+    dirs: Vec<PathBuf>,
+    /// Output directory for the merged reports (default: the first DIR).
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// The thread count the reports record (the unsharded run's, 0 by default); results do
+    /// not depend on it.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+/// The version of the shard file around a study's partial result.
+const SHARD_FILE_VERSION: u64 = 1;
+
+fn parse_shard(text: &str) -> Result<Shard, String> {
+    text.parse::<Shard>().map_err(|e| e.to_string())
 }
 
 /// The list of studies shown by `--help`.
@@ -57,6 +86,20 @@ fn git_revision() -> String {
         .filter(|o| o.status.success())
         .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
         .unwrap_or_else(|| "unknown".into())
+}
+
+/// Checks that `out` can be created and written, before any work starts.
+fn check_out(out: &Path, option: &str) -> Result<()> {
+    if out.as_os_str().is_empty() {
+        anyhow::bail!("{option} is empty: give a directory");
+    }
+    std::fs::create_dir_all(out)
+        .and_then(|()| {
+            let probe = out.join(format!(".write-check-{}", std::process::id()));
+            std::fs::write(&probe, b"")?;
+            std::fs::remove_file(probe)
+        })
+        .with_context(|| format!("{option} {}: cannot write there", out.display()))
 }
 
 /// Writes one study's `results.json` (with the provenance every study records), `report.md`
@@ -94,13 +137,10 @@ pub fn main(args: &Args) -> Result<()> {
         threads: args.threads,
     };
     // The output directory first: a bad --out fails before minutes of studies, not after.
-    std::fs::create_dir_all(&out)
-        .and_then(|()| {
-            let probe = out.join(format!(".write-check-{}", std::process::id()));
-            std::fs::write(&probe, b"")?;
-            std::fs::remove_file(probe)
-        })
-        .with_context(|| format!("--out {}: cannot write there", out.display()))?;
+    check_out(&out, "--out")?;
+    if let Some(shard) = args.shard {
+        return run_shards(args, &options, shard, &out, &revision);
+    }
     let mut rows = Vec::new();
     let mut claims: Vec<(&dyn Reproduce, Vec<Claim>)> = Vec::new();
     let total = Instant::now();
@@ -112,29 +152,263 @@ pub fn main(args: &Args) -> Result<()> {
         let outcome = with_progress(id, || study.reproduce(&options))
             .with_context(|| format!("study {id}"))?;
         eprintln!("{id}: done in {:.2} s", start.elapsed().as_secs_f64());
-        let provenance = serde_json::json!({
-            "study": id,
-            "git_revision": revision,
-            "size": options.size.label(),
-            "seed": outcome.seed,
-            "threads": args.threads,
-            "parameters": outcome.config,
-        });
-        write_study(&out, study, provenance, &outcome)?;
-        rows.push(format!(
-            "| {} | {} | [{id}/report.md]({id}/report.md) |",
-            study.title(),
-            outcome.highlight
-        ));
-        if study.paper().is_some() {
-            claims.push((study, outcome.claims));
-        }
+        record(
+            &out,
+            study,
+            &options,
+            &revision,
+            outcome,
+            &mut rows,
+            &mut claims,
+        )?;
     }
 
-    let index = index_markdown(&revision, options.size.label(), args, &rows, &claims);
+    let index = index_markdown(
+        &revision,
+        options.size.label(),
+        args.seed,
+        args.threads,
+        &rows,
+        &claims,
+    );
     std::fs::create_dir_all(&out)?;
     std::fs::write(out.join("index.md"), &index)?;
     println!("{index}");
+    println!(
+        "wrote {} in {:.2} s",
+        out.join("index.md").display(),
+        total.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Writes one study's files and adds its row and claims to the index's.
+fn record<'a>(
+    out: &Path,
+    study: &'a dyn Reproduce,
+    options: &Options,
+    revision: &str,
+    outcome: Outcome,
+    rows: &mut Vec<String>,
+    claims: &mut Vec<(&'a dyn Reproduce, Vec<Claim>)>,
+) -> Result<()> {
+    let id = study.id();
+    let provenance = serde_json::json!({
+        "study": id,
+        "git_revision": revision,
+        "size": options.size.label(),
+        "seed": outcome.seed,
+        "threads": options.threads,
+        "parameters": outcome.config,
+    });
+    write_study(out, study, provenance, &outcome)?;
+    rows.push(format!(
+        "| {} | {} | [{id}/report.md]({id}/report.md) |",
+        study.title(),
+        outcome.highlight
+    ));
+    if study.paper().is_some() {
+        claims.push((study, outcome.claims));
+    }
+    Ok(())
+}
+
+/// `reproduce --shard I/S`: each named study's shard, written as a partial result.
+fn run_shards(
+    args: &Args,
+    options: &Options,
+    shard: Shard,
+    out: &Path,
+    revision: &str,
+) -> Result<()> {
+    let studies: Vec<&dyn Reproduce> = args
+        .studies
+        .iter()
+        .filter_map(|id| REGISTRY.iter().copied().find(|s| s.id() == id))
+        .collect();
+    // Every study is checked before any runs: a typo in the list fails at once.
+    if let Some(study) = studies.iter().find(|s| !s.sharded()) {
+        let sharded: Vec<&str> = REGISTRY
+            .iter()
+            .filter(|s| s.sharded())
+            .map(|s| s.id())
+            .collect();
+        anyhow::bail!(
+            "--shard: study {} does not run as shards; the studies that do: {}",
+            study.id(),
+            sharded.join(", ")
+        );
+    }
+    for study in studies {
+        let id = study.id();
+        eprintln!("{id}: shard {shard} of {} ...", study.describe(options));
+        let start = Instant::now();
+        let partial = with_progress(id, || study.reproduce_shard(options, shard))
+            .with_context(|| format!("study {id}, shard {shard}"))?;
+        let file = serde_json::json!({
+            "kalibra_shard": SHARD_FILE_VERSION,
+            "study": id,
+            "git_revision": revision,
+            "size": options.size.label(),
+            "seed": options.seed,
+            "partial": partial,
+        });
+        let dir = out.join(id);
+        std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+        let path = dir.join(format!("shard-{}-of-{}.json", shard.index(), shard.count()));
+        std::fs::write(&path, serde_json::to_string(&file)?)
+            .with_context(|| format!("write {}", path.display()))?;
+        eprintln!(
+            "{id}: shard {shard} done in {:.2} s, wrote {}",
+            start.elapsed().as_secs_f64(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// One shard file as read back: its study, size and seed, and the partial result.
+struct ShardFile {
+    path: PathBuf,
+    study: String,
+    size: String,
+    seed: Option<u64>,
+    partial: serde_json::Value,
+}
+
+fn read_shard_file(path: &Path) -> Result<ShardFile> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("read {}", path.display()))?;
+    let mut value: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    let field = |v: &serde_json::Value, key: &str| -> Result<String> {
+        v[key]
+            .as_str()
+            .map(str::to_string)
+            .with_context(|| format!("{}: no text field {key:?}", path.display()))
+    };
+    if value["kalibra_shard"].as_u64() != Some(SHARD_FILE_VERSION) {
+        anyhow::bail!(
+            "{}: not a kalibra shard file of version {SHARD_FILE_VERSION}",
+            path.display()
+        );
+    }
+    let seed = match &value["seed"] {
+        serde_json::Value::Null => None,
+        v => Some(
+            v.as_u64()
+                .with_context(|| format!("{}: seed is not an integer", path.display()))?,
+        ),
+    };
+    Ok(ShardFile {
+        path: path.to_path_buf(),
+        study: field(&value, "study")?,
+        size: field(&value, "size")?,
+        seed,
+        partial: value["partial"].take(),
+    })
+}
+
+/// `cargo xtask merge DIR...`: every study's shard files merged into the reports and index
+/// that the unsharded `reproduce` writes.
+pub fn merge(args: &MergeArgs) -> Result<()> {
+    let out = args.out.clone().unwrap_or_else(|| args.dirs[0].clone());
+    check_out(&out, "--out")?;
+    let total = Instant::now();
+    // Shard files by study, in registry order.
+    let mut files: std::collections::BTreeMap<String, Vec<ShardFile>> = Default::default();
+    for dir in &args.dirs {
+        let entries = std::fs::read_dir(dir).with_context(|| format!("read {}", dir.display()))?;
+        for study_dir in entries {
+            let study_dir = study_dir?.path();
+            if !study_dir.is_dir() {
+                continue;
+            }
+            for entry in std::fs::read_dir(&study_dir)? {
+                let path = entry?.path();
+                let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+                if name.starts_with("shard-") && name.ends_with(".json") {
+                    let file = read_shard_file(&path)?;
+                    files.entry(file.study.clone()).or_default().push(file);
+                }
+            }
+        }
+    }
+    if files.is_empty() {
+        anyhow::bail!(
+            "no shard files (<study>/shard-I-of-S.json) under {}",
+            args.dirs
+                .iter()
+                .map(|d| d.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let revision = git_revision();
+    let (mut rows, mut claims) = (Vec::new(), Vec::new());
+    let mut seeds = std::collections::BTreeSet::new();
+    let mut sizes = std::collections::BTreeSet::new();
+    for study in REGISTRY.iter().copied() {
+        let Some(parts) = files.remove(study.id()) else {
+            continue;
+        };
+        let first = &parts[0];
+        if let Some(other) = parts
+            .iter()
+            .find(|p| (&p.size, p.seed) != (&first.size, first.seed))
+        {
+            anyhow::bail!(
+                "{} and {} are shards of different runs (size {} seed {:?} vs size {} seed {:?})",
+                first.path.display(),
+                other.path.display(),
+                first.size,
+                first.seed,
+                other.size,
+                other.seed
+            );
+        }
+        let size = match first.size.as_str() {
+            "full" => Size::Paper,
+            "quick" => Size::Quick,
+            other => anyhow::bail!("{}: unknown size {other:?}", first.path.display()),
+        };
+        let options = Options {
+            size,
+            seed: first.seed,
+            threads: args.threads,
+        };
+        seeds.insert(first.seed);
+        sizes.insert(size.label());
+        let id = study.id();
+        let start = Instant::now();
+        let outcome = study
+            .reproduce_merged(&options, parts.into_iter().map(|p| p.partial).collect())
+            .with_context(|| format!("merge the shards of study {id}"))?;
+        eprintln!("{id}: merged in {:.3} s", start.elapsed().as_secs_f64());
+        record(
+            &out,
+            study,
+            &options,
+            &revision,
+            outcome,
+            &mut rows,
+            &mut claims,
+        )?;
+    }
+    if let Some(unknown) = files.keys().next() {
+        anyhow::bail!("shard files of an unknown study {unknown:?}");
+    }
+    // The index records one size and seed, as an unsharded run does.
+    let (Some(size), Some(seed), true) = (
+        sizes.first(),
+        seeds.first(),
+        sizes.len() == 1 && seeds.len() == 1,
+    ) else {
+        anyhow::bail!(
+            "the shard files mix sizes {sizes:?} or seeds {seeds:?}: merge them separately"
+        );
+    };
+    let index = index_markdown(&revision, size, *seed, args.threads, &rows, &claims);
+    std::fs::write(out.join("index.md"), &index)?;
     println!(
         "wrote {} in {:.2} s",
         out.join("index.md").display(),
@@ -148,7 +422,8 @@ pub fn main(args: &Args) -> Result<()> {
 fn index_markdown(
     revision: &str,
     size: &str,
-    args: &Args,
+    seed: Option<u64>,
+    threads: usize,
     highlights: &[String],
     claims: &[(&dyn Reproduce, Vec<Claim>)],
 ) -> String {
@@ -190,9 +465,8 @@ fn index_markdown(
          report explains every gap.\n\n\
          ## Studies\n\n| study | summary | report |\n|---|---|---|\n{}\n\n\
          ## Every published claim\n\n{table}",
-        args.seed
-            .map_or("default per study".to_string(), |s| s.to_string()),
-        args.threads,
+        seed.map_or("default per study".to_string(), |s| s.to_string()),
+        threads,
         highlights.join("\n"),
     )
 }
@@ -296,6 +570,7 @@ mod tests {
                 out: Some(out.clone()),
                 seed: None,
                 threads: threads.parse().unwrap(),
+                shard: None,
             };
             super::main(&args).unwrap();
             outputs(&out)

@@ -125,6 +125,23 @@ pub enum StudyError {
         /// The registered identifiers, comma-separated.
         known: String,
     },
+    /// The study cannot run as shards (it has no Monte Carlo worth cutting, or not yet).
+    #[error("study {0} does not run as shards; the studies that do: {1}")]
+    NotSharded(&'static str, String),
+    /// Shards could not be merged (other studies, duplicates, gaps), or a partial result did
+    /// not read.
+    #[error(transparent)]
+    Shard(#[from] kalibra_sim::ShardError),
+    /// A shard's partial result is not the study's (it does not deserialise).
+    #[error("shard {shard}: not a partial result of study {study}: {message}")]
+    Partial {
+        /// The study.
+        study: &'static str,
+        /// Which shard (`i/S`, or `?` when the file does not say).
+        shard: String,
+        /// What did not read.
+        message: String,
+    },
 }
 
 /// Mean and sample standard deviation (divisor `n - 1`, at least 1) of a Monte Carlo sample.

@@ -204,6 +204,113 @@ pub trait Study: Sync {
 
     /// The figures the report links to, as data.
     fn figures(&self, report: &Self::Report) -> Vec<NamedFigure>;
+
+    /// Whether the study runs as shards ([`Study::run_shard`], [`Study::merge_shards`]).
+    fn sharded(&self) -> bool {
+        false
+    }
+
+    /// Runs shard `shard` of the study's Monte Carlo and returns its partial result
+    /// (a [`kalibra_sim::Partial`], serialised). [`Study::merge_shards`] of every shard's
+    /// partial gives the report [`Study::run`] gives, to the bit.
+    ///
+    /// # Errors
+    /// [`StudyError::NotSharded`] for a study that does not shard (the default); otherwise
+    /// as [`Study::run`].
+    fn run_shard(
+        &self,
+        config: &Self::Config,
+        shard: kalibra_sim::Shard,
+    ) -> Result<serde_json::Value, StudyError> {
+        let _ = (config, shard);
+        Err(not_sharded(self.id()))
+    }
+
+    /// The report of the study from the partial results of all its shards, in any order.
+    ///
+    /// # Errors
+    /// [`StudyError::NotSharded`] for a study that does not shard (the default);
+    /// [`StudyError::Partial`] for a part that is not this study's partial;
+    /// [`StudyError::Shard`] for parts of other configurations, duplicates or gaps.
+    fn merge_shards(
+        &self,
+        config: &Self::Config,
+        parts: Vec<serde_json::Value>,
+    ) -> Result<Self::Report, StudyError> {
+        let _ = (config, parts);
+        Err(not_sharded(self.id()))
+    }
+}
+
+fn not_sharded(id: &'static str) -> StudyError {
+    let sharded: Vec<&str> = crate::REGISTRY
+        .iter()
+        .filter(|s| s.sharded())
+        .map(|s| s.id())
+        .collect();
+    StudyError::NotSharded(id, sharded.join(", "))
+}
+
+/// The identity of a study's Monte Carlo for its shards: seed and runs, a hash of the
+/// configuration without its thread count (which never changes results), and the kalibra
+/// version. Shards of the same identity merge; any other difference is refused.
+///
+/// # Errors
+/// [`StudyError::Report`] if the configuration does not serialise.
+pub fn study_id(
+    config: &impl Serialize,
+    mc: &kalibra_sim::MonteCarlo,
+) -> Result<kalibra_sim::StudyId, StudyError> {
+    let mut value = serde_json::to_value(config)
+        .map_err(|e| StudyError::Report(format!("the configuration does not serialise: {e}")))?;
+    if let Some(map) = value.as_object_mut() {
+        map.remove("threads");
+    }
+    // serde_json's maps are ordered by key, so the text is canonical.
+    let hash = kalibra_sim::config_hash(value.to_string().as_bytes());
+    Ok(kalibra_sim::StudyId::new(
+        mc,
+        hash,
+        concat!("kalibra ", env!("CARGO_PKG_VERSION")),
+    ))
+}
+
+/// Reads shard partials from their serialised form, naming the shard that does not read.
+///
+/// # Errors
+/// [`StudyError::Partial`] for a value that is not a `Partial<A>`.
+pub fn read_partials<A: serde::de::DeserializeOwned>(
+    study: &'static str,
+    parts: Vec<serde_json::Value>,
+) -> Result<Vec<kalibra_sim::Partial<A>>, StudyError> {
+    parts
+        .into_iter()
+        .map(|value| {
+            let shard = match (
+                value["shard"]["index"].as_u64(),
+                value["shard"]["count"].as_u64(),
+            ) {
+                (Some(i), Some(s)) => format!("{i}/{s}"),
+                _ => "?".to_string(),
+            };
+            serde_json::from_value(value).map_err(|e| StudyError::Partial {
+                study,
+                shard,
+                message: e.to_string(),
+            })
+        })
+        .collect()
+}
+
+/// Serialises a shard's partial result.
+///
+/// # Errors
+/// [`StudyError::Report`] if it does not serialise (a non-finite sum).
+pub fn write_partial<A: Serialize>(
+    partial: &kalibra_sim::Partial<A>,
+) -> Result<serde_json::Value, StudyError> {
+    serde_json::to_value(partial)
+        .map_err(|e| StudyError::Report(format!("the partial result does not serialise: {e}")))
 }
 
 /// Everything one study run produced, type-erased for the registry loop.
@@ -242,6 +349,27 @@ pub trait Reproduce: Sync {
     /// Whatever the run, the highlight or the report template return, and
     /// [`StudyError::Report`] if the report does not serialise.
     fn reproduce(&self, options: &Options) -> Result<Outcome, StudyError>;
+    /// See [`Study::sharded`].
+    fn sharded(&self) -> bool;
+    /// [`Study::run_shard`] of the configuration `options` selects.
+    ///
+    /// # Errors
+    /// As [`Study::run_shard`].
+    fn reproduce_shard(
+        &self,
+        options: &Options,
+        shard: kalibra_sim::Shard,
+    ) -> Result<serde_json::Value, StudyError>;
+    /// What [`Reproduce::reproduce`] collects, from the partial results of every shard
+    /// ([`Study::merge_shards`]) instead of a run.
+    ///
+    /// # Errors
+    /// As [`Study::merge_shards`] and [`Reproduce::reproduce`].
+    fn reproduce_merged(
+        &self,
+        options: &Options,
+        parts: Vec<serde_json::Value>,
+    ) -> Result<Outcome, StudyError>;
 }
 
 impl<S: Study> Reproduce for S {
@@ -264,17 +392,48 @@ impl<S: Study> Reproduce for S {
     fn reproduce(&self, options: &Options) -> Result<Outcome, StudyError> {
         let config = self.config(options);
         let report = self.run(&config)?;
-        let json = |what: &str, value: Result<serde_json::Value, serde_json::Error>| {
-            value.map_err(|e| StudyError::Report(format!("{what} does not serialise: {e}")))
-        };
-        Ok(Outcome {
-            seed: self.seed(&config),
-            config: json("the configuration", serde_json::to_value(&config))?,
-            results: json("the report", serde_json::to_value(&report))?,
-            claims: self.claims(&report),
-            highlight: self.highlight(&config, &report)?,
-            markdown: self.markdown(&config, &report)?,
-            figures: self.figures(&report),
-        })
+        outcome(self, &config, &report)
     }
+
+    fn sharded(&self) -> bool {
+        Study::sharded(self)
+    }
+
+    fn reproduce_shard(
+        &self,
+        options: &Options,
+        shard: kalibra_sim::Shard,
+    ) -> Result<serde_json::Value, StudyError> {
+        self.run_shard(&self.config(options), shard)
+    }
+
+    fn reproduce_merged(
+        &self,
+        options: &Options,
+        parts: Vec<serde_json::Value>,
+    ) -> Result<Outcome, StudyError> {
+        let config = self.config(options);
+        let report = self.merge_shards(&config, parts)?;
+        outcome(self, &config, &report)
+    }
+}
+
+/// Everything a run of `study` produced, from its report.
+fn outcome<S: Study>(
+    study: &S,
+    config: &S::Config,
+    report: &S::Report,
+) -> Result<Outcome, StudyError> {
+    let json = |what: &str, value: Result<serde_json::Value, serde_json::Error>| {
+        value.map_err(|e| StudyError::Report(format!("{what} does not serialise: {e}")))
+    };
+    Ok(Outcome {
+        seed: study.seed(config),
+        config: json("the configuration", serde_json::to_value(config))?,
+        results: json("the report", serde_json::to_value(report))?,
+        claims: study.claims(report),
+        highlight: study.highlight(config, report)?,
+        markdown: study.markdown(config, report)?,
+        figures: study.figures(report),
+    })
 }

@@ -17,7 +17,7 @@
 mod run;
 mod scenario;
 
-pub use run::{Band, Config, Report, run};
+pub use run::{Acc, Band, Config, Report, merge, run, run_shard};
 pub use scenario::{models, prior};
 
 use crate::StudyError;
@@ -61,6 +61,26 @@ impl Study for W1 {
 
     fn run(&self, config: &Config) -> Result<Report, StudyError> {
         run(config)
+    }
+
+    fn sharded(&self) -> bool {
+        true
+    }
+
+    fn run_shard(
+        &self,
+        config: &Config,
+        shard: kalibra_sim::Shard,
+    ) -> Result<serde_json::Value, StudyError> {
+        crate::study::write_partial(&run_shard(config, shard)?)
+    }
+
+    fn merge_shards(
+        &self,
+        config: &Config,
+        parts: Vec<serde_json::Value>,
+    ) -> Result<Report, StudyError> {
+        merge(config, crate::study::read_partials(self.id(), parts)?)
     }
 
     fn claims(&self, _report: &Report) -> Vec<Claim> {

@@ -3,11 +3,12 @@
 use kalibra_filters::{Filter, Kf};
 use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, time_average};
 use kalibra_models::{Simulator, sample_with_factor};
-use kalibra_sim::MonteCarlo;
+use kalibra_sim::{ChaCha8Rng, MonteCarlo, Partial, Shard};
 use serde::Serialize;
 
 use super::scenario::{models, prior};
 use crate::StudyError;
+use crate::study::study_id;
 
 /// Size and seed of a W1 study.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -94,12 +95,57 @@ pub struct Report {
     pub rmse_velocity: Vec<f64>,
 }
 
+/// The study's accumulators: NEES / 4 and NIS / 2 per step, and the squared errors.
+pub type Acc = (StepMean, StepMean, SquaredErrors);
+
 /// Runs the study.
 ///
 /// # Errors
 /// [`StudyError`] if a run fails (it should not: the models are valid and the filter
 /// consistent) or `config` asks for zero runs or steps.
 pub fn run(config: &Config) -> Result<Report, StudyError> {
+    let (mc, make, one) = study(config)?;
+    finish(config, mc.accumulate(make, one)?)
+}
+
+/// Runs shard `shard` of the study: its partial result, which [`merge`] turns into the
+/// report [`run`] gives, to the bit.
+///
+/// # Errors
+/// As [`run`].
+pub fn run_shard(config: &Config, shard: Shard) -> Result<Partial<Acc>, StudyError> {
+    let (mc, make, one) = study(config)?;
+    let id = study_id(config, &mc)?;
+    Ok(mc.accumulate_shard(shard, &id, make, one)?)
+}
+
+/// The report from the partial results of every shard of the study of `config`.
+///
+/// # Errors
+/// [`StudyError::Shard`] for parts of another configuration (their [`kalibra_sim::StudyId`]
+/// differs from `config`'s), duplicates or gaps; as [`run`] otherwise.
+pub fn merge(config: &Config, parts: Vec<Partial<Acc>>) -> Result<Report, StudyError> {
+    let (mc, _, _) = study(config)?;
+    let id = study_id(config, &mc)?;
+    if let Some(other) = parts.iter().find(|p| p.study != id) {
+        return Err(kalibra_sim::ShardError::OtherStudy {
+            index: other.shard.index(),
+            found: other.study.clone(),
+            expected: id,
+        }
+        .into());
+    }
+    finish(config, kalibra_sim::merge(parts)?)
+}
+
+type Run = dyn Fn(usize, &mut ChaCha8Rng, &mut Acc) -> Result<(), StudyError> + Sync + Send;
+
+/// The study's Monte Carlo, its empty accumulator and one run, shared by [`run`] and
+/// [`run_shard`] so a shard computes exactly what the whole study computes.
+#[allow(clippy::type_complexity)]
+fn study(
+    config: &Config,
+) -> Result<(MonteCarlo, impl Fn() -> Acc + Sync + Send, Box<Run>), StudyError> {
     if config.runs == 0 || config.steps == 0 {
         return Err(StudyError::Metrics(
             kalibra_metrics::MetricsError::InvalidParameter {
@@ -116,32 +162,35 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
         .clone_owned();
     let steps = config.steps;
     let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
-    let (nees_acc, nis_acc, err_acc) = mc.accumulate(
-        || {
-            (
-                StepMean::new(steps),
-                StepMean::new(steps),
-                SquaredErrors::new(steps, 4),
-            )
-        },
-        |_run, rng, (nees_acc, nis_acc, err_acc)| {
-            let x0 = m0 + sample_with_factor(&p0_factor, rng);
-            let mut truth = Simulator::new(&f, &h, x0, 0)?;
-            let mut kf = Kf::new(&f, &h, m0, p0)?;
-            for k in 0..steps {
-                let (x, z) = truth.step(rng)?;
-                if k > 0 {
-                    kf.predict()?;
-                }
-                let rec = kf.update(&z)?;
-                let e = x - rec.posterior().mean;
-                nees_acc.push(k, rec.nees(&e)? / 4.0)?;
-                nis_acc.push(k, rec.nis() / 2.0)?;
-                err_acc.push(k, &e)?;
+    let make = move || {
+        (
+            StepMean::new(steps),
+            StepMean::new(steps),
+            SquaredErrors::new(steps, 4),
+        )
+    };
+    let one = move |_run: usize, rng: &mut ChaCha8Rng, (nees_acc, nis_acc, err_acc): &mut Acc| {
+        let x0 = m0 + sample_with_factor(&p0_factor, rng);
+        let mut truth = Simulator::new(&f, &h, x0, 0)?;
+        let mut kf = Kf::new(&f, &h, m0, p0)?;
+        for k in 0..steps {
+            let (x, z) = truth.step(rng)?;
+            if k > 0 {
+                kf.predict()?;
             }
-            Ok::<(), StudyError>(())
-        },
-    )?;
+            let rec = kf.update(&z)?;
+            let e = x - rec.posterior().mean;
+            nees_acc.push(k, rec.nees(&e)? / 4.0)?;
+            nis_acc.push(k, rec.nis() / 2.0)?;
+            err_acc.push(k, &e)?;
+        }
+        Ok::<(), StudyError>(())
+    };
+    Ok((mc, make, Box::new(one)))
+}
+
+/// The report from the study's accumulators.
+fn finish(config: &Config, (nees_acc, nis_acc, err_acc): Acc) -> Result<Report, StudyError> {
     let anees_band = ChiSquareBand::for_normalized_mean(4.0, config.runs, config.confidence)?;
     let anis_band = ChiSquareBand::for_normalized_mean(2.0, config.runs, config.confidence)?;
     // Every run pushes every step, so no step's mean is missing.
