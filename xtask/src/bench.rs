@@ -9,6 +9,9 @@
 //! on generated logs. `all` leaves it out: it needs Python, a virtual environment installed
 //! from PyPI and over a gigabyte of logs, which the in-process workloads do not.
 //!
+//! `shards` (in `bench_shards`) runs W1 as 1, 2 and 4 shards and times the slowest shard and
+//! the merge against the one-process run (`--shard-runs`, default 10^5 runs).
+//!
 //! `w4` (in `bench_w4`) times one Kalman filter at the run-time sizes `--sizes` through
 //! faer's kernels and nalgebra's, and a numpy script beside them (`--no-python` skips it). It
 //! is not part of `all` either: it takes minutes at n = 1024.
@@ -39,6 +42,9 @@ enum Workloads {
     /// numpy script.
     #[value(alias = "W4")]
     W4,
+    /// W1 cut into 1, 2 and 4 shards: slowest shard plus merge against one process
+    /// (`--shard-runs` runs, default 10^5).
+    Shards,
 }
 
 /// `cargo xtask bench` arguments.
@@ -75,6 +81,9 @@ pub(crate) struct Args {
     /// W4: skip the numpy script (no Python, no PyPI).
     #[arg(long)]
     pub(crate) no_python: bool,
+    /// Shards: the study's runs.
+    #[arg(long, default_value_t = 100_000, value_parser = positive)]
+    pub(crate) shard_runs: usize,
 }
 
 /// A count of at least one.
@@ -98,6 +107,9 @@ pub fn main(args: &Args) -> Result<()> {
     }
     if args.workloads == Workloads::W4 {
         return crate::bench_w4::w4_bench(args);
+    }
+    if args.workloads == Workloads::Shards {
+        return crate::bench_shards::shards_bench(args);
     }
     if args.workloads != Workloads::W2 {
         w1_bench(args)?;

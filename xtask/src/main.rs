@@ -24,6 +24,7 @@
 
 mod bench;
 mod bench_eval;
+mod bench_shards;
 mod bench_w2;
 mod bench_w4;
 mod reproduce;
