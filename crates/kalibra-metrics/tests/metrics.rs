@@ -239,3 +239,47 @@ fn squared_errors_stay_finite() {
     assert!(over_time.is_finite());
     assert!((over_time / (1.2e154 * 2f64.sqrt()) - 1.0).abs() < 1e-15);
 }
+
+/// The accumulators a Monte Carlo shard writes read back to the bit (serde_json with
+/// float_roundtrip), and a record whose parts disagree does not read.
+#[test]
+fn accumulators_round_trip_through_json_and_refuse_inconsistent_records() {
+    use kalibra_metrics::{Credibility, SquaredErrors, StepMean};
+    let mut mean = StepMean::new(2);
+    let mut squared = SquaredErrors::new(2, 2);
+    let mut cred = Credibility::new(2, 2);
+    for (i, v) in [0.1, 1.0 / 3.0, 2e-300, 7e150].iter().enumerate() {
+        mean.push(i % 2, *v).unwrap();
+        squared.push_slice(i % 2, &[*v, -v / 7.0]).unwrap();
+        cred.push_nees(i % 2, &[*v, -v / 7.0], *v).unwrap();
+    }
+    let back: StepMean = serde_json::from_str(&serde_json::to_string(&mean).unwrap()).unwrap();
+    assert_eq!(back, mean);
+    let back: SquaredErrors =
+        serde_json::from_str(&serde_json::to_string(&squared).unwrap()).unwrap();
+    assert_eq!(back, squared);
+    let back: Credibility = serde_json::from_str(&serde_json::to_string(&cred).unwrap()).unwrap();
+    assert_eq!(back, cred);
+
+    let bad = [
+        (r#"{"sum":[1.0],"count":[]}"#, "1 sums and 0 counts"),
+        (r#"{"sum":[1.0],"count":[1],"extra":0}"#, "unknown field"),
+    ];
+    for (text, why) in bad {
+        let err = serde_json::from_str::<StepMean>(text)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(why), "{err}");
+    }
+    let err = serde_json::from_str::<SquaredErrors>(r#"{"dim":2,"sum":[1.0],"count":[1]}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("dimension 2 with 1 sums for 1 steps"), "{err}");
+    let err = serde_json::from_str::<Credibility>(r#"{"dim":2,"errors":[[1.0]],"nees":[[1.0]]}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("1 error values for 1 runs of dimension 2"),
+        "{err}"
+    );
+}
