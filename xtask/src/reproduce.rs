@@ -92,6 +92,7 @@ pub fn main(args: &Args) -> Result<()> {
         size: if args.quick { Size::Quick } else { Size::Paper },
         seed: args.seed,
         threads: args.threads,
+        simd: crate::simd_from_env()?,
     };
     // The output directory first: a bad --out fails before minutes of studies, not after.
     std::fs::create_dir_all(&out)

@@ -34,8 +34,10 @@
 // Library code returns typed errors; an unwrap or expect must say why it cannot fail
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+mod batch;
 mod tuning;
 
+pub use batch::{RunFailure, TruthBatch};
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
 pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};

@@ -1,9 +1,13 @@
 //! The W1 run: Monte Carlo over the scenario, per-step ANEES, NIS and RMSE.
 
+use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch};
 use kalibra_filters::{Filter, Kf};
 use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, time_average};
-use kalibra_models::{Simulator, sample_with_factor};
-use kalibra_sim::MonteCarlo;
+use kalibra_models::Dynamics;
+use kalibra_models::{
+    LinearDynamics, LinearMeasurement, Measurement, Simulator, sample_with_factor,
+};
+use kalibra_sim::{MonteCarlo, RunFailure, TruthBatch};
 use serde::Serialize;
 
 use super::scenario::{models, prior};
@@ -22,6 +26,10 @@ pub struct Config {
     pub threads: usize,
     /// Confidence of the chi-square bands.
     pub confidence: f64,
+    /// Instruction set of [`run_batched`] when [`run`] calls it (`None`: detected at run
+    /// time). It changes the results only by rounding, and is not part of the report.
+    #[serde(skip)]
+    pub simd: Option<Isa>,
 }
 
 impl Config {
@@ -33,6 +41,7 @@ impl Config {
             seed: 2012,
             threads: 0,
             confidence: 0.95,
+            simd: None,
         }
     }
 
@@ -94,12 +103,16 @@ pub struct Report {
     pub rmse_velocity: Vec<f64>,
 }
 
-/// Runs the study.
+/// Runs the study batched ([`run_batched`]) on `config.simd`, or on the instruction set the
+/// CPU has.
 ///
 /// # Errors
-/// [`StudyError`] if a run fails (it should not: the models are valid and the filter
-/// consistent) or `config` asks for zero runs or steps.
+/// As [`run_batched`].
 pub fn run(config: &Config) -> Result<Report, StudyError> {
+    run_batched(config, config.simd.unwrap_or_else(Isa::detect))
+}
+
+fn check(config: &Config) -> Result<(), StudyError> {
     if config.runs == 0 || config.steps == 0 {
         return Err(StudyError::Metrics(
             kalibra_metrics::MetricsError::InvalidParameter {
@@ -108,6 +121,20 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
             },
         ));
     }
+    Ok(())
+}
+
+/// The accumulators of a W1 study: per-step NEES / 4, NIS / 2, and squared errors.
+type Accumulators = (StepMean, StepMean, SquaredErrors);
+
+/// Runs the study one filter at a time: the scalar [`Kf`] over [`Simulator`] truths, the
+/// reference the batched path is checked against.
+///
+/// # Errors
+/// [`StudyError`] if a run fails (it should not: the models are valid and the filter
+/// consistent) or `config` asks for zero runs or steps.
+pub fn run_scalar(config: &Config) -> Result<Report, StudyError> {
+    check(config)?;
     let (f, h) = models()?;
     let (m0, p0) = prior();
     let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
@@ -142,6 +169,109 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
             Ok::<(), StudyError>(())
         },
     )?;
+    report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// Runs the study [`BATCH`] runs at a time through [`KfBatch`] on instruction set `isa`, with
+/// [`TruthBatch`] truths: run `i` draws what it draws in [`run_scalar`], so the two agree per
+/// run to rounding, and the per-step sums add the runs in the same order.
+///
+/// # Errors
+/// As [`run_scalar`]; [`StudyError::Filter`] with
+/// [`FilterError::Unsupported`](kalibra_filters::FilterError::Unsupported) if the CPU does not
+/// run `isa`.
+pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
+    check(config)?;
+    let (f, h) = models()?;
+    let (m0, p0) = prior();
+    let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
+        .map_err(kalibra_models::ModelError::from)?
+        .factor()
+        .clone_owned();
+    let model = BatchModel::new(
+        f.matrix(0),
+        f.noise_cov(0),
+        h.matrix(0),
+        h.noise_cov(0, &m0),
+    )?;
+    // Checked once here rather than in every group.
+    KfBatch::new(isa, model.clone(), m0, p0)?;
+    let steps = config.steps;
+    let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
+    let (nees_acc, nis_acc, err_acc) = mc.accumulate_batched(
+        || -> Accumulators {
+            (
+                StepMean::new(steps),
+                StepMean::new(steps),
+                SquaredErrors::new(steps, 4),
+            )
+        },
+        |runs, rngs, (nees_acc, nis_acc, err_acc)| {
+            let first = runs.start;
+            let mut truth = TruthBatch::<4, 2, _, _>::new(&f, &h, first, rngs, |rng| {
+                m0 + sample_with_factor(&p0_factor, rng)
+            })
+            .map_err(|e| RunFailure {
+                run: e.run,
+                source: StudyError::from(e.source),
+            })?;
+            let mut kf = KfBatch::new(isa, model.clone(), m0, p0).map_err(|e| RunFailure {
+                run: first,
+                source: e.into(),
+            })?;
+            // A run stops at its first error, as the scalar run does; the others go on.
+            let mut failed: [Option<StudyError>; BATCH] = std::array::from_fn(|_| None);
+            for k in 0..steps {
+                for (lane, e) in truth.step(rngs).into_iter().enumerate() {
+                    if let Some(e) = e {
+                        failed[lane].get_or_insert(e.into());
+                    }
+                }
+                let step = if k == 0 {
+                    kf.update(truth.measurement(), truth.state())
+                } else {
+                    kf.predict_update(truth.measurement(), truth.state())
+                };
+                for (lane, slot) in failed.iter_mut().enumerate().take(runs.len()) {
+                    if slot.is_some() {
+                        continue;
+                    }
+                    let pushed = (|| -> Result<(), StudyError> {
+                        let nis = step.nis(lane)?;
+                        nees_acc.push(k, step.nees(lane)? / 4.0)?;
+                        nis_acc.push(k, nis / 2.0)?;
+                        err_acc.push_slice(k, &step.error(lane))?;
+                        Ok(())
+                    })();
+                    if let Err(e) = pushed {
+                        *slot = Some(e);
+                    }
+                }
+            }
+            // The lowest failing run of the group.
+            match failed
+                .into_iter()
+                .enumerate()
+                .find_map(|(l, e)| e.map(|e| (l, e)))
+            {
+                Some((lane, source)) => Err(RunFailure {
+                    run: first + lane,
+                    source,
+                }),
+                None => Ok(()),
+            }
+        },
+    )?;
+    report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// The report of a study's accumulators.
+fn report(
+    config: &Config,
+    nees_acc: StepMean,
+    nis_acc: StepMean,
+    err_acc: SquaredErrors,
+) -> Result<Report, StudyError> {
     let anees_band = ChiSquareBand::for_normalized_mean(4.0, config.runs, config.confidence)?;
     let anis_band = ChiSquareBand::for_normalized_mean(2.0, config.runs, config.confidence)?;
     // Every run pushes every step, so no step's mean is missing.
