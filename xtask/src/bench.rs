@@ -17,6 +17,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use kalibra_filters::batch::Isa;
+use kalibra_sim::{LinearTruthBatch, MonteCarlo, RunFailure};
 use kalibra_studies::w1;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use rand_chacha::ChaCha8Rng;
@@ -226,6 +227,17 @@ fn w1_bench(args: &Args) -> Result<()> {
             if i == 0 { " (detected)" } else { " (forced)" },
         );
     }
+    // Where the batched time goes: the truth alone (draws and truth arithmetic, accumulating
+    // nothing), and the draws alone.
+    let (t_truth, _) = best_of(args.repeats, || w1_truth_only(args.runs, args.steps, true))?;
+    let (t_draws, _) = best_of(args.repeats, || w1_truth_only(args.runs, args.steps, false))?;
+    println!(
+        "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the per-run ChaCha8 normal draws {:.3} s ({:.0}%)",
+        t_truth,
+        100.0 * t_truth / batched_best[0],
+        t_draws,
+        100.0 * t_draws / batched_best[0],
+    );
     let (t_bpar, mut bpar_report) = best_of(args.repeats, || {
         Ok(w1::run_batched(&config(args.threads), detected)?)
     })?;
@@ -266,6 +278,47 @@ fn w1_bench(args: &Args) -> Result<()> {
         bail!("results depend on the thread count");
     }
     Ok(())
+}
+
+/// W1's batched truth alone (`simulate`), or only its draws, on one thread: the part of the
+/// batched time the filter kernel cannot touch.
+fn w1_truth_only(runs: usize, steps: usize, simulate: bool) -> Result<f64> {
+    let (f, h) = w1::models()?;
+    let (m0, p0) = w1::prior();
+    let l0 = *kalibra_linalg::PsdMatrix::new(p0)?.factor();
+    let mc = MonteCarlo::new(runs, 2012).threads(1);
+    let sum = mc.accumulate_batched(
+        || kalibra_metrics::StepMean::new(1),
+        |group, rngs, acc| {
+            let fail = |message: String| RunFailure {
+                run: group.start,
+                source: std::io::Error::other(message),
+            };
+            let mut last = 0.0;
+            if simulate {
+                let mut truth = LinearTruthBatch::new(&f, &h, group.start, rngs, |rng| {
+                    m0 + l0 * normals::<4>(rng)
+                })
+                .map_err(|e| fail(e.source.to_string()))?;
+                for _ in 0..steps {
+                    truth.step(rngs).map_err(|e| fail(e.source.to_string()))?;
+                }
+                last = truth.state()[0][0];
+            } else {
+                for rng in rngs.iter_mut() {
+                    last += normals::<4>(rng)[0];
+                    for _ in 0..steps {
+                        last += normals::<2>(rng)[0] + normals::<4>(rng)[0];
+                    }
+                }
+            }
+            acc.push(0, last).map_err(|e| fail(e.to_string()))
+        },
+    );
+    Ok(std::hint::black_box(sum)
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .mean(0)
+        .unwrap_or(0.0))
 }
 
 fn normals<const D: usize>(rng: &mut ChaCha8Rng) -> SMatrix<f64, D, 1> {

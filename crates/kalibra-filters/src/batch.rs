@@ -630,12 +630,20 @@ fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]; D]) {
     }
 }
 
-/// The lower Cholesky factor of a symmetric `a` (NaN or infinite entries, never a panic, for
-/// a matrix that is not positive definite: `sqrt` of a negative pivot is NaN, of zero is 0
-/// and the divisions by it infinite).
+/// The lower Cholesky factor `L` of a symmetric `a`, and the reciprocals of its diagonal:
+/// each pivot is divided once and the other divisions by it are multiplications, which takes
+/// the divider's latency off the chain of dependent operations (a division by `l_jj` and a
+/// multiplication by its reciprocal differ by one rounding). NaN or infinite entries, never a
+/// panic, for a matrix that is not positive definite: `sqrt` of a negative pivot is NaN, of
+/// zero 0, and its reciprocal infinite.
 #[inline(always)]
-fn cholesky<S: Simd, const D: usize>(simd: S, a: &[[S::f64s; D]; D]) -> [[S::f64s; D]; D] {
+fn cholesky<S: Simd, const D: usize>(
+    simd: S,
+    a: &[[S::f64s; D]; D],
+) -> ([[S::f64s; D]; D], [S::f64s; D]) {
+    let one = simd.splat_f64s(1.0);
     let mut l = [[simd.splat_f64s(0.0); D]; D];
+    let mut inv = [one; D];
     for j in 0..D {
         let mut d = a[j][j];
         for k in 0..j {
@@ -643,22 +651,23 @@ fn cholesky<S: Simd, const D: usize>(simd: S, a: &[[S::f64s; D]; D]) -> [[S::f64
         }
         let ljj = simd.sqrt_f64s(d);
         l[j][j] = ljj;
+        inv[j] = simd.div_f64s(one, ljj);
         for i in (j + 1)..D {
             let mut s = a[i][j];
             for k in 0..j {
                 s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
             }
-            l[i][j] = simd.div_f64s(s, ljj);
+            l[i][j] = simd.mul_f64s(s, inv[j]);
         }
     }
-    l
+    (l, inv)
 }
 
-/// Solves `L w = b` by forward substitution.
+/// Solves `L w = b` by forward substitution (`inv`: the reciprocals of `L`'s diagonal).
 #[inline(always)]
 fn forward<S: Simd, const D: usize>(
     simd: S,
-    l: &[[S::f64s; D]; D],
+    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
     b: &[S::f64s; D],
 ) -> [S::f64s; D] {
     let mut w = *b;
@@ -667,7 +676,7 @@ fn forward<S: Simd, const D: usize>(
         for k in 0..i {
             s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
         }
-        w[i] = simd.div_f64s(s, l[i][i]);
+        w[i] = simd.mul_f64s(s, inv[i]);
     }
     w
 }
@@ -676,7 +685,7 @@ fn forward<S: Simd, const D: usize>(
 #[inline(always)]
 fn backward<S: Simd, const D: usize>(
     simd: S,
-    l: &[[S::f64s; D]; D],
+    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
     w: &[S::f64s; D],
 ) -> [S::f64s; D] {
     let mut y = *w;
@@ -685,7 +694,7 @@ fn backward<S: Simd, const D: usize>(
         for k in (i + 1)..D {
             s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
         }
-        y[i] = simd.div_f64s(s, l[i][i]);
+        y[i] = simd.mul_f64s(s, inv[i]);
     }
     y
 }

@@ -1,10 +1,13 @@
 //! Batched Monte Carlo: runs stepped [`BATCH`] at a time ([`MonteCarlo::accumulate_batched`])
-//! and their true trajectories ([`TruthBatch`]).
+//! and their true trajectories ([`LinearTruthBatch`] for linear models, [`TruthBatch`] for any).
 
 use kalibra_filters::batch::{BATCH, Lanes};
-use kalibra_linalg::{Const, SVector};
+use kalibra_linalg::{Const, SMatrix, SVector};
 use kalibra_metrics::Merge;
-use kalibra_models::{Dynamics, Measurement, ModelError, Simulator};
+use kalibra_models::{
+    Dynamics, LinearGaussian, LinearObservation, Measurement, ModelError, Simulator,
+};
+use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::{ChaCha8Rng, MAX_BLOCKS, MonteCarlo, SimError};
@@ -200,5 +203,194 @@ where
 fn write_lane<const D: usize>(out: &mut [Lanes; D], lane: usize, v: &SVector<f64, D>) {
     for (row, value) in out.iter_mut().zip(v.iter()) {
         row[lane] = *value;
+    }
+}
+
+/// The true trajectories of up to [`BATCH`] runs of a time-invariant linear model
+/// ([`LinearGaussian`] dynamics, [`LinearObservation`] sensor), in the lane layout of
+/// [`KfBatch`](kalibra_filters::batch::KfBatch).
+///
+/// Lane `i` draws from run `i`'s generator exactly the normals its scalar [`Simulator`] draws,
+/// in the same order (per step: the measurement noise, then the process noise), and applies
+/// them as the models do (`z = H x + L_R n_v`, `x' = F x + L_Q n_w` with the models' own
+/// factors, each product summed in column order as nalgebra's), so a lane's truth is the
+/// scalar run's, bit for bit where the compiler keeps the operation order. Unlike
+/// [`TruthBatch`], the arithmetic runs across the lanes (the compiler vectorises the loops) and
+/// skips the per-lane model calls; the draws stay per lane, since each generator is sequential.
+#[derive(Clone, Debug)]
+pub struct LinearTruthBatch<const N: usize, const M: usize> {
+    f: [[f64; N]; N],
+    lq: [[f64; N]; N],
+    h: [[f64; N]; M],
+    lr: [[f64; M]; M],
+    lanes: usize,
+    first_run: usize,
+    k: usize,
+    x: [Lanes; N],
+    current: [Lanes; N],
+    z: [Lanes; M],
+}
+
+fn rows<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> [[f64; C]; R] {
+    let mut out = [[0.0; C]; R];
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = m[(i, j)];
+        }
+    }
+    out
+}
+
+/// `out = a v + l n`, lane by lane, each product summed over columns in order.
+#[inline(always)]
+fn affine<const R: usize, const C: usize, const D: usize>(
+    a: &[[f64; C]; R],
+    v: &[Lanes; C],
+    l: &[[f64; D]; R],
+    n: &[Lanes; D],
+    out: &mut [Lanes; R],
+) {
+    for i in 0..R {
+        let mut av = [0.0; BATCH];
+        let mut ln = [0.0; BATCH];
+        for lane in 0..BATCH {
+            av[lane] = a[i][0] * v[0][lane];
+            ln[lane] = l[i][0] * n[0][lane];
+        }
+        for j in 1..C {
+            for lane in 0..BATCH {
+                av[lane] += a[i][j] * v[j][lane];
+            }
+        }
+        for j in 1..D {
+            for lane in 0..BATCH {
+                ln[lane] += l[i][j] * n[j][lane];
+            }
+        }
+        for lane in 0..BATCH {
+            out[i][lane] = av[lane] + ln[lane];
+        }
+    }
+}
+
+/// Whether every entry of lane `lane` is finite.
+fn lane_finite<const D: usize>(v: &[Lanes; D], lane: usize) -> bool {
+    v.iter().all(|row| row[lane].is_finite())
+}
+
+impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
+    /// One lane per generator (at most [`BATCH`]), lane `i` (run `first_run + i`) starting at
+    /// step 0 from the state `x0(rng_i)` it draws (`m0 + L0 n` for a Gaussian prior, as the
+    /// scalar study draws it). Lanes past `rngs.len()` hold zeros and draw nothing.
+    ///
+    /// # Errors
+    /// [`ModelError::NonFinite`] for the lowest lane whose initial state is not finite, as
+    /// that lane's run's failure.
+    ///
+    /// # Panics
+    /// If more than [`BATCH`] generators are given.
+    pub fn new(
+        dynamics: &LinearGaussian<Const<N>>,
+        measurement: &LinearObservation<Const<N>, Const<M>>,
+        first_run: usize,
+        rngs: &mut [ChaCha8Rng],
+        mut x0: impl FnMut(&mut ChaCha8Rng) -> SVector<f64, N>,
+    ) -> Result<Self, RunFailure<ModelError>> {
+        assert!(rngs.len() <= BATCH, "at most {BATCH} lanes");
+        let mut x = [[0.0; BATCH]; N];
+        for (lane, rng) in rngs.iter_mut().enumerate() {
+            let x0 = x0(rng);
+            if !x0.iter().all(|v| v.is_finite()) {
+                return Err(RunFailure {
+                    run: first_run + lane,
+                    source: ModelError::NonFinite {
+                        what: "initial state",
+                        step: 0,
+                    },
+                });
+            }
+            for i in 0..N {
+                x[i][lane] = x0[i];
+            }
+        }
+        Ok(Self {
+            f: rows(dynamics.f()),
+            lq: rows(dynamics.q().factor()),
+            h: rows(measurement.h()),
+            lr: rows(measurement.r().factor()),
+            lanes: rngs.len(),
+            first_run,
+            k: 0,
+            x,
+            current: [[0.0; BATCH]; N],
+            z: [[0.0; BATCH]; M],
+        })
+    }
+
+    /// Number of live lanes.
+    pub fn len(&self) -> usize {
+        self.lanes
+    }
+
+    /// Whether there are no lanes.
+    pub fn is_empty(&self) -> bool {
+        self.lanes == 0
+    }
+
+    /// Steps every lane once, as [`Simulator::step`] does (measures `x_k`, then advances):
+    /// afterwards [`LinearTruthBatch::state`] holds the `x_k` and
+    /// [`LinearTruthBatch::measurement`] the `z_k` of every lane.
+    ///
+    /// # Errors
+    /// [`ModelError::NonFinite`] for the lowest lane whose measurement or next state is not
+    /// finite (a diverging truth), as [`Simulator::step`] reports it, as its run's failure;
+    /// the other lanes have stepped.
+    ///
+    /// # Panics
+    /// If `rngs` has fewer generators than there are lanes.
+    pub fn step(&mut self, rngs: &mut [ChaCha8Rng]) -> Result<(), RunFailure<ModelError>> {
+        assert!(rngs.len() >= self.lanes, "one generator per lane");
+        let mut nv = [[0.0; BATCH]; M];
+        let mut nw = [[0.0; BATCH]; N];
+        for (lane, rng) in rngs[..self.lanes].iter_mut().enumerate() {
+            for row in nv.iter_mut() {
+                row[lane] = StandardNormal.sample(rng);
+            }
+            for row in nw.iter_mut() {
+                row[lane] = StandardNormal.sample(rng);
+            }
+        }
+        self.current = self.x;
+        affine(&self.h, &self.current, &self.lr, &nv, &mut self.z);
+        affine(&self.f, &self.current, &self.lq, &nw, &mut self.x);
+        let k = self.k;
+        self.k += 1;
+        for lane in 0..self.lanes {
+            let what = if !lane_finite(&self.z, lane) {
+                ("simulated measurement", k)
+            } else if !lane_finite(&self.x, lane) {
+                ("simulated state", k + 1)
+            } else {
+                continue;
+            };
+            return Err(RunFailure {
+                run: self.first_run + lane,
+                source: ModelError::NonFinite {
+                    what: what.0,
+                    step: what.1,
+                },
+            });
+        }
+        Ok(())
+    }
+
+    /// The true states `x_k` of the last [`LinearTruthBatch::step`], lane by lane.
+    pub fn state(&self) -> &[Lanes; N] {
+        &self.current
+    }
+
+    /// The measurements `z_k` of the last [`LinearTruthBatch::step`], lane by lane.
+    pub fn measurement(&self) -> &[Lanes; M] {
+        &self.z
     }
 }

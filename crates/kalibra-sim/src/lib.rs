@@ -37,7 +37,7 @@
 mod batch;
 mod tuning;
 
-pub use batch::{RunFailure, TruthBatch};
+pub use batch::{LinearTruthBatch, RunFailure, TruthBatch};
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
 pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};

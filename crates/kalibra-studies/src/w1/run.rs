@@ -7,7 +7,7 @@ use kalibra_models::Dynamics;
 use kalibra_models::{
     LinearDynamics, LinearMeasurement, Measurement, Simulator, sample_with_factor,
 };
-use kalibra_sim::{MonteCarlo, RunFailure, TruthBatch};
+use kalibra_sim::{LinearTruthBatch, MonteCarlo, RunFailure};
 use serde::Serialize;
 
 use super::scenario::{models, prior};
@@ -173,7 +173,7 @@ pub fn run_scalar(config: &Config) -> Result<Report, StudyError> {
 }
 
 /// Runs the study [`BATCH`] runs at a time through [`KfBatch`] on instruction set `isa`, with
-/// [`TruthBatch`] truths: run `i` draws what it draws in [`run_scalar`], so the two agree per
+/// [`LinearTruthBatch`] truths: run `i` draws what it draws in [`run_scalar`], so the two agree per
 /// run to rounding, and the per-step sums add the runs in the same order.
 ///
 /// # Errors
@@ -208,13 +208,14 @@ pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
         },
         |runs, rngs, (nees_acc, nis_acc, err_acc)| {
             let first = runs.start;
-            let mut truth = TruthBatch::<4, 2, _, _>::new(&f, &h, first, rngs, |rng| {
-                m0 + sample_with_factor(&p0_factor, rng)
-            })
-            .map_err(|e| RunFailure {
+            let to_study = |e: RunFailure<kalibra_models::ModelError>| RunFailure {
                 run: e.run,
                 source: StudyError::from(e.source),
-            })?;
+            };
+            let mut truth = LinearTruthBatch::new(&f, &h, first, rngs, |rng| {
+                m0 + sample_with_factor(&p0_factor, rng)
+            })
+            .map_err(to_study)?;
             let mut kf = KfBatch::new(isa, model.clone(), m0, p0).map_err(|e| RunFailure {
                 run: first,
                 source: e.into(),
@@ -222,10 +223,12 @@ pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
             // A run stops at its first error, as the scalar run does; the others go on.
             let mut failed: [Option<StudyError>; BATCH] = std::array::from_fn(|_| None);
             for k in 0..steps {
-                for (lane, e) in truth.step(rngs).into_iter().enumerate() {
-                    if let Some(e) = e {
-                        failed[lane].get_or_insert(e.into());
-                    }
+                // A diverging truth fails its run (the scalar run's error); the others go on.
+                // The step names the lowest failing lane: a higher one failing too cannot be
+                // the group's lowest failure.
+                if let Err(e) = truth.step(rngs) {
+                    let lane = e.run - first;
+                    failed[lane].get_or_insert_with(|| to_study(e).source);
                 }
                 let step = if k == 0 {
                     kf.update(truth.measurement(), truth.state())
