@@ -330,7 +330,7 @@ impl<const N: usize> BatchStep<N> {
             .all(Option::is_none)
     }
 
-    /// Lane `lane`'s estimation error `x - x+` (meaningful when [`BatchStep::lane`] is `Ok`).
+    /// Lane `lane`'s estimation error `x - x+` (meaningful when [`BatchStep::nis`] is `Ok`).
     ///
     /// # Panics
     /// If `lane >= BATCH`.
