@@ -19,6 +19,8 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
+use kalibra_filters::batch::Isa;
+use kalibra_sim::{LinearTruthBatch, MonteCarlo, RunFailure};
 use kalibra_studies::w1;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use rand_chacha::ChaCha8Rng;
@@ -148,25 +150,43 @@ fn w1_bench(args: &Args) -> Result<()> {
         seed: 2012,
         threads,
         confidence: 0.95,
+        simd: None,
     };
-    // Interleave the two so that machine noise hits both alike.
+    // The batched path on the instruction set detected (or KALIBRA_SIMD's), then AVX2 and the
+    // scalar fallback forced, where the CPU has them.
+    let detected = crate::simd_from_env()?.unwrap_or_else(Isa::detect);
+    let mut isas = vec![detected];
+    isas.extend(
+        [Isa::Avx2, Isa::Scalar]
+            .into_iter()
+            .filter(|i| *i != detected && i.is_available()),
+    );
+    // Interleave them all so that machine noise hits each alike.
     let mut lib_best = f64::INFINITY;
     let mut hand_best = f64::INFINITY;
+    let mut batched_best = vec![f64::INFINITY; isas.len()];
+    let mut batched_reports = vec![None; isas.len()];
     let mut lib_report = None;
     let mut hand_out = None;
     for _ in 0..args.repeats {
         let t = Instant::now();
-        lib_report = Some(w1::run(&config(1))?);
+        lib_report = Some(w1::run_scalar(&config(1))?);
         lib_best = lib_best.min(t.elapsed().as_secs_f64());
         let t = Instant::now();
         hand_out = Some(hand_w1(args.runs, args.steps, 2012));
         hand_best = hand_best.min(t.elapsed().as_secs_f64());
+        for (i, isa) in isas.iter().enumerate() {
+            let t = Instant::now();
+            batched_reports[i] = Some(w1::run_batched(&config(1), *isa)?);
+            batched_best[i] = batched_best[i].min(t.elapsed().as_secs_f64());
+        }
     }
     let (lib_report, hand_out) = (
         lib_report.expect("repeats > 0"),
         hand_out.expect("repeats > 0"),
     );
-    let (t_par, mut par_report) = best_of(args.repeats, || Ok(w1::run(&config(args.threads))?))?;
+    let (t_par, mut par_report) =
+        best_of(args.repeats, || Ok(w1::run_scalar(&config(args.threads))?))?;
     // The reports differ only in the thread count they record.
     par_report.config.threads = lib_report.config.threads;
 
@@ -191,6 +211,62 @@ fn w1_bench(args: &Args) -> Result<()> {
         par_rate,
         par_rate / lib_rate
     );
+    // Largest relative difference over the per-step ANEES, ANIS and RMSE series.
+    let rel_diff = |a: &w1::Report, b: &w1::Report| {
+        [
+            (&a.anees, &b.anees),
+            (&a.anis, &b.anis),
+            (&a.rmse_position, &b.rmse_position),
+            (&a.rmse_velocity, &b.rmse_velocity),
+        ]
+        .into_iter()
+        .flat_map(|(x, y)| x.iter().zip(y.iter()))
+        .map(|(x, y)| (x - y).abs() / x.abs().max(y.abs()))
+        .fold(0.0f64, f64::max)
+    };
+    for (i, isa) in isas.iter().enumerate() {
+        let rate = total / batched_best[i];
+        let report = batched_reports[i].as_ref().expect("repeats > 0");
+        println!(
+            "  batched ({:<6} {} lanes/vector), 1 thread: {:>12.0} steps/s ({:.3} s), {:.2}x hand-written, {:.2}x library; max rel. diff. to library {:.1e}{}",
+            format!("{isa},"),
+            isa.lanes(),
+            rate,
+            batched_best[i],
+            rate / hand_rate,
+            rate / lib_rate,
+            rel_diff(report, &lib_report),
+            if i == 0 { " (detected)" } else { " (forced)" },
+        );
+    }
+    // Where the batched time goes: the truth alone (draws and truth arithmetic, accumulating
+    // nothing), and the draws alone.
+    let (t_truth, _) = best_of(args.repeats, || w1_truth_only(args.runs, args.steps, true))?;
+    let (t_draws, _) = best_of(args.repeats, || w1_truth_only(args.runs, args.steps, false))?;
+    println!(
+        "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the per-run ChaCha8 normal draws {:.3} s ({:.0}%)",
+        t_truth,
+        100.0 * t_truth / batched_best[0],
+        t_draws,
+        100.0 * t_draws / batched_best[0],
+    );
+    let (t_bpar, mut bpar_report) = best_of(args.repeats, || {
+        Ok(w1::run_batched(&config(args.threads), detected)?)
+    })?;
+    bpar_report.config.threads = 1;
+    println!(
+        "  batched ({detected}), {} threads: {:>12.0} steps/s ({t_bpar:.3} s), {}",
+        args.threads,
+        total / t_bpar,
+        if Some(&bpar_report) == batched_reports[0].as_ref() {
+            "bit-identical to 1 thread"
+        } else {
+            "DIFFERENT from 1 thread"
+        }
+    );
+    if Some(&bpar_report) != batched_reports[0].as_ref() {
+        bail!("batched results depend on the thread count");
+    }
     let max_diff = lib_report
         .anees
         .iter()
@@ -214,6 +290,47 @@ fn w1_bench(args: &Args) -> Result<()> {
         bail!("results depend on the thread count");
     }
     Ok(())
+}
+
+/// W1's batched truth alone (`simulate`), or only its draws, on one thread: the part of the
+/// batched time the filter kernel cannot touch.
+fn w1_truth_only(runs: usize, steps: usize, simulate: bool) -> Result<f64> {
+    let (f, h) = w1::models()?;
+    let (m0, p0) = w1::prior();
+    let l0 = *kalibra_linalg::PsdMatrix::new(p0)?.factor();
+    let mc = MonteCarlo::new(runs, 2012).threads(1);
+    let sum = mc.accumulate_batched(
+        || kalibra_metrics::StepMean::new(1),
+        |group, rngs, acc| {
+            let fail = |message: String| RunFailure {
+                run: group.start,
+                source: std::io::Error::other(message),
+            };
+            let mut last = 0.0;
+            if simulate {
+                let mut truth = LinearTruthBatch::new(&f, &h, group.start, rngs, |rng| {
+                    m0 + l0 * normals::<4>(rng)
+                })
+                .map_err(|e| fail(e.source.to_string()))?;
+                for _ in 0..steps {
+                    truth.step(rngs).map_err(|e| fail(e.source.to_string()))?;
+                }
+                last = truth.state()[0][0];
+            } else {
+                for rng in rngs.iter_mut() {
+                    last += normals::<4>(rng)[0];
+                    for _ in 0..steps {
+                        last += normals::<2>(rng)[0] + normals::<4>(rng)[0];
+                    }
+                }
+            }
+            acc.push(0, last).map_err(|e| fail(e.to_string()))
+        },
+    );
+    Ok(std::hint::black_box(sum)
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .mean(0)
+        .unwrap_or(0.0))
 }
 
 fn normals<const D: usize>(rng: &mut ChaCha8Rng) -> SMatrix<f64, D, 1> {

@@ -66,6 +66,20 @@ fn main() -> std::process::ExitCode {
     }
 }
 
+/// The instruction set `KALIBRA_SIMD` asks for (`avx512`, `avx2`, `neon`, `scalar`, `auto`),
+/// `None` when it is unset: the library reads no environment, so the task runner passes it on.
+pub(crate) fn simd_from_env() -> anyhow::Result<Option<kalibra_filters::batch::Isa>> {
+    match std::env::var("KALIBRA_SIMD") {
+        Ok(text) => {
+            Ok(Some(text.parse().map_err(|e| {
+                anyhow::anyhow!("KALIBRA_SIMD={text}: {e}")
+            })?))
+        }
+        Err(std::env::VarError::NotPresent) => Ok(None),
+        Err(e) => anyhow::bail!("KALIBRA_SIMD: {e}"),
+    }
+}
+
 /// The workspace root (the parent of this crate's directory).
 fn workspace_root() -> std::path::PathBuf {
     let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));

@@ -135,6 +135,7 @@ pub fn main(args: &Args) -> Result<()> {
         size: if args.quick { Size::Quick } else { Size::Paper },
         seed: args.seed,
         threads: args.threads,
+        simd: crate::simd_from_env()?,
     };
     // The output directory first: a bad --out fails before minutes of studies, not after.
     check_out(&out, "--out")?;
@@ -375,6 +376,8 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
             size,
             seed: first.seed,
             threads: args.threads,
+            // The merge runs nothing batched; the shards' arithmetic is in their identity.
+            simd: None,
         };
         seeds.insert(first.seed);
         sizes.insert(size.label());

@@ -41,6 +41,12 @@ pub enum FilterError {
         /// What was asked for.
         what: &'static str,
     },
+    /// An instruction set name that [`Isa`](crate::batch::Isa)'s parser does not know.
+    #[error("parse instruction set {name:?} (expected avx512, avx2, neon, scalar or auto)")]
+    UnknownIsa {
+        /// The text given.
+        name: String,
+    },
     /// A dynamically sized input has the wrong size.
     #[error("{what} has dimension {found}, expected {expected}")]
     DimensionMismatch {

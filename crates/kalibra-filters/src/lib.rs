@@ -63,6 +63,7 @@
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod as_given;
+pub mod batch;
 mod constant_gain;
 mod core;
 mod error;

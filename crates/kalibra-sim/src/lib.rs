@@ -34,9 +34,11 @@
 // Library code returns typed errors; an unwrap or expect must say why it cannot fail
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+mod batch;
 mod shard;
 mod tuning;
 
+pub use batch::{LinearTruthBatch, RunFailure, TruthBatch};
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
 pub use shard::{PARTIAL_FORMAT_VERSION, Partial, Shard, ShardError, StudyId, config_hash, merge};

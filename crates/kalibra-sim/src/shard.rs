@@ -263,6 +263,18 @@ pub struct Partial<A> {
     pub blocks: Vec<A>,
 }
 
+impl<A> Partial<A> {
+    /// A partial of the current format version.
+    pub(crate) fn new(study: StudyId, shard: Shard, blocks: Vec<A>) -> Self {
+        Self {
+            format: PARTIAL_FORMAT_VERSION,
+            study,
+            shard,
+            blocks,
+        }
+    }
+}
+
 impl MonteCarlo {
     /// The number of blocks this study is cut into (see the crate docs); shards divide them.
     pub fn blocks(&self) -> usize {
@@ -296,12 +308,7 @@ impl MonteCarlo {
                 .map(|b| self.run_block(b, blocks, &make, &one))
                 .collect::<Result<Vec<A>, SimError<E>>>()
         })?;
-        Ok(Partial {
-            format: PARTIAL_FORMAT_VERSION,
-            study: study.clone(),
-            shard,
-            blocks: accs,
-        })
+        Ok(Partial::new(study.clone(), shard, accs))
     }
 }
 

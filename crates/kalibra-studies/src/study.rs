@@ -7,6 +7,7 @@
 //! and figures as data. Tests assert on the structured report and the claims; the Markdown is
 //! only a view of them.
 
+use kalibra_filters::batch::Isa;
 use serde::Serialize;
 
 use crate::StudyError;
@@ -43,6 +44,9 @@ pub struct Options {
     pub seed: Option<u64>,
     /// Worker threads; 0 uses every core.
     pub threads: usize,
+    /// The instruction set of the batched Monte Carlo paths (`None`: detected at run time).
+    /// Like the thread count, it changes the results only by rounding.
+    pub simd: Option<Isa>,
 }
 
 impl Options {
@@ -52,6 +56,7 @@ impl Options {
             size: Size::Paper,
             seed: None,
             threads: 0,
+            simd: None,
         }
     }
 
@@ -102,6 +107,8 @@ pub trait StudyConfig: Serialize + Sized {
     fn set_seed(&mut self, seed: u64);
     /// Sets the thread count (0: every core).
     fn set_threads(&mut self, threads: usize);
+    /// Sets the instruction set of a study's batched path (ignored by a study without one).
+    fn set_simd(&mut self, _isa: Isa) {}
 
     /// The configuration `options` select: its size, with the seed and thread count applied.
     fn from_options(options: &Options) -> Self {
@@ -110,22 +117,33 @@ pub trait StudyConfig: Serialize + Sized {
             config.set_seed(seed);
         }
         config.set_threads(options.threads);
+        if let Some(isa) = options.simd {
+            config.set_simd(isa);
+        }
         config
     }
 }
 
 /// Implements [`StudyConfig`] for a configuration type with `paper()` and `quick()`
 /// constructors and a `threads` field: `study_config!(Config, seed)` when it has a `seed: u64`
-/// field, `study_config!(Config)` when the study draws nothing at random.
+/// field, `study_config!(Config, seed, simd)` when it also has a `simd: Option<Isa>` field
+/// for a batched path, `study_config!(Config)` when the study draws nothing at random.
 #[macro_export]
 macro_rules! study_config {
     ($config:ty, seed) => {
         $crate::study_config!(@impl $config, |c: &$config| Some(c.seed), |c: &mut $config, s| c.seed = s);
     };
+    ($config:ty, seed, simd) => {
+        $crate::study_config!(@impl $config, |c: &$config| Some(c.seed), |c: &mut $config, s| c.seed = s,
+            fn set_simd(&mut self, isa: kalibra_filters::batch::Isa) {
+                self.simd = Some(isa);
+            }
+        );
+    };
     ($config:ty) => {
         $crate::study_config!(@impl $config, |_: &$config| None, |_: &mut $config, _| ());
     };
-    (@impl $config:ty, $get:expr, $set:expr) => {
+    (@impl $config:ty, $get:expr, $set:expr $(, $extra:item)*) => {
         impl $crate::study::StudyConfig for $config {
             fn for_size(size: $crate::study::Size) -> Self {
                 match size {
@@ -142,6 +160,7 @@ macro_rules! study_config {
             fn set_threads(&mut self, threads: usize) {
                 self.threads = threads;
             }
+            $($extra)*
         }
     };
 }

@@ -17,7 +17,7 @@
 mod run;
 mod scenario;
 
-pub use run::{Acc, Band, Config, Report, merge, run, run_shard};
+pub use run::{Acc, Band, Config, Report, merge, run, run_batched, run_scalar, run_shard};
 pub use scenario::{models, prior};
 
 use crate::StudyError;
@@ -34,7 +34,7 @@ const TEMPLATE: &str = include_str!("report.md");
 /// Steps the report's table samples (those past the end of a short run are left out).
 const SHOWN_STEPS: [usize; 10] = [0, 1, 2, 5, 10, 20, 50, 100, 200, 500];
 
-crate::study_config!(Config, seed);
+crate::study_config!(Config, seed, simd);
 
 impl Study for W1 {
     type Config = Config;

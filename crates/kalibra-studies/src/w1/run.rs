@@ -1,9 +1,13 @@
 //! The W1 run: Monte Carlo over the scenario, per-step ANEES, NIS and RMSE.
 
+use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch};
 use kalibra_filters::{Filter, Kf};
 use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, time_average};
-use kalibra_models::{Simulator, sample_with_factor};
-use kalibra_sim::{ChaCha8Rng, MonteCarlo, Partial, Shard};
+use kalibra_models::Dynamics;
+use kalibra_models::{
+    LinearDynamics, LinearMeasurement, Measurement, Simulator, sample_with_factor,
+};
+use kalibra_sim::{ChaCha8Rng, LinearTruthBatch, MonteCarlo, Partial, RunFailure, Shard};
 use serde::Serialize;
 
 use super::scenario::{models, prior};
@@ -23,6 +27,10 @@ pub struct Config {
     pub threads: usize,
     /// Confidence of the chi-square bands.
     pub confidence: f64,
+    /// Instruction set of [`run_batched`] when [`run`] calls it (`None`: detected at run
+    /// time). It changes the results only by rounding, and is not part of the report.
+    #[serde(skip)]
+    pub simd: Option<Isa>,
 }
 
 impl Config {
@@ -34,6 +42,7 @@ impl Config {
             seed: 2012,
             threads: 0,
             confidence: 0.95,
+            simd: None,
         }
     }
 
@@ -95,57 +104,16 @@ pub struct Report {
     pub rmse_velocity: Vec<f64>,
 }
 
-/// The study's accumulators: NEES / 4 and NIS / 2 per step, and the squared errors.
-pub type Acc = (StepMean, StepMean, SquaredErrors);
-
-/// Runs the study.
+/// Runs the study batched ([`run_batched`]) on `config.simd`, or on the instruction set the
+/// CPU has.
 ///
 /// # Errors
-/// [`StudyError`] if a run fails (it should not: the models are valid and the filter
-/// consistent) or `config` asks for zero runs or steps.
+/// As [`run_batched`].
 pub fn run(config: &Config) -> Result<Report, StudyError> {
-    let (mc, make, one) = study(config)?;
-    finish(config, mc.accumulate(make, one)?)
+    run_batched(config, config.simd.unwrap_or_else(Isa::detect))
 }
 
-/// Runs shard `shard` of the study: its partial result, which [`merge`] turns into the
-/// report [`run`] gives, to the bit.
-///
-/// # Errors
-/// As [`run`].
-pub fn run_shard(config: &Config, shard: Shard) -> Result<Partial<Acc>, StudyError> {
-    let (mc, make, one) = study(config)?;
-    let id = study_id(config, &mc)?;
-    Ok(mc.accumulate_shard(shard, &id, make, one)?)
-}
-
-/// The report from the partial results of every shard of the study of `config`.
-///
-/// # Errors
-/// [`StudyError::Shard`] for parts of another configuration (their [`kalibra_sim::StudyId`]
-/// differs from `config`'s), duplicates or gaps; as [`run`] otherwise.
-pub fn merge(config: &Config, parts: Vec<Partial<Acc>>) -> Result<Report, StudyError> {
-    let (mc, _, _) = study(config)?;
-    let id = study_id(config, &mc)?;
-    if let Some(other) = parts.iter().find(|p| p.study != id) {
-        return Err(kalibra_sim::ShardError::OtherStudy {
-            index: other.shard.index(),
-            found: other.study.clone(),
-            expected: id,
-        }
-        .into());
-    }
-    finish(config, kalibra_sim::merge(parts)?)
-}
-
-type Run = dyn Fn(usize, &mut ChaCha8Rng, &mut Acc) -> Result<(), StudyError> + Sync + Send;
-
-/// The study's Monte Carlo, its empty accumulator and one run, shared by [`run`] and
-/// [`run_shard`] so a shard computes exactly what the whole study computes.
-#[allow(clippy::type_complexity)]
-fn study(
-    config: &Config,
-) -> Result<(MonteCarlo, impl Fn() -> Acc + Sync + Send, Box<Run>), StudyError> {
+fn check(config: &Config) -> Result<(), StudyError> {
     if config.runs == 0 || config.steps == 0 {
         return Err(StudyError::Metrics(
             kalibra_metrics::MetricsError::InvalidParameter {
@@ -154,6 +122,20 @@ fn study(
             },
         ));
     }
+    Ok(())
+}
+
+/// The accumulators of a W1 study: per-step NEES / 4, NIS / 2, and squared errors.
+type Accumulators = (StepMean, StepMean, SquaredErrors);
+
+/// Runs the study one filter at a time: the scalar [`Kf`] over [`Simulator`] truths, the
+/// reference the batched path is checked against.
+///
+/// # Errors
+/// [`StudyError`] if a run fails (it should not: the models are valid and the filter
+/// consistent) or `config` asks for zero runs or steps.
+pub fn run_scalar(config: &Config) -> Result<Report, StudyError> {
+    check(config)?;
     let (f, h) = models()?;
     let (m0, p0) = prior();
     let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
@@ -162,35 +144,234 @@ fn study(
         .clone_owned();
     let steps = config.steps;
     let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
-    let make = move || {
+    let (nees_acc, nis_acc, err_acc) = mc.accumulate(
+        || {
+            (
+                StepMean::new(steps),
+                StepMean::new(steps),
+                SquaredErrors::new(steps, 4),
+            )
+        },
+        |_run, rng, (nees_acc, nis_acc, err_acc)| {
+            let x0 = m0 + sample_with_factor(&p0_factor, rng);
+            let mut truth = Simulator::new(&f, &h, x0, 0)?;
+            let mut kf = Kf::new(&f, &h, m0, p0)?;
+            for k in 0..steps {
+                let (x, z) = truth.step(rng)?;
+                if k > 0 {
+                    kf.predict()?;
+                }
+                let rec = kf.update(&z)?;
+                let e = x - rec.posterior().mean;
+                nees_acc.push(k, rec.nees(&e)? / 4.0)?;
+                nis_acc.push(k, rec.nis() / 2.0)?;
+                err_acc.push(k, &e)?;
+            }
+            Ok::<(), StudyError>(())
+        },
+    )?;
+    report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// Runs the study [`BATCH`] runs at a time through [`KfBatch`] on instruction set `isa`, with
+/// [`LinearTruthBatch`] truths: run `i` draws what it draws in [`run_scalar`], so the two agree per
+/// run to rounding, and the per-step sums add the runs in the same order.
+///
+/// # Errors
+/// As [`run_scalar`]; [`StudyError::Filter`] with
+/// [`FilterError::Unsupported`](kalibra_filters::FilterError::Unsupported) if the CPU does not
+/// run `isa`.
+pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
+    let (mc, make, group) = batched(config, isa)?;
+    let (nees_acc, nis_acc, err_acc) = mc.accumulate_batched(make, group)?;
+    report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// The study's accumulators (NEES / 4 and NIS / 2 per step, squared errors), as a shard's
+/// partial result holds them block by block.
+pub type Acc = Accumulators;
+
+/// Runs shard `shard` of the batched study on `config.simd` (or the detected instruction
+/// set): its partial result, which [`merge`] turns into the report [`run`] gives, to the bit.
+///
+/// The partial's [`kalibra_sim::StudyId`] names the arithmetic the instruction set does:
+/// AVX2, AVX-512 and NEON fuse multiply-adds and agree to the bit (a test compares AVX2 with
+/// AVX-512), while the scalar fallback rounds products and sums apart. Shards of the two kinds
+/// refuse to merge rather than mix results that differ in the last bits.
+///
+/// # Errors
+/// As [`run_batched`].
+pub fn run_shard(config: &Config, shard: Shard) -> Result<Partial<Acc>, StudyError> {
+    let isa = config.simd.unwrap_or_else(Isa::detect);
+    let (mc, make, group) = batched(config, isa)?;
+    Ok(mc.accumulate_batched_shard(shard, &shard_id(config, &mc, isa)?, make, group)?)
+}
+
+/// The report from the partial results of every shard of the study of `config`.
+///
+/// # Errors
+/// [`StudyError::Shard`] for parts of another configuration or arithmetic (their
+/// [`kalibra_sim::StudyId`] differs from `config`'s), duplicates or gaps; as [`run`]
+/// otherwise.
+pub fn merge(config: &Config, parts: Vec<Partial<Acc>>) -> Result<Report, StudyError> {
+    check(config)?;
+    let mc = MonteCarlo::new(config.runs, config.seed);
+    let Some(first) = parts.first() else {
+        return Err(kalibra_sim::ShardError::Empty.into());
+    };
+    // The arithmetic the shards ran with, from the first shard's identity; every other field
+    // must be this configuration's.
+    let mut expected = shard_id(config, &mc, config.simd.unwrap_or_else(Isa::detect))?;
+    for isa in [Isa::Avx2, Isa::Scalar] {
+        let id = shard_id(config, &mc, isa)?;
+        if id == first.study {
+            expected = id;
+        }
+    }
+    if let Some(other) = parts.iter().find(|p| p.study != expected) {
+        return Err(kalibra_sim::ShardError::OtherStudy {
+            index: other.shard.index(),
+            found: other.study.clone(),
+            expected,
+        }
+        .into());
+    }
+    let (nees_acc, nis_acc, err_acc) = kalibra_sim::merge(parts)?;
+    report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// The identity of the study's shards: [`study_id`] with the arithmetic of `isa` in its
+/// version label.
+fn shard_id(
+    config: &Config,
+    mc: &MonteCarlo,
+    isa: Isa,
+) -> Result<kalibra_sim::StudyId, StudyError> {
+    let mut id = study_id(config, mc)?;
+    let arithmetic = match isa {
+        Isa::Scalar => "batched, separate multiply and add",
+        _ => "batched, fused multiply-add",
+    };
+    id.version = format!("{}, {arithmetic}", id.version);
+    Ok(id)
+}
+
+type Group = dyn Fn(
+        std::ops::Range<usize>,
+        &mut [ChaCha8Rng],
+        &mut Accumulators,
+    ) -> Result<(), RunFailure<StudyError>>
+    + Sync
+    + Send;
+
+/// The batched study's Monte Carlo, its empty accumulator and one group of runs, shared by
+/// [`run_batched`] and [`run_shard`] so that a shard computes what the whole study computes.
+#[allow(clippy::type_complexity)]
+fn batched(
+    config: &Config,
+    isa: Isa,
+) -> Result<
+    (
+        MonteCarlo,
+        impl Fn() -> Accumulators + Sync + Send,
+        Box<Group>,
+    ),
+    StudyError,
+> {
+    check(config)?;
+    let (f, h) = models()?;
+    let (m0, p0) = prior();
+    let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
+        .map_err(kalibra_models::ModelError::from)?
+        .factor()
+        .clone_owned();
+    let model = BatchModel::new(
+        f.matrix(0),
+        f.noise_cov(0),
+        h.matrix(0),
+        h.noise_cov(0, &m0),
+    )?;
+    // Checked once here rather than in every group.
+    KfBatch::new(isa, model.clone(), m0, p0)?;
+    let steps = config.steps;
+    let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
+    let make = move || -> Accumulators {
         (
             StepMean::new(steps),
             StepMean::new(steps),
             SquaredErrors::new(steps, 4),
         )
     };
-    let one = move |_run: usize, rng: &mut ChaCha8Rng, (nees_acc, nis_acc, err_acc): &mut Acc| {
-        let x0 = m0 + sample_with_factor(&p0_factor, rng);
-        let mut truth = Simulator::new(&f, &h, x0, 0)?;
-        let mut kf = Kf::new(&f, &h, m0, p0)?;
+    let group = move |runs: std::ops::Range<usize>,
+                      rngs: &mut [ChaCha8Rng],
+                      (nees_acc, nis_acc, err_acc): &mut Accumulators| {
+        let first = runs.start;
+        let to_study = |e: RunFailure<kalibra_models::ModelError>| RunFailure {
+            run: e.run,
+            source: StudyError::from(e.source),
+        };
+        let mut truth = LinearTruthBatch::new(&f, &h, first, rngs, |rng| {
+            m0 + sample_with_factor(&p0_factor, rng)
+        })
+        .map_err(to_study)?;
+        let mut kf = KfBatch::new(isa, model.clone(), m0, p0).map_err(|e| RunFailure {
+            run: first,
+            source: e.into(),
+        })?;
+        // A run stops at its first error, as the scalar run does; the others go on.
+        let mut failed: [Option<StudyError>; BATCH] = std::array::from_fn(|_| None);
         for k in 0..steps {
-            let (x, z) = truth.step(rng)?;
-            if k > 0 {
-                kf.predict()?;
+            // A diverging truth fails its run (the scalar run's error); the others go on.
+            // The step names the lowest failing lane: a higher one failing too cannot be
+            // the group's lowest failure.
+            if let Err(e) = truth.step(rngs) {
+                let lane = e.run - first;
+                failed[lane].get_or_insert_with(|| to_study(e).source);
             }
-            let rec = kf.update(&z)?;
-            let e = x - rec.posterior().mean;
-            nees_acc.push(k, rec.nees(&e)? / 4.0)?;
-            nis_acc.push(k, rec.nis() / 2.0)?;
-            err_acc.push(k, &e)?;
+            let step = if k == 0 {
+                kf.update(truth.measurement(), truth.state())
+            } else {
+                kf.predict_update(truth.measurement(), truth.state())
+            };
+            for (lane, slot) in failed.iter_mut().enumerate().take(runs.len()) {
+                if slot.is_some() {
+                    continue;
+                }
+                let pushed = (|| -> Result<(), StudyError> {
+                    let nis = step.nis(lane)?;
+                    nees_acc.push(k, step.nees(lane)? / 4.0)?;
+                    nis_acc.push(k, nis / 2.0)?;
+                    err_acc.push_slice(k, &step.error(lane))?;
+                    Ok(())
+                })();
+                if let Err(e) = pushed {
+                    *slot = Some(e);
+                }
+            }
         }
-        Ok::<(), StudyError>(())
+        // The lowest failing run of the group.
+        match failed
+            .into_iter()
+            .enumerate()
+            .find_map(|(l, e)| e.map(|e| (l, e)))
+        {
+            Some((lane, source)) => Err(RunFailure {
+                run: first + lane,
+                source,
+            }),
+            None => Ok(()),
+        }
     };
-    Ok((mc, make, Box::new(one)))
+    Ok((mc, make, Box::new(group)))
 }
 
-/// The report from the study's accumulators.
-fn finish(config: &Config, (nees_acc, nis_acc, err_acc): Acc) -> Result<Report, StudyError> {
+/// The report of a study's accumulators.
+fn report(
+    config: &Config,
+    nees_acc: StepMean,
+    nis_acc: StepMean,
+    err_acc: SquaredErrors,
+) -> Result<Report, StudyError> {
     let anees_band = ChiSquareBand::for_normalized_mean(4.0, config.runs, config.confidence)?;
     let anis_band = ChiSquareBand::for_normalized_mean(2.0, config.runs, config.confidence)?;
     // Every run pushes every step, so no step's mean is missing.
