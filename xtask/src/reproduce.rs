@@ -22,13 +22,14 @@ pub struct Args {
     #[arg(long)]
     quick: bool,
     /// Output directory (default: target/reproduce in the workspace).
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", value_parser = non_empty_dir)]
     out: Option<PathBuf>,
     /// Seed for every study, replacing each study's own.
-    #[arg(long)]
+    // Negative numbers are taken as values, so that their error names the option (issue 19).
+    #[arg(long, allow_negative_numbers = true)]
     seed: Option<u64>,
     /// Worker threads (0: every core); the results do not depend on it.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
 }
 
@@ -39,6 +40,15 @@ fn studies_help() -> String {
         text.push_str(&format!("  {:<5} {}\n", study.id(), study.title()));
     }
     text
+}
+
+/// A directory path that is not empty: `--out ''` would write into the current directory.
+fn non_empty_dir(s: &str) -> Result<PathBuf, String> {
+    if s.trim().is_empty() {
+        Err("empty; name the directory the reports are written to".to_string())
+    } else {
+        Ok(PathBuf::from(s))
+    }
 }
 
 /// Accepts a registered study identifier; the error lists the known ones.
