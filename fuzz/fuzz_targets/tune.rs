@@ -6,7 +6,8 @@
 use libfuzzer_sys::fuzz_target;
 
 /// The measurements of the tuning fixture, for inputs that hold a model only.
-const SERIES: &[u8] = include_bytes!("../../crates/kalibra-cli/tests/fixtures/tune_measurements.csv");
+const SERIES: &[u8] =
+    include_bytes!("../../crates/kalibra-cli/tests/fixtures/tune_measurements.csv");
 
 fuzz_target!(|data: &[u8]| {
     kalibra_fuzz::tune(data, SERIES);

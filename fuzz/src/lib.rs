@@ -45,7 +45,13 @@ pub fn tune(data: &[u8], default_series: &[u8]) {
         let path = Path::new(files[0]);
         let model = parse_model(path, &String::from_utf8_lossy(model))?;
         let m = model.meas_dim();
-        let z = parse_series(Path::new(files[1]), series, "z", m, &format!("H has {m} row(s)"))?;
+        let z = parse_series(
+            Path::new(files[1]),
+            series,
+            "z",
+            m,
+            &format!("H has {m} row(s)"),
+        )?;
         let problem = model.problem(path, z, None)?;
         let mut tuning = Tuning::new()
             .exponents(-1.0, 1.0, 1.0)
@@ -54,7 +60,9 @@ pub fn tune(data: &[u8], default_series: &[u8]) {
         if let Some(position) = &model.position {
             tuning = tuning.position(position.clone());
         }
-        tuning.tune(&problem).map_err(|e| format!("model.toml: {e}"))
+        tuning
+            .tune(&problem)
+            .map_err(|e| format!("model.toml: {e}"))
     })();
     judged(&files, result);
 }
@@ -79,8 +87,8 @@ pub fn npz_of_pieces(data: &[u8]) -> Vec<u8> {
     ];
     const SEPARATOR: &[u8] = b"--npy--";
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Stored);
+    let options =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
     let mut rest = data;
     while let Some((&first, body)) = rest.split_first() {
         let end = body
