@@ -56,23 +56,23 @@ pub(crate) struct Args {
     #[arg(value_enum, default_value = "all")]
     workloads: Workloads,
     /// Monte Carlo runs per workload.
-    #[arg(long, default_value_t = 1000, value_parser = positive)]
+    #[arg(long, default_value_t = 1000, value_parser = positive, allow_negative_numbers = true)]
     pub(crate) runs: usize,
     /// Steps per run (W1 and eval; W2 has 51).
-    #[arg(long, default_value_t = 1000, value_parser = positive)]
+    #[arg(long, default_value_t = 1000, value_parser = positive, allow_negative_numbers = true)]
     pub(crate) steps: usize,
     /// Threads for the multi-thread comparison of W1 and W2, and for W4's within-step
     /// parallelism at n >= 512 (default: every core).
-    #[arg(long, default_value_t = cores())]
+    #[arg(long, default_value_t = cores(), allow_negative_numbers = true)]
     pub(crate) threads: usize,
     /// Timed repeats; the best is reported.
-    #[arg(long, default_value_t = 3, value_parser = positive)]
+    #[arg(long, default_value_t = 3, value_parser = positive, allow_negative_numbers = true)]
     pub(crate) repeats: usize,
     /// Seed of the eval workload's generated logs (W1 and W2 keep their fixed seeds).
-    #[arg(long, default_value_t = 2012)]
+    #[arg(long, default_value_t = 2012, allow_negative_numbers = true)]
     pub(crate) seed: u64,
     /// W4: the state dimensions measured (default 8, 16, ..., 1024).
-    #[arg(long, value_delimiter = ',', default_values_t = crate::bench_w4::SIZES)]
+    #[arg(long, value_delimiter = ',', default_values_t = crate::bench_w4::SIZES, allow_negative_numbers = true)]
     pub(crate) sizes: Vec<usize>,
     /// W4: also time the kernels of the step one by one, faer against nalgebra.
     #[arg(long)]

@@ -23,13 +23,14 @@ pub struct Args {
     #[arg(long)]
     quick: bool,
     /// Output directory (default: target/reproduce in the workspace).
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", value_parser = non_empty_dir)]
     out: Option<PathBuf>,
     /// Seed for every study, replacing each study's own.
-    #[arg(long)]
+    // Negative numbers are taken as values, so that their error names the option (issue 19).
+    #[arg(long, allow_negative_numbers = true)]
     seed: Option<u64>,
     /// Worker threads (0: every core); the results do not depend on it.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
     /// Run only shard I of S of each named study's Monte Carlo (0 <= I < S) and write its
     /// partial result to DIR/<study>/shard-I-of-S.json; `cargo xtask merge` turns the S
@@ -43,10 +44,10 @@ pub struct Args {
 pub struct MergeArgs {
     /// Directories holding shard files (`<study>/shard-I-of-S.json`, as `reproduce --shard`
     /// writes them), for instance one per machine; every shard of a study must be present.
-    #[arg(value_name = "DIR", required = true)]
+    #[arg(value_name = "DIR", required = true, value_parser = non_empty_dir)]
     dirs: Vec<PathBuf>,
     /// Output directory for the merged reports (default: the first DIR).
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", value_parser = non_empty_dir)]
     out: Option<PathBuf>,
     /// The thread count the reports record (the unsharded run's, 0 by default); results do
     /// not depend on it.
@@ -68,6 +69,15 @@ fn studies_help() -> String {
         text.push_str(&format!("  {:<5} {}\n", study.id(), study.title()));
     }
     text
+}
+
+/// A directory path that is not empty: `--out ''` would write into the current directory.
+fn non_empty_dir(s: &str) -> Result<PathBuf, String> {
+    if s.trim().is_empty() {
+        Err("empty; name the directory the reports are written to".to_string())
+    } else {
+        Ok(PathBuf::from(s))
+    }
 }
 
 /// Accepts a registered study identifier; the error lists the known ones.

@@ -35,10 +35,16 @@ fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
     // The shape rules are the streaming NPZ reader's, so both read an array the same way.
     let (runs, steps, cell_shape) = crate::npz_log::cell_shape(array, &a.shape, cell_dims)?;
     let size: usize = cell_shape.iter().product();
+    if size == 0 || runs == 0 || steps == 0 {
+        // No values bound the other axes then: `(2^40, 2^40, 0)` holds nothing, and a cell
+        // per run and step would not fit in memory.
+        return Err(format!(
+            "array {array} has shape {:?}; it holds no values",
+            a.shape
+        ));
+    }
     let logged = |c: &[f64]| !c.iter().all(|v| v.is_nan());
-    let cells = if size == 0 {
-        CellValues::Sparse(vec![None; runs * steps])
-    } else if a.data.chunks(size).all(logged) {
+    let cells = if a.data.chunks(size).all(logged) {
         CellValues::Dense(a.data)
     } else {
         CellValues::Sparse(

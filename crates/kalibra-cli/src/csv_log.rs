@@ -77,7 +77,13 @@ const PROGRESS_FROM_BYTES: u64 = 64 << 20;
 pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> {
     let name = file.display();
     let opened = File::open(file).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
-    let size = opened.metadata().map_or(0, |m| m.len());
+    // The size of a regular file bounds the rows it can hold (a pipe's is unknown).
+    let known_size = opened
+        .metadata()
+        .ok()
+        .filter(std::fs::Metadata::is_file)
+        .map(|m| m.len());
+    let size = known_size.unwrap_or(0);
     let progress = (size >= PROGRESS_FROM_BYTES && std::io::stderr().is_terminal()).then(|| {
         let bar = indicatif::ProgressBar::new(size);
         bar.set_style(
@@ -93,11 +99,20 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
         Some(bar) => Box::new(bar.wrap_read(opened)),
         None => Box::new(opened),
     };
-    let result = stream(file, source, evaluation);
+    let result = stream(file, source, known_size, evaluation);
     if let Some(bar) = progress {
         bar.finish_and_clear();
     }
     result
+}
+
+/// Evaluates the CSV log held in `bytes` (the file `file`, as messages name it).
+pub fn evaluate_bytes(
+    file: &Path,
+    bytes: &[u8],
+    evaluation: &Evaluation,
+) -> Result<Report, String> {
+    stream(file, bytes, Some(bytes.len() as u64), evaluation)
 }
 
 /// The header's columns and the arrays' layouts, or the error naming the column at fault.
@@ -200,6 +215,12 @@ struct Plan {
     offsets: [Option<usize>; ARRAYS.len()],
     /// Values per parsed row: every array's cell side by side.
     width: usize,
+    /// The most rows the file can hold, when its size is known: a row has at least one byte
+    /// per column (a comma or the line's end, and the digits of its run and step). A row
+    /// whose run and step need a larger rectangle of rows is refused as it is read, before
+    /// the evaluation grows its per-run and per-step statistics to that size: a one-line
+    /// file claiming step 10^15 must not allocate for 10^15 steps.
+    max_rows: Option<u64>,
 }
 
 /// One parsed row of a block.
@@ -253,6 +274,18 @@ impl Plan {
             };
             let run = index(self.run_col)?;
             let step = index(self.step_col)?;
+            if let Some(max) = self.max_rows {
+                let needed = (run as u128 + 1) * (step as u128 + 1);
+                if needed > u128::from(max) {
+                    return Err(format!(
+                        "{}: row {line}: run {run}, step {step}: a log holding it has at least \
+                         {needed} rows (runs times steps), more than the file's {} columns \
+                         per row leave room for (at most {max}); is the run or step wrong?",
+                        self.name,
+                        self.header.len(),
+                    ));
+                }
+            }
             let time = match self.time_col {
                 Some(c) => number(&fields.get(c)).map_err(|()| not_number(c))?,
                 None => None,
@@ -375,6 +408,7 @@ fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Resu
 fn stream(
     file: &Path,
     mut source: impl Read + Send,
+    size: Option<u64>,
     evaluation: &Evaluation,
 ) -> Result<Report, String> {
     let name = file.display().to_string();
@@ -421,8 +455,9 @@ fn stream(
         time_col: find(Column::Time),
         offsets,
         width,
+        max_rows: size.map(|s| s / (rows.header.len().max(1) as u64)),
     };
-    let fail = |e: EvalError| format!("{name}: cannot evaluate the log: {e}");
+    let fail = |e: EvalError| crate::input::evaluation_error(&name, &e);
     let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
     let first_data_row = 1 + buf[..header_end].iter().filter(|&&b| b == b'\n').count() as u64;
     buf.drain(..header_end);
@@ -622,41 +657,53 @@ fn layouts(columns: &[Column]) -> Result<Vec<Layout>, String> {
             continue;
         }
         entries.sort_unstable();
-        let dim = entries.iter().map(|&(i, j, _)| i.max(j)).max().unwrap_or(0) + 1;
-        let column = |i: usize, j: usize| {
-            entries
-                .iter()
-                .find(|&&(x, y, _)| (x, y) == (i, j))
-                .map(|&(_, _, c)| c)
-        };
         let matrix = a >= FIRST_MATRIX;
         let diagonal = matrix && entries.iter().all(|&(i, j, _)| i == j);
-        let wanted: Vec<(usize, usize)> = if !matrix {
-            (0..dim).map(|i| (i, 0)).collect()
-        } else if diagonal {
-            (0..dim).map(|i| (i, i)).collect()
-        } else {
-            (0..dim)
-                .flat_map(|i| (0..dim).map(move |j| (i, j)))
-                .collect()
+        // The largest index names the dimension. It can be absurd (`truth_99999999999`): the
+        // array is then incomplete, and the search below finds its first missing column
+        // without making room for the columns it would need (a header of a few bytes once
+        // asked for terabytes here).
+        let dim = entries
+            .iter()
+            .map(|&(i, j, _)| i.max(j))
+            .max()
+            .unwrap_or(0)
+            .saturating_add(1);
+        // The p-th entry of a complete cell, in the sorted order of `entries`.
+        let position = |p: usize| {
+            if !matrix {
+                (p, 0)
+            } else if diagonal {
+                (p, p)
+            } else {
+                (p / dim, p % dim)
+            }
         };
-        let mut cols = Vec::with_capacity(wanted.len());
-        for (i, j) in wanted {
-            let c = column(i, j).ok_or_else(|| {
-                if !matrix {
-                    format!(
-                        "missing column `{array}_{i}` ({array}_0 to {array}_{} expected)",
-                        dim - 1
-                    )
-                } else {
-                    format!(
-                        "missing column `{array}_{i}_{j}` ({array} columns are every \
-                         {array}_i_j for i, j below {dim}, or the diagonal {array}_i_i alone)"
-                    )
-                }
-            })?;
-            cols.push(c);
+        let needed = if matrix && !diagonal {
+            dim.saturating_mul(dim)
+        } else {
+            dim
+        };
+        // Entries are unique (a repeated column was refused) and lie inside the cell, so the
+        // cell is complete when every entry sits at its own position; otherwise the first
+        // one out of place marks the first missing column. At most `entries.len() + 1` steps.
+        if let Some((i, j)) = (0..needed)
+            .find(|&p| entries.get(p).map(|&(i, j, _)| (i, j)) != Some(position(p)))
+            .map(position)
+        {
+            return Err(if !matrix {
+                format!(
+                    "missing column `{array}_{i}` ({array}_0 to {array}_{} expected)",
+                    dim - 1
+                )
+            } else {
+                format!(
+                    "missing column `{array}_{i}_{j}` ({array} columns are every {array}_i_j \
+                     for i, j below {dim}, or the diagonal {array}_i_i alone)"
+                )
+            });
         }
+        let cols: Vec<usize> = entries.iter().map(|&(_, _, c)| c).collect();
         out.push(Layout {
             array: a,
             dim,

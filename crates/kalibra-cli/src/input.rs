@@ -258,8 +258,10 @@ impl RawLog {
 pub fn log_from_arrays(arrays: Vec<(String, Vec<usize>, Vec<f64>)>) -> Result<FilterLog, String> {
     let mut named = std::collections::BTreeMap::new();
     for (name, shape, data) in arrays {
-        let size: usize = shape.iter().product();
-        if data.len() != size {
+        // Checked: the shape comes from the caller, and a product that wraps could match a
+        // short buffer.
+        let size = shape.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
+        if size != Some(data.len()) {
             return Err(format!(
                 "array {name} holds {} values for shape {shape:?}",
                 data.len()
@@ -272,35 +274,99 @@ pub fn log_from_arrays(arrays: Vec<(String, Vec<usize>, Vec<f64>)>) -> Result<Fi
         .map_err(|e| e.to_string())
 }
 
+/// A log's format, chosen by its file's extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogFormat {
+    /// `.json`: an object of named arrays.
+    Json,
+    /// `.csv`: one row per run and step.
+    Csv,
+    /// `.npz`: numpy's archive of `.npy` arrays.
+    Npz,
+}
+
+impl LogFormat {
+    /// The format `path`'s extension names (case-insensitive).
+    ///
+    /// # Errors
+    /// A message naming the file: no extension, or one that is not `.json`, `.csv` or `.npz`.
+    pub fn of(path: &Path) -> Result<Self, String> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_lowercase())
+            .unwrap_or_default();
+        match ext.as_str() {
+            "csv" => Ok(Self::Csv),
+            "json" => Ok(Self::Json),
+            "npz" => Ok(Self::Npz),
+            "" => Err(format!(
+                "{}: no file extension; name the log .json, .csv or .npz",
+                path.display()
+            )),
+            other => Err(format!(
+                "{}: unknown extension `.{other}`; kalibra eval reads .json, .csv and .npz logs",
+                path.display()
+            )),
+        }
+    }
+}
+
 /// Evaluates the log `path` in the format its extension names: a CSV file streams through
 /// the evaluation row by row; JSON and NPZ logs are read whole into a `FilterLog` (their
 /// arrays are stored whole in the file).
+///
+/// # Errors
+/// One message naming the file and where in it the input is at fault, or what the
+/// evaluation refused.
 pub fn evaluate_log(path: &Path, evaluation: &Evaluation) -> Result<Report, String> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_lowercase())
-        .unwrap_or_default();
-    let raw = match ext.as_str() {
-        "csv" => return crate::csv_log::evaluate(path, evaluation),
-        "json" => crate::json_log::read(path, &read_bytes(path)?)?,
-        "npz" => return crate::npz_log::evaluate(path, evaluation),
-        "" => {
-            return Err(format!(
-                "{}: no file extension; name the log .json, .csv or .npz",
-                path.display()
-            ));
-        }
-        other => {
-            return Err(format!(
-                "{}: unknown extension `.{other}`; kalibra eval reads .json, .csv and .npz logs",
-                path.display()
-            ));
-        }
-    };
-    let log = raw.build(path)?;
+    match LogFormat::of(path)? {
+        LogFormat::Csv => crate::csv_log::evaluate(path, evaluation),
+        LogFormat::Json => evaluate_json(path, &read_bytes(path)?, evaluation),
+        LogFormat::Npz => crate::npz_log::evaluate(path, evaluation),
+    }
+}
+
+/// Evaluates a log held in memory, `bytes` in `format`, with the rules and messages of
+/// [`evaluate_log`] (`name` is the file the messages name). This is the readers' entry point
+/// for the fuzz targets (`fuzz/`) and the readers' property test: every input is an error
+/// or a report, never a panic, and memory stays proportional to `bytes`.
+///
+/// # Errors
+/// As [`evaluate_log`].
+pub fn evaluate_bytes(
+    name: &Path,
+    format: LogFormat,
+    bytes: &[u8],
+    evaluation: &Evaluation,
+) -> Result<Report, String> {
+    match format {
+        LogFormat::Csv => crate::csv_log::evaluate_bytes(name, bytes, evaluation),
+        LogFormat::Json => evaluate_json(name, bytes, evaluation),
+        LogFormat::Npz => crate::npz_log::evaluate_bytes(name, bytes, evaluation),
+    }
+}
+
+fn evaluate_json(path: &Path, bytes: &[u8], evaluation: &Evaluation) -> Result<Report, String> {
+    let log = crate::json_log::read(path, bytes)?.build(path)?;
     evaluation
         .evaluate(&log)
-        .map_err(|e| format!("{}: cannot evaluate the log: {e}", path.display()))
+        .map_err(|e| evaluation_error(path.display(), &e))
+}
+
+/// The message of an error evaluating the log `file`. A `--group` naming a component the
+/// log's state does not have is the option's fault, not the log's, and says so.
+pub(crate) fn evaluation_error(
+    file: impl std::fmt::Display,
+    e: &kalibra_eval::EvalError,
+) -> String {
+    match e {
+        kalibra_eval::EvalError::GroupIndex { group, index, dim } => format!(
+            "--group {group}: component {index} is not in the state of {file}, which has {dim} \
+             components (0 to {})",
+            dim.saturating_sub(1)
+        ),
+        other => format!("{file}: cannot evaluate the log: {other}"),
+    }
 }
 
 fn read_bytes(path: &Path) -> Result<Vec<u8>, String> {

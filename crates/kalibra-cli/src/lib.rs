@@ -10,10 +10,14 @@
 //! logs and models, and writing a report into a temporary directory renamed into place. Every
 //! error is one message naming the file (or array) and where in it.
 
+// Outside input must not reach an unwrap: every reader error is a message (issue 19).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 mod arrays;
 mod csv_log;
 mod csv_rows;
 pub mod document;
+pub mod finite;
 pub mod input;
 mod json_log;
 mod npz_log;

@@ -15,6 +15,7 @@
 //! (CSV) or the array and index (JSON, NPZ); never a panic or a backtrace.
 
 #![allow(clippy::print_stdout, clippy::print_stderr)]
+#![deny(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -44,8 +45,10 @@ enum Command {
 #[command(after_long_help = tune_input::TUNE_HELP, after_help = tune_input::TUNE_HELP)]
 struct TuneArgs {
     /// The linear model: F, H, the nominal Q, R, x0 and P0 (see below).
+    #[arg(value_parser = non_empty_file)]
     model: PathBuf,
     /// The measurements: columns step, z_0, ..., z_{m-1} (see below).
+    #[arg(value_parser = non_empty_file)]
     measurements: PathBuf,
     /// The grid of exponents p of Q = 10^p Q_nom, as FROM:TO:STEP (TO included).
     #[arg(
@@ -57,14 +60,33 @@ struct TuneArgs {
     )]
     grid: (f64, f64, f64),
     /// The true states (columns step, x_0, ..., x_{n-1}), for the RMSE at every p.
-    #[arg(long)]
+    #[arg(long, value_parser = non_empty_file)]
     truth: Option<PathBuf>,
     /// Directory the report is written to (replaced if it holds an earlier report).
-    #[arg(long, short, default_value = "kalibra-tune")]
+    #[arg(long, short, default_value = "kalibra-tune", value_parser = non_empty_dir)]
     out: PathBuf,
     /// Threads for the sweep (0: one per core). The results do not depend on it.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
+}
+
+/// A directory that is not an empty path: an empty `--out` would write into the current
+/// directory (clap names the option in the error).
+fn non_empty_dir(s: &str) -> Result<PathBuf, String> {
+    if s.trim().is_empty() {
+        Err("empty; name the directory the report is written to".to_string())
+    } else {
+        Ok(PathBuf::from(s))
+    }
+}
+
+/// A file that is not an empty path: reading `` would fail with a message naming nothing.
+fn non_empty_file(s: &str) -> Result<PathBuf, String> {
+    if s.trim().is_empty() {
+        Err("empty; name the file".to_string())
+    } else {
+        Ok(PathBuf::from(s))
+    }
 }
 
 fn parse_grid(s: &str) -> Result<(f64, f64, f64), String> {
@@ -89,22 +111,23 @@ fn parse_grid(s: &str) -> Result<(f64, f64, f64), String> {
 #[command(after_long_help = input::FORMATS_HELP, after_help = input::FORMATS_HELP)]
 struct EvalArgs {
     /// The filter log: a .json, .csv or .npz file (format chosen by the extension).
+    #[arg(value_parser = non_empty_file)]
     log: PathBuf,
     /// Directory the report is written to (replaced if it holds an earlier report).
-    #[arg(long, short, default_value = "kalibra-report")]
+    #[arg(long, short, default_value = "kalibra-report", value_parser = non_empty_dir)]
     out: PathBuf,
     /// Confidence of every band and test, in (0, 1).
-    #[arg(long, default_value_t = 0.95, value_parser = parse_confidence)]
+    #[arg(long, default_value_t = 0.95, value_parser = parse_confidence, allow_negative_numbers = true)]
     confidence: f64,
     /// Sliding window in samples, at least 2 (default: a tenth of the steps, at least 2).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(2..))]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(2..), allow_negative_numbers = true)]
     window: Option<u64>,
     /// A group of state components whose joint RMSE is reported, as NAME=i,j,... (0-based;
     /// repeat for several groups).
     #[arg(long = "group", value_name = "NAME=i,j", value_parser = parse_group)]
     groups: Vec<(String, Vec<usize>)>,
     /// Largest lag of the innovation whiteness test, at least 1.
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
     lags: u64,
 }
 
@@ -156,8 +179,7 @@ fn main() -> ExitCode {
 
 /// `kalibra eval`: read, evaluate, write. The error is the one message to print.
 fn eval(args: &EvalArgs) -> Result<(), String> {
-    let evaluation = evaluation(args)
-        .map_err(|e| format!("{}: cannot evaluate the log: {e}", args.log.display()))?;
+    let evaluation = evaluation(args)?;
     // The output first: an unwritable --out fails before a long evaluation.
     let target = output::Target::prepare(&args.out)?;
     let report = input::evaluate_log(&args.log, &evaluation)?;
@@ -203,15 +225,25 @@ fn tune(args: &TuneArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn evaluation(args: &EvalArgs) -> Result<Evaluation, kalibra_eval::EvalError> {
+/// The evaluation the options ask for; an error names the option at fault.
+fn evaluation(args: &EvalArgs) -> Result<Evaluation, String> {
+    fn option(name: &'static str) -> impl Fn(kalibra_eval::EvalError) -> String {
+        move |e| format!("{name}: {e}")
+    }
     let mut e = Evaluation::new()
-        .confidence(args.confidence)?
-        .lags(usize::try_from(args.lags).unwrap_or(usize::MAX))?;
+        .confidence(args.confidence)
+        .map_err(option("--confidence"))?
+        .lags(usize::try_from(args.lags).unwrap_or(usize::MAX))
+        .map_err(option("--lags"))?;
     if let Some(w) = args.window {
-        e = e.window(usize::try_from(w).unwrap_or(usize::MAX))?;
+        e = e
+            .window(usize::try_from(w).unwrap_or(usize::MAX))
+            .map_err(option("--window"))?;
     }
     for (name, components) in &args.groups {
-        e = e.group(name.clone(), components.clone())?;
+        e = e
+            .group(name.clone(), components.clone())
+            .map_err(option("--group"))?;
     }
     Ok(e)
 }

@@ -13,7 +13,7 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 use std::sync::mpsc;
 
@@ -26,13 +26,115 @@ const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, ti
 /// Cells per batch handed from the reader thread to the evaluation.
 const BATCH_CELLS: usize = 4096;
 
-type Archive = zip::ZipArchive<BufReader<File>>;
+type Archive<R> = zip::ZipArchive<R>;
 
-fn open(file: &Path) -> Result<Archive, String> {
+/// Opens the archive on a new handle from `source` (each per-cell array streams from its own).
+fn open<R: Read + Seek>(
+    file: &Path,
+    source: &impl Fn() -> std::io::Result<R>,
+) -> Result<Archive<R>, String> {
     let name = file.display();
-    let handle = File::open(file).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
-    zip::ZipArchive::new(BufReader::with_capacity(1 << 20, handle))
+    let handle = source().map_err(|e| format!("{name}: cannot read the file: {e}"))?;
+    zip::ZipArchive::new(handle)
         .map_err(|e| format!("{name}: not an NPZ archive ({e}); write it with numpy's np.savez"))
+}
+
+/// The bytes `shape` of `kind` takes, `None` beyond `u64`.
+fn shape_bytes(shape: &[usize], kind: Kind) -> Option<u64> {
+    shape
+        .iter()
+        .try_fold(kind.size() as u64, |acc, &d| acc.checked_mul(d as u64))
+}
+
+/// Refuses a header whose shape needs more bytes than its archive entry holds (`entry_size`,
+/// the entry's uncompressed size), before anything is allocated for it: the shape is only
+/// a claim, and a `.npy` header of a few bytes can claim terabytes.
+fn check_fits(h: &Header, entry_size: u64) -> Result<(), String> {
+    match shape_bytes(&h.shape, h.kind) {
+        Some(bytes) if bytes <= entry_size => Ok(()),
+        claimed => Err(format!(
+            "shape {:?} needs {} bytes of values, but the entry holds {entry_size} \
+             (truncated or corrupt?)",
+            h.shape,
+            claimed.map_or_else(|| "more than 2^64".to_string(), |b| b.to_string())
+        )),
+    }
+}
+
+/// An `.npy` file's reader after its header: the header's bytes, then the rest of the entry.
+type AfterHeader<R> = std::io::Chain<std::io::Cursor<Vec<u8>>, R>;
+
+/// Reads the `.npy` header at the start of `reader` with npyz, once the shape it claims has
+/// been checked here: npyz multiplies the dimensions without checking for overflow, so a
+/// header of a few bytes claiming `(2^40, 2^40)` panicked inside it in a debug build and
+/// wrapped around in a release one (found by the readers' property test, issue 19).
+fn npy_file<R: Read>(mut reader: R) -> Result<npyz::NpyFile<AfterHeader<R>>, String> {
+    let not_npy = |why: String| format!("not a .npy array ({why})");
+    // The magic string, the format version and the header's length (2 bytes in version 1,
+    // 4 in versions 2 and 3).
+    let mut prefix = vec![0u8; 10];
+    reader
+        .read_exact(&mut prefix)
+        .map_err(|e| not_npy(e.to_string()))?;
+    if &prefix[..6] != b"\x93NUMPY" {
+        return Err(not_npy("no magic string".to_string()));
+    }
+    let len = match prefix[6] {
+        1 => u64::from(u16::from_le_bytes([prefix[8], prefix[9]])),
+        2 | 3 => {
+            let mut more = [0u8; 2];
+            reader
+                .read_exact(&mut more)
+                .map_err(|e| not_npy(e.to_string()))?;
+            prefix.extend_from_slice(&more);
+            u64::from(u32::from_le_bytes([prefix[8], prefix[9], more[0], more[1]]))
+        }
+        version => return Err(not_npy(format!("format version {version}"))),
+    };
+    // Read as it comes, not allocated up front: the length is only a claim.
+    let mut header = Vec::new();
+    (&mut reader)
+        .take(len)
+        .read_to_end(&mut header)
+        .map_err(|e| not_npy(e.to_string()))?;
+    if header.len() as u64 != len {
+        return Err(not_npy("the header is cut short (truncated?)".to_string()));
+    }
+    check_shape_claim(&String::from_utf8_lossy(&header)).map_err(not_npy)?;
+    prefix.extend_from_slice(&header);
+    npyz::NpyFile::new(std::io::Cursor::new(prefix).chain(reader))
+        .map_err(|e| not_npy(e.to_string()))
+}
+
+/// Checks the `'shape': (...)` of an `.npy` header's dictionary: whole numbers whose non-zero
+/// ones multiply to at most `u64::MAX`, which bounds every product npyz forms of them (a
+/// product with a zero is zero). A header without a shape is left to npyz to refuse.
+fn check_shape_claim(dict: &str) -> Result<(), String> {
+    let Some(key) = dict.find("'shape'").or_else(|| dict.find("\"shape\"")) else {
+        return Ok(());
+    };
+    let rest = &dict[key + "'shape'".len()..];
+    let tuple = rest
+        .trim_start()
+        .strip_prefix(':')
+        .map(str::trim_start)
+        .and_then(|t| t.strip_prefix('('))
+        .and_then(|t| t.split_once(')'))
+        .map(|(inside, _)| inside)
+        .ok_or_else(|| "its shape is not a tuple".to_string())?;
+    let mut product: u64 = 1;
+    for piece in tuple.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let dim: u64 = piece
+            .trim_end_matches(['L', 'l'])
+            .parse()
+            .map_err(|_| format!("shape ({tuple}) holds `{piece}`, not a whole number"))?;
+        if dim != 0 {
+            product = product
+                .checked_mul(dim)
+                .ok_or_else(|| format!("shape ({tuple}) holds more than 2^64 values"))?;
+        }
+    }
+    Ok(())
 }
 
 /// How an array's values are stored.
@@ -52,7 +154,7 @@ struct Header {
 }
 
 /// Checks a `.npy` header: C order, a number type kalibra reads.
-fn header(npy: &npyz::NpyFile<impl Read>) -> Result<Header, String> {
+fn header<R: Read>(npy: &npyz::NpyFile<R>) -> Result<Header, String> {
     if npy.order() == npyz::Order::Fortran {
         return Err(
             "stored in Fortran order; save a C-ordered array (np.ascontiguousarray)".to_string(),
@@ -121,16 +223,19 @@ struct Array {
 }
 
 /// Reads the array in `entry` whole.
-fn read_whole(archive: &mut Archive, entry: &str) -> Result<Array, String> {
+fn read_whole<R: Read + Seek>(archive: &mut Archive<R>, entry: &str) -> Result<Array, String> {
     let file = archive
         .by_name(entry)
         .map_err(|e| format!("cannot read it ({e}; truncated?)"))?;
-    let npy = npyz::NpyFile::new(file).map_err(|e| format!("not a .npy array ({e})"))?;
+    let entry_size = file.size();
+    let npy = npy_file(file)?;
     let h = header(&npy)?;
+    check_fits(&h, entry_size)?;
     let mut bytes = Vec::new();
     npy.into_inner()
         .read_to_end(&mut bytes)
         .map_err(|e| format!("cannot read its values ({e}; truncated?)"))?;
+    // Fits in usize: the values' bytes fit in the entry, whose bytes were just read.
     let count: usize = h.shape.iter().product();
     if bytes.len() != count * h.kind.size() {
         return Err(format!(
@@ -214,9 +319,29 @@ struct Batch {
 
 /// Evaluates the NPZ log `file` with `evaluation`.
 pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> {
+    let source = || File::open(file).map(|f| BufReader::with_capacity(1 << 20, f));
+    evaluate_from(file, &source, evaluation)
+}
+
+/// Evaluates the NPZ log held in `bytes` (the file `file`, as messages name it).
+pub fn evaluate_bytes(
+    file: &Path,
+    bytes: &[u8],
+    evaluation: &Evaluation,
+) -> Result<Report, String> {
+    let source = || Ok(std::io::Cursor::new(bytes));
+    evaluate_from(file, &source, evaluation)
+}
+
+/// Evaluates the NPZ log that `source` opens a handle on (each call a new handle at its start).
+fn evaluate_from<R: Read + Seek + Send>(
+    file: &Path,
+    source: &impl Fn() -> std::io::Result<R>,
+    evaluation: &Evaluation,
+) -> Result<Report, String> {
     let name = file.display();
     let fail = |msg: String| format!("{name}: {msg}");
-    let mut archive = open(file)?;
+    let mut archive = open(file, source)?;
     let known = [
         "truth",
         "estimate",
@@ -277,7 +402,7 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
     }
     let mut archives = present
         .iter()
-        .map(|_| open(file))
+        .map(|_| open(file, source))
         .collect::<Result<Vec<_>, _>>()?;
     let mut streams = Vec::new();
     let mut contents = Contents::default();
@@ -286,12 +411,21 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
         let entry = archive
             .by_name(&entries[array])
             .map_err(|e| fail(format!("array {array}: cannot read it ({e}; truncated?)")))?;
-        let npy = npyz::NpyFile::new(entry)
-            .map_err(|e| fail(format!("array {array}: not a .npy array ({e})")))?;
+        let entry_size = entry.size();
+        let npy = npy_file(entry).map_err(|e| fail(format!("array {array}: {e}")))?;
         let h = header(&npy).map_err(|e| fail(format!("array {array}: {e}")))?;
+        check_fits(&h, entry_size).map_err(|e| fail(format!("array {array}: {e}")))?;
         let matrix = array == "covariance" || array == "innovation_cov";
         let (runs, steps, cell) =
             cell_shape(array, &h.shape, if matrix { 2 } else { 1 }).map_err(fail)?;
+        if runs == 0 || steps == 0 {
+            // Nothing to evaluate; refused before the evaluation sizes itself by the cells'
+            // dimensions, which no value then bounds.
+            return Err(fail(format!(
+                "array {array} is empty (shape {:?})",
+                h.shape
+            )));
+        }
         match shape_from {
             None => shape_from = Some((array, runs, steps)),
             Some((first, r, k)) if (r, k) != (runs, steps) => {
@@ -339,10 +473,12 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
     if let Some([f, h, ..]) = &model {
         contents.model = Some((f.rows, h.rows));
     }
-    let evaluate_error = |e: EvalError| fail(format!("cannot evaluate the log: {e}"));
+    let evaluate_error = |e: EvalError| crate::input::evaluation_error(&name, &e);
     let mut evaluator = evaluation.evaluator(contents).map_err(evaluate_error)?;
 
-    let total = runs * steps;
+    // Every array's values fit in its entry (`check_fits`) and the evaluation refused cells of
+    // no values, so this product is at most the archive's size.
+    let total = runs.saturating_mul(steps);
     let fed: Result<(), String> = std::thread::scope(|scope| {
         // The reader: batches of cells, run-major, while this thread evaluates the last.
         let (tx, rx) = mpsc::sync_channel::<Result<Batch, String>>(4);

@@ -54,10 +54,18 @@ pub struct Target {
 impl Target {
     /// Checks `out` and makes the temporary directory beside it.
     ///
+    /// # Errors
+    /// A message naming `out`: an empty path, a directory holding something other than an
+    /// earlier report, or one that cannot be created or written beside.
+    ///
     /// `out` will be replaced if it holds an earlier report (a `report.json`); a directory
     /// holding anything else is left alone and refused.
     pub fn prepare(out: &Path) -> Result<Self, String> {
         let shown = out.display().to_string();
+        if out.as_os_str().is_empty() {
+            // `Path::new("")` joins as the current directory: the report would land there.
+            return Err("the output directory is an empty path; name a directory".to_string());
+        }
         let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
         if out.exists() {
             let is_report = out.join("report.json").is_file();

@@ -142,16 +142,28 @@ fn key_before(text: &str, at: usize) -> Option<&str> {
 }
 
 /// Reads MODEL.toml at `path`.
+///
+/// # Errors
+/// A message naming the file and the key, or the line and column, at fault.
 pub fn read_model(path: &Path) -> Result<Model, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read the file: {e}", path.display()))?;
+    parse_model(path, &text)
+}
+
+/// Reads MODEL.toml from `text` (the file `path`, as messages name it): [`read_model`] on text
+/// in memory, the entry point of the fuzz targets and the readers' property test.
+///
+/// # Errors
+/// As [`read_model`].
+pub fn parse_model(path: &Path, text: &str) -> Result<Model, String> {
     let name = path.display();
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
-    let file: ModelFile = toml::from_str(&text).map_err(|e| {
+    let file: ModelFile = toml::from_str(text).map_err(|e| {
         let at = e
             .span()
             .map(|s| {
-                let (line, column) = line_column(&text, s.start);
-                let key = key_before(&text, s.start)
+                let (line, column) = line_column(text, s.start);
+                let key = key_before(text, s.start)
                     .map(|k| format!("key {k}, "))
                     .unwrap_or_default();
                 format!("{key}line {line}, column {column}: ")
@@ -186,15 +198,38 @@ pub fn read_model(path: &Path) -> Result<Model, String> {
 /// Reads a CSV of `step` and `{prefix}_0 .. {prefix}_{dim-1}` at `path`: one entry per step,
 /// `None` for a row whose value cells are all empty. `what` names `dim` in messages
 /// ("H has 2 rows").
+///
+/// # Errors
+/// A message naming the file, and the row and column at fault.
 pub fn read_series(
     path: &Path,
     prefix: &str,
     dim: usize,
     what: &str,
 ) -> Result<Vec<Option<DVector<f64>>>, String> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| format!("{}: cannot read the file: {e}", path.display()))?;
+    parse_series(path, &bytes, prefix, dim, what)
+}
+
+/// [`read_series`] of the CSV in `bytes` (the file `path`, as messages name it).
+///
+/// # Errors
+/// As [`read_series`], and a `dim` of 0 (no model has one).
+pub fn parse_series(
+    path: &Path,
+    bytes: &[u8],
+    prefix: &str,
+    dim: usize,
+    what: &str,
+) -> Result<Vec<Option<DVector<f64>>>, String> {
     let name = path.display();
-    let bytes = std::fs::read(path).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
-    let mut rows_in = Rows::new(&name, bytes.as_slice())?;
+    if dim == 0 {
+        return Err(format!(
+            "{name}: {what}, so no {prefix} columns can be read"
+        ));
+    }
+    let mut rows_in = Rows::new(&name, bytes)?;
     let header = rows_in.header.clone();
     let expected: Vec<String> = std::iter::once("step".to_string())
         .chain((0..dim).map(|i| format!("{prefix}_{i}")))

@@ -12,6 +12,24 @@ use crate::as_given::lu_solve;
 use crate::record::Unchecked;
 use crate::{Estimate, FilterError, StepRecord};
 
+/// Checks the shape of what a user's model returned at step `k` (issue 19, point 3): a `Dyn`
+/// model answering with a vector or matrix of the wrong size is a
+/// [`FilterError::DimensionMismatch`] naming both sizes, before anything is computed from it,
+/// not a panic inside nalgebra. Nothing to check for fixed sizes, whose types hold the shape.
+pub(crate) fn check_model_output<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R, C>>(
+    what: &'static str,
+    m: &nalgebra::Matrix<f64, R, C, S>,
+    (rows, cols): (usize, usize),
+    k: usize,
+) -> Result<(), FilterError> {
+    if R::try_to_usize().is_some() && C::try_to_usize().is_some() {
+        return Ok(());
+    }
+    check_dim(rows, m.nrows(), what)
+        .and_then(|()| check_dim(cols, m.ncols(), what))
+        .map_err(|e| FilterError::at(k, e))
+}
+
 /// Which covariance update a filter applies.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[non_exhaustive]

@@ -5,7 +5,7 @@ use kalibra_models::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
 
 use std::marker::PhantomData;
 
-use crate::core::{KalmanCore, reject_as_given};
+use crate::core::{KalmanCore, check_model_output, reject_as_given};
 use crate::{
     AsGiven, Checked, Checking, Filter, FilterError, FilterOptions, InitialCheck, StepRecord,
 };
@@ -208,12 +208,18 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let k = core.step();
-    core.check_measurement(measurement.meas_dim().value(), z)?;
+    let m = measurement.meas_dim().value();
+    core.check_measurement(m, z)?;
     let x = core.mean();
+    let n = x.nrows();
     let zhat = measurement.measure(k, x);
+    check_model_output("predicted measurement h(x)", &zhat, (m, 1), k)?;
     let nu = measurement.residual(z, &zhat);
+    check_model_output("measurement residual", &nu, (m, 1), k)?;
     let h = h_matrix(k, x);
+    check_model_output("measurement matrix H", &h, (m, n), k)?;
     let r = measurement.noise_cov(k, x);
+    check_model_output("measurement noise covariance R", &r, (m, m), k)?;
     core.update::<AS_GIVEN>(zhat, nu, h, r, fixed_gain)
 }
 
@@ -228,7 +234,25 @@ where
     let k = core.step();
     let x = core.mean();
     let x_pred = dynamics.transition(k, x);
-    core.predict::<AS_GIVEN>(x_pred, dynamics.jacobian(k, x), dynamics.noise_cov(k))
+    let (f, q) = (dynamics.jacobian(k, x), dynamics.noise_cov(k));
+    check_prediction(k, x.nrows(), &x_pred, &f, &q)?;
+    core.predict::<AS_GIVEN>(x_pred, f, q)
+}
+
+/// Checks the sizes of a dynamics model's answers: `f(x)`, `F` and `Q` for a state of `n`.
+fn check_prediction<N: Dim>(
+    k: usize,
+    n: usize,
+    x_pred: &OVector<f64, N>,
+    f: &OMatrix<f64, N, N>,
+    q: &OMatrix<f64, N, N>,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    check_model_output("predicted mean f(x)", x_pred, (n, 1), k)?;
+    check_model_output("transition matrix F", f, (n, n), k)?;
+    check_model_output("process noise covariance Q", q, (n, n), k)
 }
 
 /// The prediction of the filters with linear dynamics (KF, SRF): `F_k` is the model's matrix.
@@ -241,7 +265,9 @@ where
 {
     let k = core.step();
     let x_pred = dynamics.transition(k, core.mean());
-    core.predict::<AS_GIVEN>(x_pred, dynamics.matrix(k), dynamics.noise_cov(k))
+    let (f, q) = (dynamics.matrix(k), dynamics.noise_cov(k));
+    check_prediction(k, core.mean().nrows(), &x_pred, &f, &q)?;
+    core.predict::<AS_GIVEN>(x_pred, f, q)
 }
 
 /// The accessors both filters forward to their core.

@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use kalibra_models::{Dynamics, Measurement, wrap_angle};
 
-use crate::core::{KalmanCore, UpdateParts};
+use crate::core::{KalmanCore, UpdateParts, check_model_output};
 use crate::kalman::{core_accessors, jacobian_predict};
 use crate::{Estimate, Filter, FilterError, FilterOptions, StepRecord};
 
@@ -553,11 +553,22 @@ where
         let x = self.core.mean().clone();
         let (l, _) = sigma_sqrt(self.core.cov(), "covariance for sigma points")
             .map_err(|e| FilterError::at(k, e))?;
+        // Every answer of the model is checked as it comes (a `Dyn` model may return any
+        // length), before a sum mixes it with the others; the filter is untouched until the
+        // core stores the prediction.
+        let fx = "predicted sigma point f(x)";
         let x0 = self.dynamics.transition(k, &x);
+        check_model_output(fx, &x0, (n, 1), k)?;
         for j in 0..n {
             let d = l.column(j) * w.spread;
-            self.scratch_x[j] = self.dynamics.transition(k, &(&x + &d));
-            self.scratch_x[n + j] = self.dynamics.transition(k, &(&x - &d));
+            let (plus, minus) = (
+                self.dynamics.transition(k, &(&x + &d)),
+                self.dynamics.transition(k, &(&x - &d)),
+            );
+            check_model_output(fx, &plus, (n, 1), k)?;
+            check_model_output(fx, &minus, (n, 1), k)?;
+            self.scratch_x[j] = plus;
+            self.scratch_x[n + j] = minus;
         }
         let (mean, mut cov) = match &self.state_space {
             None => {
@@ -583,10 +594,14 @@ where
                 points.push(x0);
                 points.extend(self.scratch_x.iter().cloned());
                 let mean = space.mean(&points, &w);
+                check_model_output("state space's sigma-point mean", &mean, (n, 1), k)?;
+                let residual = "state space's sigma-point residual";
                 let d0 = space.residual(&points[0], &mean);
+                check_model_output(residual, &d0, (n, 1), k)?;
                 let mut cov = &d0 * d0.transpose() * w.cov_center;
                 for xi in &points[1..] {
                     let d = space.residual(xi, &mean);
+                    check_model_output(residual, &d, (n, 1), k)?;
                     cov += &d * d.transpose() * w.other;
                 }
                 (mean, cov)
@@ -594,7 +609,9 @@ where
         };
         symmetrize(&mut cov);
         let f = self.dynamics.jacobian(k, &x);
+        check_model_output("transition Jacobian F", &f, (n, n), k)?;
         let q = self.dynamics.noise_cov(k);
+        check_model_output("process noise covariance Q", &q, (n, n), k)?;
         let (propagated, noise) = if self.core.is_prior() {
             // A second prediction without an update: carry the split through the Jacobian and
             // count what the unscented transform adds beyond it as propagated, so the parts
@@ -616,9 +633,12 @@ where
         let n = prior.mean.nrows();
         let (l, method) = sigma_sqrt(&prior.cov, "prior covariance for sigma points")
             .map_err(|e| FilterError::at(k, e))?;
+        let m = self.measurement.meas_dim().value();
         let r = self.measurement.noise_cov(k, &prior.mean);
+        check_model_output("measurement noise covariance R", &r, (m, m), k)?;
         check_finite(&r, "measurement noise covariance R").map_err(|e| FilterError::at(k, e))?;
         let z0 = self.measurement.measure(k, &prior.mean);
+        check_model_output("predicted measurement h(x)", &z0, (m, 1), k)?;
         let spaces = Spaces {
             state: self.state_space.as_deref(),
             measurement_mean: self.measurement_mean.as_deref(),
@@ -702,6 +722,7 @@ where
             _ => None,
         }
         .unwrap_or_else(|| self.measurement.jacobian(k, &prior.mean));
+        check_model_output("measurement Jacobian H", &h, (m, n), k)?;
         self.last_kappa = Some(kappa);
         self.core.commit_update(UpdateParts {
             zhat: c.zhat,
@@ -770,7 +791,18 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = prior.mean.nrows();
+    let m = z0.nrows();
     let x = &prior.mean;
+    // The model's answers are checked as they come, as in the prediction.
+    let (hx, residual) = ("sigma measurement h(x)", "measurement residual");
+    let measured = |at: &OVector<f64, N>| {
+        let z = measurement.measure(k, at);
+        check_model_output(hx, &z, (m, 1), k).map(|()| z)
+    };
+    let residual_of = |a: &OVector<f64, M>, b: &OVector<f64, M>| {
+        let e = measurement.residual(a, b);
+        check_model_output(residual, &e, (m, 1), k).map(|()| e)
+    };
     // Fixed sizes write the sigma-point sums out, run-time sizes call the kernels (which may
     // hand them to faer): the same arithmetic below the faer threshold, but the kernel calls
     // changed how the compiler inlined the fixed-size update (W2's UKF step, callgrind).
@@ -780,8 +812,8 @@ where
             // Sigma measurements as residuals from the central one: unwrapped around it.
             for j in 0..n {
                 let d = l.column(j) * w.spread;
-                scratch[j] = measurement.residual(&measurement.measure(k, &(x + &d)), z0);
-                scratch[n + j] = measurement.residual(&measurement.measure(k, &(x - &d)), z0);
+                scratch[j] = residual_of(&measured(&(x + &d))?, z0)?;
+                scratch[n + j] = residual_of(&measured(&(x - &d))?, z0)?;
             }
             let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, nalgebra::U1);
             for d in scratch.iter() {
@@ -806,15 +838,16 @@ where
             for sign in [1.0, -1.0] {
                 for j in 0..n {
                     let d = l.column(j) * (sign * w.spread);
-                    points.push(measurement.measure(k, &(x + &d)));
+                    points.push(measured(&(x + &d))?);
                 }
             }
             let mut zhat = mean.mean(&points, &w);
             measurement.normalize(&mut zhat);
+            check_model_output("measurement space's sigma-point mean", &zhat, (m, 1), k)?;
             for (slot, zi) in scratch.iter_mut().zip(&points[1..]) {
-                *slot = measurement.residual(zi, &zhat);
+                *slot = residual_of(zi, &zhat)?;
             }
-            let e0 = measurement.residual(z0, &zhat);
+            let e0 = residual_of(z0, &zhat)?;
             let mut pz = &e0 * e0.transpose() * w.cov_center;
             for e in scratch.iter() {
                 pz += e * e.transpose() * w.other;
@@ -843,8 +876,9 @@ where
     let mut zhat = zhat;
     if spaces.measurement_mean.is_none() {
         measurement.normalize(&mut zhat);
+        check_model_output("normalized measurement", &zhat, (m, 1), k)?;
     }
-    let nu = measurement.residual(z, &zhat);
+    let nu = residual_of(z, &zhat)?;
     let s = Covariance::from_symmetric(pz, "innovation covariance Pz").map_err(|e| {
         let e = if all_finite(&zhat) {
             e
@@ -860,6 +894,7 @@ where
     let mut mean = x + &gain * &nu;
     if let Some(space) = spaces.state {
         space.normalize(&mut mean);
+        check_model_output("state space's normalized mean", &mean, (n, 1), k)?;
     }
     let cov = &prior.cov - propagate(&gain, s.matrix());
     Ok(Candidate {
@@ -901,7 +936,16 @@ where
             .map_or(f64::NAN, |y| y.norm_squared()),
         _ => f64::NAN,
     };
-    let e = measurement.residual(z, &measurement.measure(k, &c.mean));
+    // A model answering with the wrong length here makes the criterion NaN (this kappa never
+    // wins), as a failed factorisation does; the update's own checks caught the others.
+    let zc = measurement.measure(k, &c.mean);
+    if zc.nrows() != z.nrows() {
+        return f64::NAN;
+    }
+    let e = measurement.residual(z, &zc);
+    if e.nrows() != z.nrows() {
+        return f64::NAN;
+    }
     let meas_term = r.map_or(f64::NAN, |r| quad_or_non_finite(r, &e));
     match criterion {
         KappaCriterion::PureMap => prior_term + meas_term,

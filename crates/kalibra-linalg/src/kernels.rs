@@ -11,6 +11,22 @@ use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage};
 
 use crate::{Alloc, LinalgError, backend};
 
+/// The documented panic of the kernels below on `Dyn` sizes that do not fit. Checked before
+/// the backend is chosen: faer's branch reads some operands as raw slices by the sizes of the
+/// others (`R` by `H`'s rows), where a wrong size would read the wrong entries instead of
+/// panicking. For fixed sizes the comparisons are constant and vanish.
+#[track_caller]
+fn assert_shape(what: &str, found: (usize, usize), expected: (usize, usize)) {
+    assert!(
+        found == expected,
+        "{what} is {}x{} where {}x{} is expected",
+        found.0,
+        found.1,
+        expected.0,
+        expected.1
+    );
+}
+
 /// `A P A^T` for any `A` (r x n) and square `P` (n x n): the covariance propagation `F P F^T`,
 /// the projection `H P H^T`, and `K R K^T` all use it.
 ///
@@ -20,6 +36,12 @@ use crate::{Alloc, LinalgError, backend};
 /// let p = Matrix2::identity();
 /// assert_eq!(propagate(&f, &p), Matrix2::new(2.0, 1.0, 1.0, 1.0));
 /// ```
+///
+/// # Panics
+/// If the `Dyn` sizes do not fit (`a`'s columns differ from `p`'s size, or `p` is not square):
+/// these are the filters' hot-path kernels, and take sizes already checked where they entered (the
+/// filters check their models' sizes at construction and every model answer at each step; a caller
+/// with outside data checks with [`check_dim`] first). Fixed sizes cannot disagree.
 #[inline]
 pub fn propagate<R: Dim, N: Dim>(
     a: &OMatrix<f64, R, N>,
@@ -31,6 +53,9 @@ where
     // either way, a second `Alloc` instance would not be.
     DefaultAllocator: Allocator<R, N> + Allocator<N, R> + Allocator<R, R> + Allocator<N, N>,
 {
+    let n = p.nrows();
+    assert_shape("propagate: P", p.shape(), (n, n));
+    assert_shape("propagate: A", a.shape(), (a.nrows(), n));
     if let Some(par) = backend::route(a.shape_generic().0, p.shape_generic().0) {
         return backend::propagate(a, p, par);
     }
@@ -45,6 +70,12 @@ where
 /// let a = Matrix2::new(1.0, 2.0, 3.0, 4.0);
 /// assert_eq!(product(&a, &a), a * a);
 /// ```
+///
+/// # Panics
+/// If the `Dyn` sizes do not fit (`a`'s columns differ from `b`'s rows): these are the filters'
+/// hot-path kernels, and take sizes already checked where they entered (the filters check their
+/// models' sizes at construction and every model answer at each step; a caller with outside data
+/// checks with [`check_dim`] first). Fixed sizes cannot disagree.
 #[inline]
 pub fn product<R: Dim, K: Dim, C: Dim>(
     a: &OMatrix<f64, R, K>,
@@ -53,6 +84,7 @@ pub fn product<R: Dim, K: Dim, C: Dim>(
 where
     DefaultAllocator: Allocator<R, K> + Allocator<K, C> + Allocator<R, C>,
 {
+    assert_shape("product: B", b.shape(), (a.ncols(), b.ncols()));
     let (r, k) = a.shape_generic();
     if let Some(par) = backend::route3(r, k, b.shape_generic().1) {
         return backend::product(a, b, par);
@@ -72,6 +104,12 @@ where
 /// assert_eq!(pht, SMatrix::<f64, 2, 1>::new(4.0, 1.0));
 /// assert_eq!(s[(0, 0)], 4.5);
 /// ```
+///
+/// # Panics
+/// If the `Dyn` sizes do not fit (`h`'s columns differ from `p`'s size, or `r`'s size from `h`'s
+/// rows): these are the filters' hot-path kernels, and take sizes already checked where they
+/// entered (the filters check their models' sizes at construction and every model answer at each
+/// step; a caller with outside data checks with [`check_dim`] first). Fixed sizes cannot disagree.
 #[inline]
 pub fn innovation_covariance<N: Dim, M: Dim>(
     p: &OMatrix<f64, N, N>,
@@ -81,6 +119,9 @@ pub fn innovation_covariance<N: Dim, M: Dim>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    let (m, n) = h.shape();
+    assert_shape("innovation_covariance: P", p.shape(), (n, n));
+    assert_shape("innovation_covariance: R", r.shape(), (m, m));
     if let Some(par) = backend::route(p.shape_generic().0, r.shape_generic().0) {
         return backend::innovation_covariance(p, h, r, par);
     }
@@ -190,6 +231,12 @@ where
 /// It keeps `P` symmetric positive semi-definite for any gain `K`, not only the optimal one,
 /// at the cost of two extra products over [`standard_update`]. At the optimal gain
 /// `K = P H^T S^-1` both forms agree to rounding (a property test checks it).
+///
+/// # Panics
+/// If the `Dyn` sizes do not fit (`k` is not `n x m`, `h` not `m x n` or `r` not `m x m` for `p` of
+/// `n x n`): these are the filters' hot-path kernels, and take sizes already checked where they
+/// entered (the filters check their models' sizes at construction and every model answer at each
+/// step; a caller with outside data checks with [`check_dim`] first). Fixed sizes cannot disagree.
 #[inline]
 pub fn joseph_update<N: Dim, M: Dim>(
     p: &OMatrix<f64, N, N>,
@@ -200,6 +247,10 @@ pub fn joseph_update<N: Dim, M: Dim>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    let (m, n) = h.shape();
+    assert_shape("joseph_update: P", p.shape(), (n, n));
+    assert_shape("joseph_update: K", k.shape(), (n, m));
+    assert_shape("joseph_update: R", r.shape(), (m, m));
     if let Some(par) = backend::route(p.shape_generic().0, r.shape_generic().0) {
         return backend::joseph_update(p, k, h, r, par);
     }
@@ -214,6 +265,12 @@ where
 
 /// Standard covariance update `(I - K H) P`, symmetrised. Correct only at the optimal gain;
 /// kept for comparison with papers that print it.
+///
+/// # Panics
+/// If the `Dyn` sizes do not fit (`k` is not `n x m` or `h` not `m x n` for `p` of `n x n`): these
+/// are the filters' hot-path kernels, and take sizes already checked where they entered (the
+/// filters check their models' sizes at construction and every model answer at each step; a caller
+/// with outside data checks with [`check_dim`] first). Fixed sizes cannot disagree.
 #[inline]
 pub fn standard_update<N: Dim, M: Dim>(
     p: &OMatrix<f64, N, N>,
@@ -223,6 +280,9 @@ pub fn standard_update<N: Dim, M: Dim>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    let (m, n) = h.shape();
+    assert_shape("standard_update: P", p.shape(), (n, n));
+    assert_shape("standard_update: K", k.shape(), (n, m));
     if let Some(par) = backend::route(p.shape_generic().0, h.shape_generic().0) {
         return backend::standard_update(p, k, h, par);
     }

@@ -11,12 +11,19 @@ use crate::{Measurement, ModelError};
 
 /// Wraps an angle into (-pi, pi].
 ///
+/// Every finite angle, from subnormals to `f64::MAX`, comes back finite and inside the
+/// interval. A NaN or infinite angle has no direction, and comes back NaN: it is not an error
+/// here because this is a hot-path arithmetic helper, and its callers refuse non-finite input
+/// before it: the filters refuse a non-finite measurement, and a non-finite state or sigma
+/// point reaches their posterior, whose finiteness check fails the step (issue 19, point 1).
+///
 /// ```
 /// use kalibra_models::wrap_angle;
 /// use std::f64::consts::PI;
 /// assert_eq!(wrap_angle(PI), PI);
 /// assert_eq!(wrap_angle(-PI), PI);
 /// assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-15);
+/// assert!(wrap_angle(f64::NAN).is_nan() && wrap_angle(f64::INFINITY).is_nan());
 /// ```
 pub fn wrap_angle(a: f64) -> f64 {
     let w = a.rem_euclid(2.0 * PI);
@@ -469,6 +476,42 @@ mod tests {
     use kalibra_linalg::{Matrix2, U4, Vector4};
     use rand_chacha::ChaCha8Rng;
     use rand_chacha::rand_core::SeedableRng;
+
+    /// Issue 19: every finite angle, at the extremes of f64 and at and across +-pi, wraps to a
+    /// finite angle in (-pi, pi]; a NaN or infinite one is NaN, as the docs say (the callers
+    /// refuse it before).
+    #[test]
+    fn wrap_angle_over_the_whole_f64_range() {
+        let tiny = f64::from_bits(1);
+        for a in [
+            0.0,
+            -0.0,
+            tiny,
+            -tiny,
+            1e-308,
+            -1e-300,
+            PI,
+            -PI,
+            PI.next_up(),
+            (-PI).next_down(),
+            3.0 * PI,
+            -3.0 * PI,
+            1e15,
+            -1e15,
+            1e308,
+            f64::MAX,
+            f64::MIN,
+        ] {
+            let w = wrap_angle(a);
+            assert!(
+                w.is_finite() && w > -PI && w <= PI,
+                "wrap_angle({a:e}) = {w:e}"
+            );
+        }
+        for a in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert!(wrap_angle(a).is_nan(), "wrap_angle({a})");
+        }
+    }
 
     #[test]
     fn bearing_jacobians_match_finite_differences_for_both_references() {

@@ -1,0 +1,10 @@
+//! `kalibra eval`'s CSV log reader, with the evaluation it feeds, on any bytes.
+
+#![no_main]
+
+use kalibra_cli::input::LogFormat;
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    kalibra_fuzz::eval(LogFormat::Csv, "log.csv", data);
+});
