@@ -3,9 +3,10 @@
 //! The study (`--shard-runs` runs, default 10^5, of `--steps` steps) runs once in one process,
 //! then as S = 1, 2 and 4 shards, one after the other on this machine, each with every core
 //! (as each would run alone on its own machine). A shard's time includes writing its partial
-//! result as JSON; the merge reads the S texts back, merges and builds the report. Printed per
+//! result (CBOR); the merge reads the S encodings back, merges and builds the report. Printed per
 //! S: the slowest shard, the merge, their sum beside the one-process time, and the merge as a
 //! share of a shard; the merged report is checked equal to the one-process report, bit for bit.
+//! Partials are encoded as the shard files hold them (CBOR, `study::write_partial`).
 //! Last, a projection to 100 machines from the measured per-run cost and merge.
 
 use std::time::Instant;
@@ -34,7 +35,7 @@ pub fn shards_bench(args: &Args) -> Result<()> {
     let whole_bits = serde_json::to_string(&whole)?;
     println!("one process: {one_process:.2} s");
     println!(
-        "| S | slowest shard s | merge s | slowest + merge s | one process / (slowest + merge) | merge / shard | partial bytes | bit-identical |"
+        "| S | slowest shard s | merge s | slowest + merge s | one process / (slowest + merge) | merge / shard | partial CBOR bytes | bit-identical |"
     );
     println!("|---|---|---|---|---|---|---|---|");
     let mut merge_costs = Vec::new();
@@ -44,14 +45,12 @@ pub fn shards_bench(args: &Args) -> Result<()> {
         for index in 0..count {
             let start = Instant::now();
             let part = w1::run_shard(&config, Shard::new(index, count)?)?;
-            texts.push(serde_json::to_string(&part)?);
+            texts.push(kalibra_studies::study::write_partial(&part)?);
             slowest = slowest.max(start.elapsed().as_secs_f64());
         }
+        let bytes: usize = texts.iter().map(Vec::len).sum();
         let start = Instant::now();
-        let parts = texts
-            .iter()
-            .map(|t| serde_json::from_str(t))
-            .collect::<Result<Vec<_>, _>>()?;
+        let parts = kalibra_studies::study::read_partials("w1", texts)?;
         let merged = w1::merge(&config, parts)?;
         let merge = start.elapsed().as_secs_f64();
         let identical = serde_json::to_string(&merged)? == whole_bits;
@@ -65,7 +64,7 @@ pub fn shards_bench(args: &Args) -> Result<()> {
             slowest + merge,
             one_process / (slowest + merge),
             100.0 * merge / slowest,
-            texts.iter().map(String::len).sum::<usize>(),
+            bytes,
         );
     }
     // The merge handles the study's blocks (at most 64) whatever S is, so its cost at S = 4

@@ -4,7 +4,7 @@
 //!   the studies of `kalibra_studies::REGISTRY` (all, or those named) and writes each one's
 //!   Markdown report, `results.json` and SVG figures, and `index.md`, under `target/reproduce/`.
 //! * `cargo xtask reproduce STUDY... --shard I/S --out DIR`: runs shard I of S of each study's
-//!   Monte Carlo and writes its partial result to `DIR/<study>/shard-I-of-S.json`;
+//!   Monte Carlo and writes its partial result to `DIR/<study>/shard-I-of-S.cbor`;
 //!   `cargo xtask merge DIR... [--out DIR]` merges all shards into the reports and index the
 //!   unsharded run writes, bit for bit (docs/distributed.md).
 //! * `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs

@@ -33,7 +33,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
     /// Run only shard I of S of each named study's Monte Carlo (0 <= I < S) and write its
-    /// partial result to DIR/<study>/shard-I-of-S.json; `cargo xtask merge` turns the S
+    /// partial result to DIR/<study>/shard-I-of-S.cbor; `cargo xtask merge` turns the S
     /// partials into the report the unsharded run writes, to the bit.
     #[arg(long, value_name = "I/S", value_parser = parse_shard, requires = "studies")]
     shard: Option<Shard>,
@@ -42,7 +42,7 @@ pub struct Args {
 /// `cargo xtask merge` arguments.
 #[derive(Debug, clap::Args)]
 pub struct MergeArgs {
-    /// Directories holding shard files (`<study>/shard-I-of-S.json`, as `reproduce --shard`
+    /// Directories holding shard files (`<study>/shard-I-of-S.cbor`, as `reproduce --shard`
     /// writes them), for instance one per machine; every shard of a study must be present.
     #[arg(value_name = "DIR", required = true, value_parser = non_empty_dir)]
     dirs: Vec<PathBuf>,
@@ -256,19 +256,20 @@ fn run_shards(
         let start = Instant::now();
         let partial = with_progress(id, || study.reproduce_shard(options, shard))
             .with_context(|| format!("study {id}, shard {shard}"))?;
-        let file = serde_json::json!({
-            "kalibra_shard": SHARD_FILE_VERSION,
-            "study": id,
-            "git_revision": revision,
-            "size": options.size.label(),
-            "seed": options.seed,
-            "partial": partial,
-        });
+        let file = ShardFile {
+            kalibra_shard: SHARD_FILE_VERSION,
+            study: id.to_string(),
+            git_revision: revision.to_string(),
+            size: options.size.label().to_string(),
+            seed: options.seed,
+            partial: ciborium::Value::Bytes(partial),
+        };
         let dir = out.join(id);
         std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
-        let path = dir.join(format!("shard-{}-of-{}.json", shard.index(), shard.count()));
-        std::fs::write(&path, serde_json::to_string(&file)?)
-            .with_context(|| format!("write {}", path.display()))?;
+        let path = dir.join(format!("shard-{}-of-{}.cbor", shard.index(), shard.count()));
+        let mut bytes = Vec::new();
+        ciborium::into_writer(&file, &mut bytes)?;
+        std::fs::write(&path, bytes).with_context(|| format!("write {}", path.display()))?;
         eprintln!(
             "{id}: shard {shard} done in {:.2} s, wrote {}",
             start.elapsed().as_secs_f64(),
@@ -278,44 +279,51 @@ fn run_shards(
     Ok(())
 }
 
-/// One shard file as read back: its study, size and seed, and the partial result.
+/// A shard file (CBOR, RFC 8949): which study, size and seed it belongs to, where it was
+/// built, and the study's partial result (`Study::run_shard`'s bytes).
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 struct ShardFile {
+    kalibra_shard: u64,
+    study: String,
+    git_revision: String,
+    size: String,
+    seed: Option<u64>,
+    partial: ciborium::Value,
+}
+
+/// A shard file read back, with its path for messages and its partial result's bytes.
+struct ReadShard {
     path: PathBuf,
     study: String,
     size: String,
     seed: Option<u64>,
-    partial: serde_json::Value,
+    partial: Vec<u8>,
 }
 
-fn read_shard_file(path: &Path) -> Result<ShardFile> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("read {}", path.display()))?;
-    let mut value: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-    let field = |v: &serde_json::Value, key: &str| -> Result<String> {
-        v[key]
-            .as_str()
-            .map(str::to_string)
-            .with_context(|| format!("{}: no text field {key:?}", path.display()))
-    };
-    if value["kalibra_shard"].as_u64() != Some(SHARD_FILE_VERSION) {
+fn read_shard_file(path: &Path) -> Result<ReadShard> {
+    let bytes = std::fs::read(path).with_context(|| format!("read {}", path.display()))?;
+    let file: ShardFile = ciborium::from_reader(bytes.as_slice())
+        .with_context(|| format!("{}: not a kalibra shard file", path.display()))?;
+    if file.kalibra_shard != SHARD_FILE_VERSION {
         anyhow::bail!(
-            "{}: not a kalibra shard file of version {SHARD_FILE_VERSION}",
-            path.display()
+            "{}: a shard file of version {}; this xtask reads version {SHARD_FILE_VERSION}",
+            path.display(),
+            file.kalibra_shard
         );
     }
-    let seed = match &value["seed"] {
-        serde_json::Value::Null => None,
-        v => Some(
-            v.as_u64()
-                .with_context(|| format!("{}: seed is not an integer", path.display()))?,
-        ),
+    let ciborium::Value::Bytes(partial) = file.partial else {
+        anyhow::bail!(
+            "{}: its partial result is not a byte string",
+            path.display()
+        );
     };
-    Ok(ShardFile {
+    Ok(ReadShard {
         path: path.to_path_buf(),
-        study: field(&value, "study")?,
-        size: field(&value, "size")?,
-        seed,
-        partial: value["partial"].take(),
+        study: file.study,
+        size: file.size,
+        seed: file.seed,
+        partial,
     })
 }
 
@@ -326,7 +334,7 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
     check_out(&out, "--out")?;
     let total = Instant::now();
     // Shard files by study, in registry order.
-    let mut files: std::collections::BTreeMap<String, Vec<ShardFile>> = Default::default();
+    let mut files: std::collections::BTreeMap<String, Vec<ReadShard>> = Default::default();
     for dir in &args.dirs {
         let entries = std::fs::read_dir(dir).with_context(|| format!("read {}", dir.display()))?;
         for study_dir in entries {
@@ -337,7 +345,7 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
             for entry in std::fs::read_dir(&study_dir)? {
                 let path = entry?.path();
                 let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
-                if name.starts_with("shard-") && name.ends_with(".json") {
+                if name.starts_with("shard-") && name.ends_with(".cbor") {
                     let file = read_shard_file(&path)?;
                     files.entry(file.study.clone()).or_default().push(file);
                 }
@@ -346,7 +354,7 @@ pub fn merge(args: &MergeArgs) -> Result<()> {
     }
     if files.is_empty() {
         anyhow::bail!(
-            "no shard files (<study>/shard-I-of-S.json) under {}",
+            "no shard files (<study>/shard-I-of-S.cbor) under {}",
             args.dirs
                 .iter()
                 .map(|d| d.display().to_string())

@@ -61,12 +61,15 @@ fn check_step(step: usize, steps: usize) -> Result<(), MetricsError> {
 /// The mean over runs of a scalar at each step (NEES, NIS, any per-step statistic).
 ///
 /// Serialised (serde, for a Monte Carlo shard's partial result) as its sums and counts per
-/// step, `{"sum": [...], "count": [...]}`; deserialising checks that the two have one length and
+/// step, `{"sum": [...], "count": [...]}` (in binary formats each array is one byte string of
+/// little-endian 8-byte values); deserialising checks that the two have one length and
 /// the sums are finite.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "StepMeanData")]
 pub struct StepMean {
+    #[serde(with = "crate::packed")]
     sum: Vec<f64>,
+    #[serde(with = "crate::packed")]
     count: Vec<u64>,
 }
 
@@ -74,7 +77,9 @@ pub struct StepMean {
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct StepMeanData {
+    #[serde(with = "crate::packed")]
     sum: Vec<f64>,
+    #[serde(with = "crate::packed")]
     count: Vec<u64>,
 }
 
@@ -216,13 +221,16 @@ impl Merge for StepMean {
 /// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
 ///
-/// Serialised (serde) as `{"dim": n, "sum": [...], "count": [...]}`, the sums step-major;
+/// Serialised (serde) as `{"dim": n, "sum": [...], "count": [...]}`, the sums step-major (in
+/// binary formats each array is one byte string of little-endian 8-byte values);
 /// deserialising checks the lengths (`sum` holds `dim` values per step) and finiteness.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "SquaredErrorsData")]
 pub struct SquaredErrors {
     dim: usize,
+    #[serde(with = "crate::packed")]
     sum: Vec<f64>,
+    #[serde(with = "crate::packed")]
     count: Vec<u64>,
 }
 
@@ -231,7 +239,9 @@ pub struct SquaredErrors {
 #[serde(deny_unknown_fields)]
 struct SquaredErrorsData {
     dim: usize,
+    #[serde(with = "crate::packed")]
     sum: Vec<f64>,
+    #[serde(with = "crate::packed")]
     count: Vec<u64>,
 }
 

@@ -72,6 +72,7 @@ mod error;
 pub mod hypothesis;
 mod innovation;
 mod itse;
+mod packed;
 mod scale;
 mod whiteness;
 mod window;

@@ -230,7 +230,7 @@ pub trait Study: Sync {
     }
 
     /// Runs shard `shard` of the study's Monte Carlo and returns its partial result
-    /// (a [`kalibra_sim::Partial`], serialised). [`Study::merge_shards`] of every shard's
+    /// (a [`kalibra_sim::Partial`], serialised by [`write_partial`]). [`Study::merge_shards`] of every shard's
     /// partial gives the report [`Study::run`] gives, to the bit.
     ///
     /// # Errors
@@ -240,7 +240,7 @@ pub trait Study: Sync {
         &self,
         config: &Self::Config,
         shard: kalibra_sim::Shard,
-    ) -> Result<serde_json::Value, StudyError> {
+    ) -> Result<Vec<u8>, StudyError> {
         let _ = (config, shard);
         Err(not_sharded(self.id()))
     }
@@ -254,7 +254,7 @@ pub trait Study: Sync {
     fn merge_shards(
         &self,
         config: &Self::Config,
-        parts: Vec<serde_json::Value>,
+        parts: Vec<Vec<u8>>,
     ) -> Result<Self::Report, StudyError> {
         let _ = (config, parts);
         Err(not_sharded(self.id()))
@@ -294,42 +294,40 @@ pub fn study_id(
     ))
 }
 
-/// Reads shard partials from their serialised form, naming the shard that does not read.
+/// Reads shard partials written by [`write_partial`], naming the part that does not read.
 ///
 /// # Errors
-/// [`StudyError::Partial`] for a value that is not a `Partial<A>`.
+/// [`StudyError::Partial`] for bytes that are not a `Partial<A>`.
 pub fn read_partials<A: serde::de::DeserializeOwned>(
     study: &'static str,
-    parts: Vec<serde_json::Value>,
+    parts: Vec<Vec<u8>>,
 ) -> Result<Vec<kalibra_sim::Partial<A>>, StudyError> {
     parts
-        .into_iter()
-        .map(|value| {
-            let shard = match (
-                value["shard"]["index"].as_u64(),
-                value["shard"]["count"].as_u64(),
-            ) {
-                (Some(i), Some(s)) => format!("{i}/{s}"),
-                _ => "?".to_string(),
-            };
-            serde_json::from_value(value).map_err(|e| StudyError::Partial {
+        .iter()
+        .enumerate()
+        .map(|(i, bytes)| {
+            ciborium::from_reader(bytes.as_slice()).map_err(|e| StudyError::Partial {
                 study,
-                shard,
+                shard: format!("part {i} of {}", parts.len()),
                 message: e.to_string(),
             })
         })
         .collect()
 }
 
-/// Serialises a shard's partial result.
+/// Serialises a shard's partial result as CBOR (RFC 8949): compact, self-describing, and
+/// exact for `f64` (each written in the shortest IEEE width that holds it exactly), and read
+/// several times faster than JSON, whose decimal floats the merge would have to parse.
 ///
 /// # Errors
-/// [`StudyError::Report`] if it does not serialise (a non-finite sum).
+/// [`StudyError::Report`] if it does not serialise.
 pub fn write_partial<A: Serialize>(
     partial: &kalibra_sim::Partial<A>,
-) -> Result<serde_json::Value, StudyError> {
-    serde_json::to_value(partial)
-        .map_err(|e| StudyError::Report(format!("the partial result does not serialise: {e}")))
+) -> Result<Vec<u8>, StudyError> {
+    let mut bytes = Vec::new();
+    ciborium::into_writer(partial, &mut bytes)
+        .map_err(|e| StudyError::Report(format!("the partial result does not serialise: {e}")))?;
+    Ok(bytes)
 }
 
 /// Everything one study run produced, type-erased for the registry loop.
@@ -378,7 +376,7 @@ pub trait Reproduce: Sync {
         &self,
         options: &Options,
         shard: kalibra_sim::Shard,
-    ) -> Result<serde_json::Value, StudyError>;
+    ) -> Result<Vec<u8>, StudyError>;
     /// What [`Reproduce::reproduce`] collects, from the partial results of every shard
     /// ([`Study::merge_shards`]) instead of a run.
     ///
@@ -387,7 +385,7 @@ pub trait Reproduce: Sync {
     fn reproduce_merged(
         &self,
         options: &Options,
-        parts: Vec<serde_json::Value>,
+        parts: Vec<Vec<u8>>,
     ) -> Result<Outcome, StudyError>;
 }
 
@@ -422,14 +420,14 @@ impl<S: Study> Reproduce for S {
         &self,
         options: &Options,
         shard: kalibra_sim::Shard,
-    ) -> Result<serde_json::Value, StudyError> {
+    ) -> Result<Vec<u8>, StudyError> {
         self.run_shard(&self.config(options), shard)
     }
 
     fn reproduce_merged(
         &self,
         options: &Options,
-        parts: Vec<serde_json::Value>,
+        parts: Vec<Vec<u8>>,
     ) -> Result<Outcome, StudyError> {
         let config = self.config(options);
         let report = self.merge_shards(&config, parts)?;

@@ -67,19 +67,11 @@ impl Study for W1 {
         true
     }
 
-    fn run_shard(
-        &self,
-        config: &Config,
-        shard: kalibra_sim::Shard,
-    ) -> Result<serde_json::Value, StudyError> {
+    fn run_shard(&self, config: &Config, shard: kalibra_sim::Shard) -> Result<Vec<u8>, StudyError> {
         crate::study::write_partial(&run_shard(config, shard)?)
     }
 
-    fn merge_shards(
-        &self,
-        config: &Config,
-        parts: Vec<serde_json::Value>,
-    ) -> Result<Report, StudyError> {
+    fn merge_shards(&self, config: &Config, parts: Vec<Vec<u8>>) -> Result<Report, StudyError> {
         merge(config, crate::study::read_partials(self.id(), parts)?)
     }
 
