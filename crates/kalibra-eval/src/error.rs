@@ -96,6 +96,18 @@ pub enum EvalError {
         /// Step index.
         step: usize,
     },
+    /// A run or step index beyond what an [`crate::Evaluator`] takes
+    /// ([`crate::MAX_RUNS`], [`crate::MAX_STEPS`]): its state grows with the largest index
+    /// fed, so one absurd index would otherwise allocate gigabytes before anything failed.
+    #[error("{what} {index} is beyond the largest an evaluation takes ({limit} - 1)")]
+    IndexLimit {
+        /// `"run"` or `"step"`.
+        what: &'static str,
+        /// The index given.
+        index: usize,
+        /// The limit ([`crate::MAX_RUNS`] or [`crate::MAX_STEPS`]).
+        limit: usize,
+    },
     /// A cell of the runs-by-steps rectangle that was never fed to an [`crate::Evaluator`]
     /// (every run needs every step, logged or not).
     #[error("run {run}, step {step} is missing (every run needs every step 0..{steps})")]

@@ -618,6 +618,16 @@ struct Scratch {
     s: Factor,
 }
 
+/// The most runs an [`Evaluator`] takes (run indices `0 .. MAX_RUNS`): its per-run state is
+/// about a hundred bytes a run, so the largest index fed sizes it, and a limit checked as each
+/// cell comes keeps a mistaken index from allocating gigabytes. 2^24 runs (16.8 million) is
+/// far beyond any Monte Carlo study that keeps NCI's per-run errors in memory.
+pub const MAX_RUNS: usize = 1 << 24;
+
+/// The most steps an [`Evaluator`] takes (step indices `0 .. MAX_STEPS`), for the same reason
+/// as [`MAX_RUNS`]: per-step state is a few hundred bytes a step.
+pub const MAX_STEPS: usize = 1 << 24;
+
 /// Batches from this many cells on are prepared on several threads: below it the hand-over
 /// costs more than it saves.
 const PARALLEL_FROM: usize = 512;
@@ -626,7 +636,8 @@ impl Evaluator {
     /// Feeds the cell of `run` and `step`. Nothing is kept of a cell that fails.
     ///
     /// # Errors
-    /// [`EvalError::DuplicateCell`] for a cell fed before; [`EvalError::CellLength`] for a
+    /// [`EvalError::IndexLimit`] for a run or step index at or beyond [`MAX_RUNS`] or
+    /// [`MAX_STEPS`]; [`EvalError::DuplicateCell`] for a cell fed before; [`EvalError::CellLength`] for a
     /// value of the wrong length; [`EvalError::NonFinite`] for a non-finite truth or model
     /// matrix; [`EvalError::Metrics`] if a metric fails on data that passed the checks (not
     /// expected). A bad covariance or a non-finite estimate or innovation is a finding, not
@@ -743,6 +754,11 @@ impl Evaluator {
         scratch: &mut Scratch,
     ) -> Result<Prepared, EvalError> {
         let (run, step) = at;
+        for (what, index, limit) in [("run", run, MAX_RUNS), ("step", step, MAX_STEPS)] {
+            if index >= limit {
+                return Err(EvalError::IndexLimit { what, index, limit });
+            }
+        }
         let (n, m) = (self.contents.state_dim(), self.contents.measurement_dim());
         let truth = vector("truth", at, n.unwrap_or(0), cell.truth)?;
         if truth.is_some_and(|x| !x.iter().all(|v| v.is_finite())) {

@@ -337,3 +337,40 @@ fn the_rectangle_is_enforced_and_a_failed_cell_leaves_no_trace() {
         Err(EvalError::NothingToEvaluate)
     ));
 }
+
+/// A run or step index at the limit is refused before anything grows (issue 19, point 6): an
+/// index of usize::MAX used to size the evaluator's per-run and per-step state. The cell
+/// just below the limit is taken.
+#[test]
+fn indices_beyond_the_limits_are_refused_before_anything_grows() {
+    use kalibra_eval::{EvalError, MAX_RUNS, MAX_STEPS};
+    let contents = Contents {
+        innovation: Some(1),
+        innovation_cov: Some(1),
+        ..Contents::default()
+    };
+    let cell = Cell {
+        innovation: Some(&[0.5]),
+        innovation_cov: Some(MatrixCell::Full(&[1.0])),
+        ..Cell::default()
+    };
+    let mut evaluator = Evaluation::new().evaluator(contents).unwrap();
+    for (run, step, what) in [
+        (MAX_RUNS, 0, "run"),
+        (usize::MAX, 0, "run"),
+        (0, MAX_STEPS, "step"),
+        (0, usize::MAX, "step"),
+    ] {
+        match evaluator.push(run, step, &cell) {
+            Err(EvalError::IndexLimit { what: w, .. }) => assert_eq!(w, what),
+            other => panic!("({run}, {step}): {other:?}"),
+        }
+        match evaluator.push_batch(&[(run, step, cell)]) {
+            Err((0, EvalError::IndexLimit { what: w, .. })) => assert_eq!(w, what),
+            other => panic!("batch ({run}, {step}): {other:?}"),
+        }
+    }
+    evaluator.push(0, 0, &cell).unwrap();
+    let report = evaluator.finish(None).unwrap();
+    assert_eq!(report.anis_per_step.len(), 1);
+}

@@ -184,13 +184,18 @@ where
         let zhat = bearing.measure(k, &prior.mean);
         let innovation = bearing.residual(z, &zhat);
         let h = bearing.jacobian(k, &prior.mean);
+        let l = bearing.selection();
+        // A Dyn sensor answering with the wrong number of columns is an error at this step
+        // (the filter unchanged), not a panic inside the products below.
+        let n = prior.mean.nrows();
+        crate::core::check_model_output("bearing Jacobian H", &h, (1, n), k)?;
+        crate::core::check_model_output("position selection L", &l, (2, n), k)?;
         let r = bearing.noise_cov(k, &prior.mean);
         let s = propagate(&h, &prior.cov) + r;
         let s = Covariance::from_symmetric(s, "linearised innovation covariance S").map_err(at)?;
         let ekf_gain = s.cholesky().solve(&(&h * &prior.cov)).transpose();
 
         // Alg. 2.
-        let l = bearing.selection();
         let m: Vector2<f64> = &l * &prior.mean - bearing.shift(k);
         let lpl = propagate(&l, &prior.cov);
         let (tx, ty) = bearing.translational_variance();

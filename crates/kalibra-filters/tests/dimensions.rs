@@ -111,3 +111,83 @@ fn a_linearisation_point_of_another_size_is_refused() {
         Err(FilterError::NonFinite { .. })
     ));
 }
+
+/// A bearing sensor of a `Dyn` state whose Jacobian or position selection has one column too
+/// many (issue 19, point 3): the SRF's update is a `DimensionMismatch` naming both sizes, and
+/// the filter is left as it was, where nalgebra panicked in the products.
+#[test]
+fn srf_refuses_a_bearing_sensor_answering_with_the_wrong_size() {
+    use kalibra_filters::{BearingSensor, Filter};
+    use kalibra_linalg::{DVector, Matrix1, OMatrix, U1, U2, Vector1};
+    use kalibra_models::Measurement;
+
+    #[derive(Clone, Copy, PartialEq)]
+    enum Wrong {
+        Jacobian,
+        Selection,
+    }
+    struct Lying(Bearing<Dyn, Stationary<2>>, Wrong);
+    impl Measurement<Dyn, U1> for Lying {
+        fn meas_dim(&self) -> U1 {
+            U1
+        }
+        fn expected_state_dim(&self) -> Option<usize> {
+            self.0.expected_state_dim()
+        }
+        fn measure(&self, k: usize, x: &DVector<f64>) -> Vector1<f64> {
+            self.0.measure(k, x)
+        }
+        fn jacobian(&self, k: usize, x: &DVector<f64>) -> OMatrix<f64, U1, Dyn> {
+            let h = self.0.jacobian(k, x);
+            if self.1 == Wrong::Jacobian {
+                let cols = h.ncols();
+                h.insert_column(cols, 0.0)
+            } else {
+                h
+            }
+        }
+        fn noise_cov(&self, k: usize, x: &DVector<f64>) -> Matrix1<f64> {
+            self.0.noise_cov(k, x)
+        }
+        fn residual(&self, z: &Vector1<f64>, zhat: &Vector1<f64>) -> Vector1<f64> {
+            self.0.residual(z, zhat)
+        }
+    }
+    impl BearingSensor<Dyn> for Lying {
+        fn selection(&self) -> OMatrix<f64, U2, Dyn> {
+            let l = BearingSensor::selection(&self.0);
+            if self.1 == Wrong::Selection {
+                let cols = l.ncols();
+                l.insert_column(cols, 0.0)
+            } else {
+                l
+            }
+        }
+        fn shift(&self, k: usize) -> Vector2<f64> {
+            BearingSensor::shift(&self.0, k)
+        }
+        fn reference(&self) -> BearingReference {
+            BearingSensor::reference(&self.0)
+        }
+        fn variance(&self) -> f64 {
+            BearingSensor::variance(&self.0)
+        }
+        fn translational_variance(&self) -> (f64, f64) {
+            BearingSensor::translational_variance(&self.0)
+        }
+    }
+    for wrong in [Wrong::Jacobian, Wrong::Selection] {
+        let x0 = DVector::from_vec(vec![1.0, 2.0, 0.1, 0.1]);
+        let p0 = DMatrix::identity(4, 4);
+        let mut srf = Srf::new(dynamics(4), Lying(bearing(4, 1), wrong), x0, p0).unwrap();
+        let (mean, cov) = (srf.mean().clone(), srf.covariance().clone());
+        match srf.update(&Vector1::new(0.3)) {
+            Err(FilterError::DimensionMismatch {
+                expected, found, ..
+            }) => assert_eq!((expected, found), (4, 5)),
+            other => panic!("expected a dimension mismatch, got {other:?}"),
+        }
+        assert_eq!((srf.mean(), srf.covariance()), (&mean, &cov));
+        assert!(srf.last_record().is_none());
+    }
+}

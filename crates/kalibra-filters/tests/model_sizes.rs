@@ -3,7 +3,9 @@
 //! one is a `DimensionMismatch` naming both sizes at that step, with the filter left as it
 //! was; before, nalgebra panicked inside the sigma-point sums or the covariance products.
 
-use kalibra_filters::{Ekf, Filter, FilterError, KappaCriterion, KappaGrid, SigmaSet, Ukf};
+use kalibra_filters::{
+    ConstantGainKf, Ekf, Filter, FilterError, KappaCriterion, KappaGrid, SigmaSet, Ukf,
+};
 use kalibra_linalg::{DMatrix, DVector, Dyn};
 use kalibra_models::{Dynamics, Measurement};
 
@@ -138,6 +140,19 @@ fn ekf_refuses_model_answers_of_the_wrong_size() {
         let (x0, p0) = start();
         let mut ekf = Ekf::new(Model(wrong), Model(wrong), x0, p0).unwrap();
         check(&mut ekf, wrong, Wrong::Nothing, "EKF");
+    }
+}
+
+/// The constant-gain KF shares the EKF's prediction and update; its gain is given, so only the
+/// answers a step asks for are checked (the measurement noise enters only S, which the record
+/// reports, so it is checked too).
+#[test]
+fn constant_gain_kf_refuses_model_answers_of_the_wrong_size() {
+    for wrong in std::iter::once(Wrong::Nothing).chain(ALL) {
+        let (x0, p0) = start();
+        let gain = DMatrix::identity(N, N) * 0.5;
+        let mut kf = ConstantGainKf::new(Model(wrong), Model(wrong), x0, p0, gain).unwrap();
+        check(&mut kf, wrong, Wrong::Nothing, "constant-gain KF");
     }
 }
 

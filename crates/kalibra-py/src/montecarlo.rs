@@ -341,6 +341,15 @@ fn monte_carlo<'py>(
             "arguments runs and steps must be at least 1 (got {runs} and {steps})"
         )));
     }
+    // Checked before anything is simulated: the evaluator would refuse the first run beyond
+    // its limit only after every run before it had run.
+    if runs > kalibra_eval::MAX_RUNS || steps > kalibra_eval::MAX_STEPS {
+        return Err(error(format!(
+            "arguments runs and steps can be at most {} and {} (got {runs} and {steps})",
+            kalibra_eval::MAX_RUNS,
+            kalibra_eval::MAX_STEPS
+        )));
+    }
     let x0 = read(x0, "x0")?;
     let n = match x0.shape.as_slice() {
         [n] if *n > 0 => *n,

@@ -49,6 +49,11 @@ def test_consistent_and_optimistic_filters():
 def test_arguments_are_checked():
     with pytest.raises(kalibra.KalibraError, match="runs and steps"):
         kalibra.monte_carlo(*ARGS, runs=0)
+    # Refused before a run is simulated (the evaluator's limits), not after 2^24 runs.
+    with pytest.raises(kalibra.KalibraError, match="can be at most 16777216"):
+        kalibra.monte_carlo(*ARGS, runs=2**24 + 1)
+    with pytest.raises(kalibra.KalibraError, match="can be at most 16777216"):
+        kalibra.monte_carlo(*ARGS, steps=2**40)
     with pytest.raises(kalibra.KalibraError, match="argument filter_R has shape"):
         kalibra.monte_carlo(*ARGS, filter_R=np.eye(2))
     with pytest.raises(kalibra.KalibraError, match="argument H has shape"):
