@@ -33,7 +33,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
     /// Run only shard I of S of each named study's Monte Carlo (0 <= I < S) and write its
-    /// partial result to DIR/<study>/shard-I-of-S.cbor; `cargo xtask merge` turns the S
+    /// partial result to `DIR/<study>/shard-I-of-S.cbor`; `cargo xtask merge` turns the S
     /// partials into the report the unsharded run writes, to the bit.
     #[arg(long, value_name = "I/S", value_parser = parse_shard, requires = "studies")]
     shard: Option<Shard>,

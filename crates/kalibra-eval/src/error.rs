@@ -108,6 +108,9 @@ pub enum EvalError {
         /// The limit ([`crate::MAX_RUNS`] or [`crate::MAX_STEPS`]).
         limit: usize,
     },
+    /// Two evaluators of different options or contents cannot be merged.
+    #[error("the evaluators to merge were made with different options or contents")]
+    MergeMismatch,
     /// A cell of the runs-by-steps rectangle that was never fed to an [`crate::Evaluator`]
     /// (every run needs every step, logged or not).
     #[error("run {run}, step {step} is missing (every run needs every step 0..{steps})")]

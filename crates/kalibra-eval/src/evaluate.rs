@@ -586,3 +586,24 @@ impl FindingTally {
         self.count
     }
 }
+
+impl FindingTally {
+    /// Adds `other`'s findings (cells of other runs or steps).
+    pub(crate) fn merge(&mut self, other: FindingTally) {
+        let (c, o) = (&mut self.count, other.count);
+        c.cells += o.cells;
+        c.non_finite += o.non_finite;
+        c.not_symmetric += o.not_symmetric;
+        c.not_positive_definite += o.not_positive_definite;
+        c.non_finite_vector += o.non_finite_vector;
+        if let Some(f) = o.first {
+            if c.first
+                .as_ref()
+                .is_none_or(|mine| (f.run, f.step) < (mine.run, mine.step))
+            {
+                c.first = Some(f);
+            }
+        }
+        self.steps.extend(other.steps);
+    }
+}

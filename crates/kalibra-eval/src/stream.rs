@@ -4,7 +4,7 @@
 use kalibra_linalg::nalgebra::Cholesky;
 use kalibra_linalg::{DMatrix, DVector, LinalgError, SMatrix, check_symmetric, symmetrize};
 use kalibra_metrics::{
-    Credibility, JHorizon, JStep, MetricsError, SquaredErrors, StepMean, j_step,
+    Credibility, JHorizon, JStep, Merge, MetricsError, SquaredErrors, StepMean, j_step,
 };
 use rayon::prelude::*;
 
@@ -838,6 +838,78 @@ impl Evaluator {
         Ok(())
     }
 
+    /// Adds the cells `other` was fed, as if they had come to this evaluator after its own:
+    /// per-step sums add (`self`'s first, so the result depends on the order of merges, which
+    /// the caller fixes), NCI's per-run errors and NEES append after this evaluator's, counts
+    /// and findings add, and the runs and steps grow to cover both. The two must have been
+    /// made by the same [`Evaluation`] for the same [`Contents`], and have been fed disjoint
+    /// cells; a run split between them must not have a `J1`/`J2` pair across the split (feed
+    /// whole runs to each, as a Monte Carlo study cut into blocks of runs does).
+    ///
+    /// A study that evaluates blocks of runs on separate evaluators and merges them in block
+    /// order gets the same report whatever runs the blocks in parallel; it differs from feeding
+    /// every cell to one evaluator only in the rounding of the sums.
+    ///
+    /// # Errors
+    /// [`EvalError::MergeMismatch`] for evaluators of different options or contents;
+    /// [`EvalError::DuplicateCell`] for a cell both were fed.
+    pub fn merge(&mut self, other: Evaluator) -> Result<(), EvalError> {
+        if self.options != other.options || self.contents != other.contents {
+            return Err(EvalError::MergeMismatch);
+        }
+        // Duplicates first, so that nothing changes on error.
+        for (run, bits) in other.seen.iter().enumerate() {
+            if let Some(mine) = self.seen.get(run) {
+                if let Some(w) = mine.iter().zip(bits).position(|(a, b)| a & b != 0) {
+                    let step = w * 64 + (mine[w] & bits[w]).trailing_zeros() as usize;
+                    return Err(EvalError::DuplicateCell { run, step });
+                }
+            }
+        }
+        if other.seen.len() > self.seen.len() {
+            self.seen.resize_with(other.seen.len(), Vec::new);
+        }
+        for (mine, bits) in self.seen.iter_mut().zip(other.seen) {
+            if bits.len() > mine.len() {
+                mine.resize(bits.len(), 0);
+            }
+            for (a, b) in mine.iter_mut().zip(bits) {
+                *a |= b;
+            }
+        }
+        self.runs = self.runs.max(other.runs);
+        let steps = self.steps.max(other.steps);
+        self.steps = steps;
+        if let (Some(a), Some(b)) = (&mut self.state, other.state) {
+            a.merge(b, steps);
+        }
+        if let (Some(a), Some(b)) = (&mut self.innovation, other.innovation) {
+            a.merge(b, steps);
+        }
+        if let (Some(a), Some(mut b)) = (&mut self.j, other.j) {
+            a.j1.extend_steps(steps);
+            a.j2.extend_steps(steps);
+            b.j1.extend_steps(steps);
+            b.j2.extend_steps(steps);
+            a.horizon.merge(&b.horizon);
+            a.j1.merge(&b.j1);
+            a.j2.merge(&b.j2);
+            a.failed += b.failed;
+            // A run's previous covariance pairs it with its next step; runs fed to `other`
+            // continue there.
+            if b.previous.len() > a.previous.len() {
+                a.previous
+                    .resize_with(b.previous.len(), || (None, DMatrix::zeros(0, 0)));
+            }
+            for (mine, theirs) in a.previous.iter_mut().zip(b.previous) {
+                if theirs.0.is_some() {
+                    *mine = theirs;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The number of runs learnt so far: one more than the largest run fed.
     pub fn runs(&self) -> usize {
         self.runs
@@ -1041,6 +1113,34 @@ impl StateSide {
     }
 }
 
+impl StateSide {
+    /// See [`Evaluator::merge`].
+    fn merge(&mut self, mut other: StateSide, steps: usize) {
+        for side in [&mut *self, &mut other] {
+            side.means.extend_steps(steps);
+            side.cred.extend_steps(steps);
+            side.squared.extend_steps(steps);
+        }
+        self.means.merge(&other.means);
+        self.cred.merge(&other.cred);
+        self.squared.merge(&other.squared);
+        merge_per_run(&mut self.per_run, &other.per_run);
+        self.findings.merge(other.findings);
+        self.window_series.extend(other.window_series);
+    }
+}
+
+/// Adds per-run sums and counts (each run's from whichever evaluator saw it).
+fn merge_per_run(mine: &mut Vec<(f64, usize)>, theirs: &[(f64, usize)]) {
+    if theirs.len() > mine.len() {
+        mine.resize(theirs.len(), (0.0, 0));
+    }
+    for (a, b) in mine.iter_mut().zip(theirs) {
+        a.0 += b.0;
+        a.1 += b.1;
+    }
+}
+
 impl InnovationSide {
     /// One cell's innovation side, given its NIS.
     fn accept(
@@ -1080,6 +1180,18 @@ impl InnovationSide {
             self.normalized.push((step, self.factor.w.clone()));
         }
         Ok(())
+    }
+}
+
+impl InnovationSide {
+    /// See [`Evaluator::merge`].
+    fn merge(&mut self, mut other: InnovationSide, steps: usize) {
+        self.means.extend_steps(steps);
+        other.means.extend_steps(steps);
+        self.means.merge(&other.means);
+        merge_per_run(&mut self.per_run, &other.per_run);
+        self.findings.merge(other.findings);
+        self.normalized.extend(other.normalized);
     }
 }
 

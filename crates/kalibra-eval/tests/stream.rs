@@ -374,3 +374,74 @@ fn indices_beyond_the_limits_are_refused_before_anything_grows() {
     let report = evaluator.finish(None).unwrap();
     assert_eq!(report.anis_per_step.len(), 1);
 }
+
+/// Evaluators fed blocks of whole runs, merged in block order, give the one-evaluator report
+/// to rounding (the per-step sums are re-associated; NCI, medians, findings and counts, which
+/// come from stored values and counts, are the same), with `J1`/`J2` from a model, windows and
+/// findings; merging the same blocks in the same order on any threads gives the same bits.
+#[test]
+fn merged_evaluators_of_run_blocks_give_the_report_to_rounding() {
+    let mut a = arrays(11, 23, 17);
+    for i in (0..a.runs * a.steps).step_by(11) {
+        a.cov[i * N * N + 1] = 5.0;
+        a.cov[i * N * N + 2] = 5.0;
+    }
+    let (h, r, q, f) = (
+        [1.0, 0.0],
+        [4.0],
+        [0.25, 0.5, 0.5, 1.0],
+        [1.0, 1.0, 0.0, 1.0],
+    );
+    let cell = |run: usize, step: usize| Cell {
+        model: Some(ModelCell {
+            f: &f,
+            h: &h,
+            q: &q,
+            r: &r,
+        }),
+        ..a.cell(run, step)
+    };
+    let contents = Contents {
+        model: Some((N, M)),
+        ..contents()
+    };
+    let evaluation = Evaluation::new().window(4).unwrap().diagnostic_run(9);
+    let feed = |runs: std::ops::Range<usize>| {
+        let mut e = evaluation.evaluator(contents).unwrap();
+        for run in runs {
+            for step in 0..a.steps {
+                e.push(run, step, &cell(run, step)).unwrap();
+            }
+        }
+        e
+    };
+    let want = feed(0..a.runs).finish(None).unwrap();
+    assert!(want.j.is_some());
+    let blocked = |cuts: &[usize]| {
+        let mut blocks = cuts.windows(2).map(|w| feed(w[0]..w[1]));
+        let mut total = blocks.next().unwrap();
+        for b in blocks {
+            total.merge(b).unwrap();
+        }
+        total.finish(None).unwrap()
+    };
+    let merged = blocked(&[0, 5, 6, 14, 23]);
+    assert_close(&merged, &want, 1e-12);
+    assert_eq!(merged.findings, want.findings);
+    assert_eq!(blocked(&[0, 5, 6, 14, 23]), merged);
+    // One block is the one evaluator, to the bit.
+    assert_eq!(blocked(&[0, 23]), want);
+
+    // Cells given to both, and evaluators of other options, are refused.
+    let mut e = feed(0..3);
+    let err = e.merge(feed(2..4)).unwrap_err();
+    assert_eq!(
+        err,
+        kalibra_eval::EvalError::DuplicateCell { run: 2, step: 0 }
+    );
+    let other = Evaluation::new().evaluator(contents).unwrap();
+    assert_eq!(
+        e.merge(other).unwrap_err(),
+        kalibra_eval::EvalError::MergeMismatch
+    );
+}
