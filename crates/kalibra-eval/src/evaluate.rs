@@ -596,13 +596,12 @@ impl FindingTally {
         c.not_symmetric += o.not_symmetric;
         c.not_positive_definite += o.not_positive_definite;
         c.non_finite_vector += o.non_finite_vector;
-        if let Some(f) = o.first {
-            if c.first
+        if let Some(f) = o.first
+            && c.first
                 .as_ref()
                 .is_none_or(|mine| (f.run, f.step) < (mine.run, mine.step))
-            {
-                c.first = Some(f);
-            }
+        {
+            c.first = Some(f);
         }
         self.steps.extend(other.steps);
     }

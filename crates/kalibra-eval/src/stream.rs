@@ -859,11 +859,11 @@ impl Evaluator {
         }
         // Duplicates first, so that nothing changes on error.
         for (run, bits) in other.seen.iter().enumerate() {
-            if let Some(mine) = self.seen.get(run) {
-                if let Some(w) = mine.iter().zip(bits).position(|(a, b)| a & b != 0) {
-                    let step = w * 64 + (mine[w] & bits[w]).trailing_zeros() as usize;
-                    return Err(EvalError::DuplicateCell { run, step });
-                }
+            if let Some(mine) = self.seen.get(run)
+                && let Some(w) = mine.iter().zip(bits).position(|(a, b)| a & b != 0)
+            {
+                let step = w * 64 + (mine[w] & bits[w]).trailing_zeros() as usize;
+                return Err(EvalError::DuplicateCell { run, step });
             }
         }
         if other.seen.len() > self.seen.len() {
