@@ -289,7 +289,9 @@ impl Moments {
 /// deviation divides by `W - 1`); [`MetricsError::DimensionMismatch`] if the series is shorter
 /// than the window (`expected` is the window, the least length that gives one window,
 /// `found` the series length); [`MetricsError::Linalg`] with [`LinalgError::NonFinite`] if
-/// the series holds NaN or an infinity.
+/// the series holds NaN or an infinity; [`MetricsError::NonFiniteSample`] (index: the
+/// window's start) for a window whose RMSE or standard deviation lies beyond f64's range
+/// (values near `±f64::MAX` of opposite signs).
 pub fn sliding_window(series: &[f64], window: usize) -> Result<WindowStats, MetricsError> {
     if window < 2 {
         return Err(MetricsError::InvalidParameter {
@@ -316,6 +318,16 @@ pub fn sliding_window(series: &[f64], window: usize) -> Result<WindowStats, Metr
             .chain(&mut stats.std)
         {
             *v = crate::scale::ldexp(*v, k);
+        }
+        // Scaling keeps every finite statistic finite; what is left beyond f64's range (the
+        // spread of -1e308 and 1.8e308 has a sample std of 2e308) has no f64 value.
+        for (what, values) in [
+            ("sliding-window RMSE (beyond f64's range)", &stats.rmse),
+            ("sliding-window std (beyond f64's range)", &stats.std),
+        ] {
+            if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+                return Err(MetricsError::NonFiniteSample { what, index });
+            }
         }
         return Ok(stats);
     }

@@ -438,3 +438,26 @@ proptest! {
         }
     }
 }
+
+/// A window of -1e308 and f64::MAX has a sample standard deviation of about 2e308, beyond
+/// f64's range: an error naming the window, not `Ok(inf)` (found by the adversarial suite in
+/// CI, tests/adversarial.rs `metrics_series`). Its bias is finite and a window of 1e308 and
+/// f64::MAX, whose std is finite, is computed.
+#[test]
+fn a_window_whose_spread_exceeds_f64_is_an_error_not_infinity() {
+    use kalibra_metrics::{MetricsError, sliding_window};
+    match sliding_window(&[-1e308, f64::MAX], 2) {
+        Err(MetricsError::NonFiniteSample { what, index: 0 }) => {
+            assert!(what.contains("std"), "{what}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let s = sliding_window(&[1e308, f64::MAX, 1.5e308], 2).unwrap();
+    assert!(
+        s.std
+            .iter()
+            .chain(&s.rmse)
+            .chain(&s.bias)
+            .all(|v| v.is_finite())
+    );
+}

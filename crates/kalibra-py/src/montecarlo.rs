@@ -38,6 +38,35 @@ where
     }
 }
 
+/// A run's cells, borrowed from its log (`n`, `m`, `steps` its sizes), each with the model.
+fn cells_of<'a>(
+    run: usize,
+    log: &'a RunLog,
+    (n, m, steps): (usize, usize, usize),
+    model: ModelCell<'a>,
+) -> Vec<(usize, usize, Cell<'a>)> {
+    (0..steps)
+        .map(|k| {
+            (
+                run,
+                k,
+                Cell {
+                    truth: Some(&log.truth[k * n..(k + 1) * n]),
+                    estimate: Some(&log.estimate[k * n..(k + 1) * n]),
+                    covariance: Some(MatrixCell::Full(
+                        &log.covariance[k * n * n..(k + 1) * n * n],
+                    )),
+                    innovation: Some(&log.innovation[k * m..(k + 1) * m]),
+                    innovation_cov: Some(MatrixCell::Full(
+                        &log.innovation_cov[k * m * m..(k + 1) * m * m],
+                    )),
+                    model: Some(model),
+                },
+            )
+        })
+        .collect()
+}
+
 /// A study's models and size, as given (column-major `Dyn` matrices).
 struct Setup {
     f: DMatrix<f64>,
@@ -55,11 +84,6 @@ struct Setup {
     threads: usize,
 }
 
-/// Runs simulated and filtered at a time before their cells go to the evaluator: enough to
-/// keep every core busy, few enough that the logs in flight stay small (256 runs of 1000
-/// steps of a 4-state filter are 60 MB), whatever the study's size.
-const CHUNK_RUNS: usize = 256;
-
 /// What a study returns: its report, and its log as arrays when asked for.
 type Outcome = (
     kalibra_eval::Report,
@@ -69,10 +93,12 @@ type Outcome = (
 /// The study at state dimension `N` and measurement dimension `M`: `Const` sizes for the
 /// common small models (nalgebra's fixed-size code, no allocation per step), `Dyn` otherwise.
 ///
-/// Runs are simulated and filtered in parallel a chunk at a time, each from its own stream
-/// `MonteCarlo::rng(run)`, and their cells go to one [`kalibra_eval::Evaluator`] run after
-/// run, step after step: the order `Evaluation::evaluate` feeds a log in, so the report is
-/// the one `evaluate` gives on the returned log, and the same for any thread count.
+/// Each run draws from its own stream `MonteCarlo::rng(run)`. The runs are cut into the
+/// Monte Carlo blocks; a block's runs are simulated, filtered and fed to the block's own
+/// [`kalibra_eval::Evaluator`] in order, blocks run in parallel, and the evaluators merge in
+/// block order ([`kalibra_eval::Evaluator::merge`]). The report is therefore the same for any
+/// thread count; against `evaluate` on the returned log (one evaluator, run after run) only
+/// the rounding of the per-step sums differs.
 fn study<N: Dim, M: Dim>(
     setup: &Setup,
     evaluation: &Evaluation,
@@ -160,44 +186,32 @@ where
         innovation_cov: Some(m),
         model: Some((n, m)),
     };
-    let mut evaluator = evaluation.evaluator(contents).map_err(|e| e.to_string())?;
-    let mut kept: Vec<RunLog> = Vec::new();
-    for first in (0..setup.runs).step_by(CHUNK_RUNS) {
-        let last = (first + CHUNK_RUNS).min(setup.runs);
-        // rayon keeps the order of the runs; the lowest failing run's error is returned.
-        let logs: Vec<RunLog> = (first..last)
-            .into_par_iter()
-            .map(one)
-            .collect::<Vec<_>>()
-            .into_iter()
-            .collect::<Result<_, _>>()?;
-        let mut cells = Vec::with_capacity(logs.len() * steps);
-        for (i, log) in logs.iter().enumerate() {
-            for k in 0..steps {
-                cells.push((
-                    first + i,
-                    k,
-                    Cell {
-                        truth: Some(&log.truth[k * n..(k + 1) * n]),
-                        estimate: Some(&log.estimate[k * n..(k + 1) * n]),
-                        covariance: Some(MatrixCell::Full(
-                            &log.covariance[k * n * n..(k + 1) * n * n],
-                        )),
-                        innovation: Some(&log.innovation[k * m..(k + 1) * m]),
-                        innovation_cov: Some(MatrixCell::Full(
-                            &log.innovation_cov[k * m * m..(k + 1) * m * m],
-                        )),
-                        model: Some(model_cell),
-                    },
-                ));
+    // The runs are cut into the Monte Carlo blocks (fixed by the number of runs); each block
+    // is simulated, filtered and evaluated on its own evaluator, its runs in order, the blocks
+    // in parallel, and the evaluators merge in block order: the report is the same for any
+    // thread count, and the evaluation, not only the filtering, uses every core.
+    let block = |b: usize| -> Result<(kalibra_eval::Evaluator, Vec<RunLog>), String> {
+        let mut evaluator = evaluation.evaluator(contents).map_err(|e| e.to_string())?;
+        let mut kept = Vec::new();
+        for run in mc.block_runs(b) {
+            let log = one(run)?;
+            evaluator
+                .push_batch(&cells_of(run, &log, (n, m, steps), model_cell))
+                .map_err(|(_, e)| e.to_string())?;
+            if return_log {
+                kept.push(log);
             }
         }
-        evaluator
-            .push_batch(&cells)
-            .map_err(|(_, e)| e.to_string())?;
-        if return_log {
-            kept.extend(logs);
-        }
+        Ok((evaluator, kept))
+    };
+    // In block order, so the first error is the lowest failing run's.
+    let blocks: Vec<_> = (0..mc.blocks()).into_par_iter().map(block).collect();
+    let mut blocks = blocks.into_iter();
+    let (mut evaluator, mut kept) = blocks.next().ok_or_else(|| "no runs".to_string())??;
+    for b in blocks {
+        let (e, logs) = b?;
+        evaluator.merge(e).map_err(|e| e.to_string())?;
+        kept.extend(logs);
     }
     let report = evaluator.finish(None).map_err(|e| e.to_string())?;
     if !return_log {
@@ -280,9 +294,11 @@ fn square(obj: &Bound<'_, PyAny>, name: &str, dim: Option<usize>) -> PyResult<DM
 }
 
 /// A seeded Monte Carlo of the linear-Gaussian model `x_k = F x_{k-1} + w`, `z_k = H x_k + v`
-/// through kalibra's Kalman filter, evaluated as `evaluate` does: entirely in Rust, in parallel
-/// over runs, and bit-identical for any thread count (run i draws from ChaCha8 stream i of
-/// `seed`).
+/// through kalibra's Kalman filter, evaluated with `evaluate`'s statistics: entirely in Rust,
+/// in parallel over blocks of runs (simulation, filter and evaluation), and bit-identical for
+/// any thread count (run i draws from ChaCha8 stream i of `seed`). `evaluate` on the returned
+/// log gives the same report to rounding (it sums the runs in one sequence, the study block by
+/// block).
 ///
 /// Each run draws its initial state from N(x0, P0) and simulates `steps` steps with noise
 /// w ~ N(0, Q), v ~ N(0, R), measuring every step; the filter starts from (x0, P0) as the

@@ -281,6 +281,19 @@ impl MonteCarlo {
         self.runs().clamp(1, MAX_BLOCKS)
     }
 
+    /// The runs of block `b` (of [`MonteCarlo::blocks`]): contiguous, sizes differing by at
+    /// most one, fixed by the number of runs alone. For a study that accumulates its blocks
+    /// itself (the Python package's Monte Carlo evaluates each block on its own evaluator and
+    /// merges them in block order, as [`MonteCarlo::accumulate`] does); empty for `b` beyond
+    /// the last block.
+    pub fn block_runs(&self, b: usize) -> std::ops::Range<usize> {
+        let blocks = self.blocks();
+        if b >= blocks {
+            return self.runs()..self.runs();
+        }
+        self.block(b, blocks)
+    }
+
     /// Runs shard `shard` of the study: its blocks, each into its own fresh accumulator, in
     /// parallel as [`MonteCarlo::accumulate`] runs them. [`merge`] of every shard's partial
     /// gives what [`MonteCarlo::accumulate`] gives, to the bit.
