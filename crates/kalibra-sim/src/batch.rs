@@ -8,7 +8,6 @@ use kalibra_models::{
     Dynamics, LinearGaussian, LinearObservation, Measurement, ModelError, Simulator,
 };
 use rand_distr::{Distribution, StandardNormal};
-use rayon::prelude::*;
 
 use crate::{ChaCha8Rng, MonteCarlo, Partial, Shard, SimError, StudyId};
 
@@ -71,18 +70,10 @@ impl MonteCarlo {
             + Send,
     {
         let blocks = self.blocks();
-        self.in_pool(|| {
-            let parts: Vec<Result<A, SimError<E>>> = (0..blocks)
-                .into_par_iter()
-                .map(|b| self.run_block_batched(b, blocks, &make, &group))
-                .collect();
-            let mut parts = parts.into_iter();
-            let mut total = parts.next().unwrap_or_else(|| Ok(make()))?;
-            for part in parts {
-                total.merge(&part?);
-            }
-            Ok(total)
-        })
+        let parts = self.block_accumulators(0..blocks, |b| {
+            self.run_block_batched(b, blocks, &make, &group)
+        })?;
+        Ok(crate::fold_blocks(parts).unwrap_or_else(make))
     }
 
     /// Shard `shard` of [`MonteCarlo::accumulate_batched`]: its blocks, each into its own
@@ -109,12 +100,8 @@ impl MonteCarlo {
             + Send,
     {
         let blocks = self.blocks();
-        let accs = self.in_pool(|| {
-            shard
-                .blocks(blocks)
-                .into_par_iter()
-                .map(|b| self.run_block_batched(b, blocks, &make, &group))
-                .collect::<Result<Vec<A>, SimError<E>>>()
+        let accs = self.block_accumulators(shard.blocks(blocks), |b| {
+            self.run_block_batched(b, blocks, &make, &group)
         })?;
         Ok(Partial::new(study.clone(), shard, accs))
     }

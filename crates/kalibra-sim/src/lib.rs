@@ -144,17 +144,29 @@ impl MonteCarlo {
         One: Fn(usize, &mut ChaCha8Rng, &mut A) -> Result<(), E> + Sync + Send,
     {
         let blocks = self.blocks();
+        let parts =
+            self.block_accumulators(0..blocks, |b| self.run_block(b, blocks, &make, &one))?;
+        Ok(fold_blocks(parts).unwrap_or_else(make))
+    }
+
+    /// The accumulators of the blocks `range`, computed in parallel on the study's pool and
+    /// returned in block order; an error is the lowest failing block's (so its lowest failing
+    /// run), whatever the thread count. Every accumulating entry point (one run at a time or
+    /// batched, whole or one shard) goes through here.
+    pub(crate) fn block_accumulators<A, E>(
+        &self,
+        range: std::ops::Range<usize>,
+        block: impl Fn(usize) -> Result<A, SimError<E>> + Sync + Send,
+    ) -> Result<Vec<A>, SimError<E>>
+    where
+        A: Send,
+        E: std::error::Error + Send + 'static,
+    {
         self.in_pool(|| {
-            let parts: Vec<Result<A, SimError<E>>> = (0..blocks)
-                .into_par_iter()
-                .map(|b| self.run_block(b, blocks, &make, &one))
-                .collect();
-            let mut parts = parts.into_iter();
-            let mut total = parts.next().unwrap_or_else(|| Ok(make()))?;
-            for part in parts {
-                total.merge(&part?);
-            }
-            Ok(total)
+            // Collected whole before the errors are looked at: rayon's own collect into a
+            // Result would return whichever error a thread met first.
+            let parts: Vec<Result<A, SimError<E>>> = range.into_par_iter().map(block).collect();
+            parts.into_iter().collect()
         })
     }
 
@@ -200,6 +212,18 @@ impl MonteCarlo {
                 .collect()
         })
     }
+}
+
+/// Folds block accumulators from the left, in block order: the one fold of a study, shared by
+/// [`MonteCarlo::accumulate`], [`MonteCarlo::accumulate_batched`] and the shards' [`merge`], so
+/// that all three add the same sums in the same order. `None` for no blocks.
+pub(crate) fn fold_blocks<A: Merge>(blocks: impl IntoIterator<Item = A>) -> Option<A> {
+    let mut blocks = blocks.into_iter();
+    let mut total = blocks.next()?;
+    for b in blocks {
+        total.merge(&b);
+    }
+    Some(total)
 }
 
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool for `None`.

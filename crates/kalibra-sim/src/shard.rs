@@ -41,7 +41,6 @@ use std::fmt;
 use std::str::FromStr;
 
 use kalibra_metrics::Merge;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::{MAX_BLOCKS, MonteCarlo, SimError};
@@ -314,12 +313,8 @@ impl MonteCarlo {
         One: Fn(usize, &mut crate::ChaCha8Rng, &mut A) -> Result<(), E> + Sync + Send,
     {
         let blocks = self.blocks();
-        let range = shard.blocks(blocks);
-        let accs = self.in_pool(|| {
-            range
-                .into_par_iter()
-                .map(|b| self.run_block(b, blocks, &make, &one))
-                .collect::<Result<Vec<A>, SimError<E>>>()
+        let accs = self.block_accumulators(shard.blocks(blocks), |b| {
+            self.run_block(b, blocks, &make, &one)
         })?;
         Ok(Partial::new(study.clone(), shard, accs))
     }
@@ -390,20 +385,18 @@ pub fn merge<A: Merge>(mut parts: Vec<Partial<A>>) -> Result<A, ShardError> {
             });
         }
     }
-    let mut accs = parts
-        .into_iter()
-        .flat_map(|p| p.blocks.into_iter().map(move |a| (p.shard.index, a)));
-    // Every shard is present and the blocks number `blocks >= 1`, so there is a first block.
-    let Some((_, mut total)) = accs.next() else {
-        return Err(ShardError::Empty);
-    };
-    for (index, acc) in accs {
-        if !total.fits(&acc) {
-            return Err(ShardError::Shape { index });
+    // Shapes first, against the first block, so that the fold cannot panic.
+    let first = parts.iter().flat_map(|p| &p.blocks).next();
+    for part in &parts {
+        if let Some(first) = first
+            && part.blocks.iter().any(|b| !first.fits(b))
+        {
+            return Err(ShardError::Shape {
+                index: part.shard.index,
+            });
         }
-        total.merge(&acc);
     }
-    Ok(total)
+    crate::fold_blocks(parts.into_iter().flat_map(|p| p.blocks)).ok_or(ShardError::Empty)
 }
 
 #[cfg(test)]

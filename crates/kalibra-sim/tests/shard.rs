@@ -211,3 +211,34 @@ fn a_tampered_partial_does_not_deserialise() {
     value["blocks"][0][1]["sum"][0] = serde_json::Value::Null;
     assert!(serde_json::from_value::<Partial<Acc>>(value).is_err());
 }
+
+/// A shard reports its lowest failing run whatever the thread count (its blocks are collected
+/// in order before the errors are looked at).
+#[test]
+fn a_shard_reports_its_lowest_failing_run_for_any_thread_count() {
+    let mc = MonteCarlo::new(200, 3);
+    let id = id(&mc);
+    for threads in [1, 2, 4, 8] {
+        let err = mc
+            .threads(threads)
+            .accumulate_shard(
+                Shard::new(1, 2).unwrap(),
+                &id,
+                || StepMean::new(1),
+                |run, _, _| {
+                    if run == 120 || run == 190 {
+                        Err(kalibra_metrics::MetricsError::Empty {
+                            what: "a failing run",
+                        })
+                    } else {
+                        Ok(())
+                    }
+                },
+            )
+            .unwrap_err();
+        assert!(
+            matches!(err, kalibra_sim::SimError::Run { run: 120, .. }),
+            "{threads} threads: {err:?}"
+        );
+    }
+}
