@@ -853,7 +853,7 @@ impl Evaluator {
     /// # Errors
     /// [`EvalError::MergeMismatch`] for evaluators of different options or contents;
     /// [`EvalError::DuplicateCell`] for a cell both were fed.
-    pub fn merge(&mut self, other: Evaluator) -> Result<(), EvalError> {
+    pub fn merge(&mut self, mut other: Evaluator) -> Result<(), EvalError> {
         if self.options != other.options || self.contents != other.contents {
             return Err(EvalError::MergeMismatch);
         }
@@ -866,6 +866,9 @@ impl Evaluator {
                 return Err(EvalError::DuplicateCell { run, step });
             }
         }
+        // One horizon for both, so the per-step accumulators fit.
+        self.grow_steps(other.steps);
+        other.grow_steps(self.steps);
         if other.seen.len() > self.seen.len() {
             self.seen.resize_with(other.seen.len(), Vec::new);
         }
@@ -878,19 +881,13 @@ impl Evaluator {
             }
         }
         self.runs = self.runs.max(other.runs);
-        let steps = self.steps.max(other.steps);
-        self.steps = steps;
         if let (Some(a), Some(b)) = (&mut self.state, other.state) {
-            a.merge(b, steps);
+            a.merge(b);
         }
         if let (Some(a), Some(b)) = (&mut self.innovation, other.innovation) {
-            a.merge(b, steps);
+            a.merge(b);
         }
-        if let (Some(a), Some(mut b)) = (&mut self.j, other.j) {
-            a.j1.extend_steps(steps);
-            a.j2.extend_steps(steps);
-            b.j1.extend_steps(steps);
-            b.j2.extend_steps(steps);
+        if let (Some(a), Some(b)) = (&mut self.j, other.j) {
             a.horizon.merge(&b.horizon);
             a.j1.merge(&b.j1);
             a.j2.merge(&b.j2);
@@ -936,21 +933,27 @@ impl Evaluator {
         bits[word] |= bit;
         self.runs = self.runs.max(run + 1);
         if step >= self.steps {
-            self.steps = step + 1;
-            if let Some(s) = &mut self.state {
-                s.means.extend_steps(self.steps);
-                s.cred.extend_steps(self.steps);
-                s.squared.extend_steps(self.steps);
-            }
-            if let Some(s) = &mut self.innovation {
-                s.means.extend_steps(self.steps);
-            }
-            if let Some(j) = &mut self.j {
-                j.j1.extend_steps(self.steps);
-                j.j2.extend_steps(self.steps);
-            }
+            self.grow_steps(step + 1);
         }
         Ok(())
+    }
+
+    /// Extends the horizon, and every per-step accumulator, to `steps` steps.
+    fn grow_steps(&mut self, steps: usize) {
+        self.steps = self.steps.max(steps);
+        let steps = self.steps;
+        if let Some(s) = &mut self.state {
+            s.means.extend_steps(steps);
+            s.cred.extend_steps(steps);
+            s.squared.extend_steps(steps);
+        }
+        if let Some(s) = &mut self.innovation {
+            s.means.extend_steps(steps);
+        }
+        if let Some(j) = &mut self.j {
+            j.j1.extend_steps(steps);
+            j.j2.extend_steps(steps);
+        }
     }
 
     /// The first cell of the rectangle never fed, as (run, step).
@@ -1115,12 +1118,7 @@ impl StateSide {
 
 impl StateSide {
     /// See [`Evaluator::merge`].
-    fn merge(&mut self, mut other: StateSide, steps: usize) {
-        for side in [&mut *self, &mut other] {
-            side.means.extend_steps(steps);
-            side.cred.extend_steps(steps);
-            side.squared.extend_steps(steps);
-        }
+    fn merge(&mut self, other: StateSide) {
         self.means.merge(&other.means);
         self.cred.merge(&other.cred);
         self.squared.merge(&other.squared);
@@ -1185,9 +1183,7 @@ impl InnovationSide {
 
 impl InnovationSide {
     /// See [`Evaluator::merge`].
-    fn merge(&mut self, mut other: InnovationSide, steps: usize) {
-        self.means.extend_steps(steps);
-        other.means.extend_steps(steps);
+    fn merge(&mut self, other: InnovationSide) {
         self.means.merge(&other.means);
         merge_per_run(&mut self.per_run, &other.per_run);
         self.findings.merge(other.findings);

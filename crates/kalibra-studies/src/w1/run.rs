@@ -125,8 +125,28 @@ fn check(config: &Config) -> Result<(), StudyError> {
     Ok(())
 }
 
-/// The accumulators of a W1 study: per-step NEES / 4, NIS / 2, and squared errors.
-type Accumulators = (StepMean, StepMean, SquaredErrors);
+/// The accumulators of a W1 study: per-step NEES / 4, NIS / 2, and squared errors (a
+/// shard's partial result holds them block by block).
+pub type Acc = (StepMean, StepMean, SquaredErrors);
+
+/// Empty accumulators over `steps` steps.
+fn empty(steps: usize) -> Acc {
+    (
+        StepMean::new(steps),
+        StepMean::new(steps),
+        SquaredErrors::new(steps, 4),
+    )
+}
+
+/// The factor `L0` of the prior covariance, from which every run draws its initial state.
+fn prior_factor(
+    p0: &kalibra_linalg::Matrix4<f64>,
+) -> Result<kalibra_linalg::Matrix4<f64>, StudyError> {
+    Ok(kalibra_linalg::PsdMatrix::new(*p0)
+        .map_err(kalibra_models::ModelError::from)?
+        .factor()
+        .clone_owned())
+}
 
 /// Runs the study one filter at a time: the scalar [`Kf`] over [`Simulator`] truths, the
 /// reference the batched path is checked against.
@@ -138,20 +158,11 @@ pub fn run_scalar(config: &Config) -> Result<Report, StudyError> {
     check(config)?;
     let (f, h) = models()?;
     let (m0, p0) = prior();
-    let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
-        .map_err(kalibra_models::ModelError::from)?
-        .factor()
-        .clone_owned();
+    let p0_factor = prior_factor(&p0)?;
     let steps = config.steps;
     let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
     let (nees_acc, nis_acc, err_acc) = mc.accumulate(
-        || {
-            (
-                StepMean::new(steps),
-                StepMean::new(steps),
-                SquaredErrors::new(steps, 4),
-            )
-        },
+        || empty(steps),
         |_run, rng, (nees_acc, nis_acc, err_acc)| {
             let x0 = m0 + sample_with_factor(&p0_factor, rng);
             let mut truth = Simulator::new(&f, &h, x0, 0)?;
@@ -186,10 +197,6 @@ pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
     let (nees_acc, nis_acc, err_acc) = mc.accumulate_batched(make, group)?;
     report(config, nees_acc, nis_acc, err_acc)
 }
-
-/// The study's accumulators (NEES / 4 and NIS / 2 per step, squared errors), as a shard's
-/// partial result holds them block by block.
-pub type Acc = Accumulators;
 
 /// Runs shard `shard` of the batched study on `config.simd` (or the detected instruction
 /// set): its partial result, which [`merge`] turns into the report [`run`] gives, to the bit.
@@ -256,11 +263,7 @@ fn shard_id(
     Ok(id)
 }
 
-type Group = dyn Fn(
-        std::ops::Range<usize>,
-        &mut [ChaCha8Rng],
-        &mut Accumulators,
-    ) -> Result<(), RunFailure<StudyError>>
+type Group = dyn Fn(std::ops::Range<usize>, &mut [ChaCha8Rng], &mut Acc) -> Result<(), RunFailure<StudyError>>
     + Sync
     + Send;
 
@@ -270,21 +273,11 @@ type Group = dyn Fn(
 fn batched(
     config: &Config,
     isa: Isa,
-) -> Result<
-    (
-        MonteCarlo,
-        impl Fn() -> Accumulators + Sync + Send,
-        Box<Group>,
-    ),
-    StudyError,
-> {
+) -> Result<(MonteCarlo, impl Fn() -> Acc + Sync + Send, Box<Group>), StudyError> {
     check(config)?;
     let (f, h) = models()?;
     let (m0, p0) = prior();
-    let p0_factor = kalibra_linalg::PsdMatrix::new(p0)
-        .map_err(kalibra_models::ModelError::from)?
-        .factor()
-        .clone_owned();
+    let p0_factor = prior_factor(&p0)?;
     let model = BatchModel::new(
         f.matrix(0),
         f.noise_cov(0),
@@ -295,16 +288,10 @@ fn batched(
     KfBatch::new(isa, model.clone(), m0, p0)?;
     let steps = config.steps;
     let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
-    let make = move || -> Accumulators {
-        (
-            StepMean::new(steps),
-            StepMean::new(steps),
-            SquaredErrors::new(steps, 4),
-        )
-    };
+    let make = move || empty(steps);
     let group = move |runs: std::ops::Range<usize>,
                       rngs: &mut [ChaCha8Rng],
-                      (nees_acc, nis_acc, err_acc): &mut Accumulators| {
+                      (nees_acc, nis_acc, err_acc): &mut Acc| {
         let first = runs.start;
         let to_study = |e: RunFailure<kalibra_models::ModelError>| RunFailure {
             run: e.run,
