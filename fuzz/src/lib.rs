@@ -72,19 +72,11 @@ pub fn tune(data: &[u8], default_series: &[u8]) {
 /// (stored, with correct checksums, so that the fuzzer reaches the arrays rather than the
 /// zip's checks).
 pub fn npz_of_pieces(data: &[u8]) -> Vec<u8> {
-    const NAMES: [&str; 11] = [
-        "truth",
-        "estimate",
-        "covariance",
-        "innovation",
-        "innovation_cov",
-        "time",
-        "F",
-        "H",
-        "Q",
-        "R",
-        "other",
-    ];
+    // Every array kalibra reads, and one it does not.
+    let names: Vec<&str> = kalibra_cli::ARRAY_NAMES
+        .into_iter()
+        .chain(["other"])
+        .collect();
     const SEPARATOR: &[u8] = b"--npy--";
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     let options =
@@ -95,7 +87,7 @@ pub fn npz_of_pieces(data: &[u8]) -> Vec<u8> {
             .windows(SEPARATOR.len())
             .position(|w| w == SEPARATOR)
             .unwrap_or(body.len());
-        let name = NAMES[usize::from(first) % NAMES.len()];
+        let name = names[usize::from(first) % names.len()];
         // A repeated name is an error of the zip writer, not of the reader: skip it.
         if zip.start_file(format!("{name}.npy"), options).is_ok() {
             let _ = std::io::Write::write_all(&mut zip, &body[..end]);

@@ -10,7 +10,24 @@ use kalibra_eval::Scope;
 
 use crate::input::{CellValues, ModelArray, PER_CELL, RawLog, model_given};
 
-const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
+/// The arrays a log may hold, by name, in every format (CSV columns aside): the NPZ archive's
+/// and the JSON object's entries, and the Python package's keyword arguments.
+pub const ARRAY_NAMES: [&str; 10] = [
+    "truth",
+    "estimate",
+    "covariance",
+    "innovation",
+    "innovation_cov",
+    "time",
+    "F",
+    "H",
+    "Q",
+    "R",
+];
+
+/// [`ARRAY_NAMES`] as the error messages list them (a test keeps the two equal).
+pub(crate) const KNOWN: &str =
+    "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
 
 /// One array as stored: its shape and its values in C order, as f64.
 pub(crate) struct Array {
@@ -66,19 +83,7 @@ fn cells(array: &str, a: Array, cell_dims: usize) -> Result<Cells, String> {
 pub(crate) fn build(
     mut arrays: std::collections::BTreeMap<String, Array>,
 ) -> Result<RawLog, String> {
-    let known = [
-        "truth",
-        "estimate",
-        "covariance",
-        "innovation",
-        "innovation_cov",
-        "time",
-        "F",
-        "H",
-        "Q",
-        "R",
-    ];
-    if let Some(unknown) = arrays.keys().find(|k| !known.contains(&k.as_str())) {
+    if let Some(unknown) = arrays.keys().find(|k| !ARRAY_NAMES.contains(&k.as_str())) {
         return Err(format!("unknown array `{unknown}`; the arrays are {KNOWN}"));
     }
     let mut log = RawLog::default();
@@ -136,4 +141,14 @@ pub(crate) fn build(
         log.model = Some([f, h, q, r]);
     }
     Ok(log)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_listed_names_are_the_names() {
+        assert_eq!(KNOWN, ARRAY_NAMES.join(", "));
+    }
 }

@@ -20,7 +20,7 @@ use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
 const VECTORS: [&str; 3] = ["truth", "estimate", "innovation"];
 const MATRICES: [&str; 2] = ["covariance", "innovation_cov"];
 const MODEL: [&str; 4] = ["F", "H", "Q", "R"];
-const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
+use crate::arrays::KNOWN;
 
 /// An array's cells by run and step, each cell flat, with its shape.
 struct Cells {

@@ -24,3 +24,5 @@ mod npz_log;
 pub mod output;
 mod tune_document;
 pub mod tune_input;
+
+pub use arrays::ARRAY_NAMES;

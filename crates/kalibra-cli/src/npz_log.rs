@@ -21,7 +21,7 @@ use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, ModelCell,
 
 use crate::input::{ModelArray, PER_CELL, model_given};
 
-const KNOWN: &str = "truth, estimate, covariance, innovation, innovation_cov, time, F, H, Q, R";
+use crate::arrays::KNOWN;
 
 /// Cells per batch handed from the reader thread to the evaluation.
 const BATCH_CELLS: usize = 4096;
@@ -342,18 +342,6 @@ fn evaluate_from<R: Read + Seek + Send>(
     let name = file.display();
     let fail = |msg: String| format!("{name}: {msg}");
     let mut archive = open(file, source)?;
-    let known = [
-        "truth",
-        "estimate",
-        "covariance",
-        "innovation",
-        "innovation_cov",
-        "time",
-        "F",
-        "H",
-        "Q",
-        "R",
-    ];
     // Array name -> entry name.
     let mut entries = BTreeMap::new();
     for index in 0..archive.len() {
@@ -371,7 +359,7 @@ fn evaluate_from<R: Read + Seek + Send>(
                 "entry `{entry}` is not a .npy array; the arrays are {KNOWN}"
             )));
         };
-        if !known.contains(&array) {
+        if !crate::arrays::ARRAY_NAMES.contains(&array) {
             return Err(fail(format!(
                 "unknown array `{array}`; the arrays are {KNOWN}"
             )));

@@ -280,19 +280,12 @@ fn npz(entries: &[(String, Vec<u8>)]) -> Vec<u8> {
 /// kalibra reads or not, any order, a shape with absurd or zero dimensions, and values that
 /// fill it, fall short or run over (hostile floats among them).
 fn npy_entry() -> impl Strategy<Value = (String, Vec<u8>)> {
-    let name = prop::sample::select(vec![
-        "truth",
-        "estimate",
-        "covariance",
-        "innovation",
-        "innovation_cov",
-        "time",
-        "F",
-        "H",
-        "Q",
-        "R",
-        "other",
-    ]);
+    // Every array kalibra reads, and one it does not.
+    let names: Vec<&str> = kalibra_cli::ARRAY_NAMES
+        .into_iter()
+        .chain(["other"])
+        .collect();
+    let name = prop::sample::select(names);
     let descr = prop::sample::select(vec!["<f8", ">f8", "<f4", "<i8", "<i4", "|u1", "<c16"]);
     let dim = prop_oneof![
         6 => 0..5u64,

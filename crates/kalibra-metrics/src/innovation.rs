@@ -252,7 +252,10 @@ pub struct JHorizon {
     sum_j1: f64,
     sum_j2: f64,
     sum_log10_tr_b: f64,
+    /// The sum of `tr(B_k)` divided by `2^tr_b_exp`: the power of two grows when the sum
+    /// would pass f64's range (traces near 1e308), so the mean's `log10` stays finite.
     sum_tr_b: f64,
+    tr_b_exp: i32,
     updates: usize,
     indefinite: usize,
     max_j1k: f64,
@@ -283,6 +286,7 @@ impl JHorizon {
             sum_j2: 0.0,
             sum_log10_tr_b: 0.0,
             sum_tr_b: 0.0,
+            tr_b_exp: 0,
             updates: 0,
             indefinite: 0,
             // J2k is negative at some indefinite updates, so the running maxima start below
@@ -298,11 +302,30 @@ impl JHorizon {
         self.sum_j1 += step.j1;
         self.sum_j2 += step.j2;
         self.sum_log10_tr_b += step.tr_b.log10();
-        self.sum_tr_b += step.tr_b;
+        self.add_tr_b(step.tr_b, 0);
         self.updates += 1;
         self.indefinite += usize::from(!step.a_plus_b_definite);
         self.max_j1k = max_keep_nan(self.max_j1k, step.j1);
         self.max_j2k = max_keep_nan(self.max_j2k, step.j2);
+    }
+
+    /// Adds `value * 2^exp` to the scaled sum of `tr(B_k)`. For ordinary traces the scale
+    /// stays 2^0 and this is the plain sum, to the bit; a sum that would pass f64's range is
+    /// rescaled by 2^64 first (exact, a power of two).
+    fn add_tr_b(&mut self, value: f64, exp: i32) {
+        // Bring both to the larger scale (exact for powers of two, short of underflow).
+        if exp > self.tr_b_exp {
+            self.sum_tr_b = crate::scale::ldexp(self.sum_tr_b, self.tr_b_exp - exp);
+            self.tr_b_exp = exp;
+        }
+        let value = crate::scale::ldexp(value, exp - self.tr_b_exp);
+        let mut sum = self.sum_tr_b + value;
+        if sum.is_infinite() && value.is_finite() && self.sum_tr_b.is_finite() {
+            self.tr_b_exp += 64;
+            self.sum_tr_b = crate::scale::ldexp(self.sum_tr_b, -64);
+            sum = self.sum_tr_b + crate::scale::ldexp(value, -64);
+        }
+        self.sum_tr_b = sum;
     }
 
     /// Number of updates pushed.
@@ -337,7 +360,9 @@ impl JHorizon {
             j1: self.sum_j1 / divisor as f64,
             j2: self.sum_j2 / divisor as f64,
             nq_mean_log10: self.sum_log10_tr_b / n,
-            nq_log10_mean: (self.sum_tr_b / n).log10(),
+            // log10(sum / n * 2^e); the second term is 0.0 for unscaled sums.
+            nq_log10_mean: (self.sum_tr_b / n).log10()
+                + f64::from(self.tr_b_exp) * std::f64::consts::LOG10_2,
             updates: self.updates,
             divisor,
             indefinite_updates: self.indefinite,
@@ -354,7 +379,7 @@ impl Merge for JHorizon {
         self.sum_j1 += other.sum_j1;
         self.sum_j2 += other.sum_j2;
         self.sum_log10_tr_b += other.sum_log10_tr_b;
-        self.sum_tr_b += other.sum_tr_b;
+        self.add_tr_b(other.sum_tr_b, other.tr_b_exp);
         self.updates += other.updates;
         self.indefinite += other.indefinite;
         self.max_j1k = max_keep_nan(self.max_j1k, other.max_j1k);

@@ -242,3 +242,40 @@ proptest! {
         prop_assert!((line(lo.j2, hi.j2) - c.j).abs() <= 1e-9, "J2 line misses J_c");
     }
 }
+
+/// `nq` of traces near f64::MAX: their sum passes f64's range, but the log10 of their mean is
+/// about 308 (found by the readers' property test in kalibra-cli: a logged Q of 1e308 made the
+/// report's `j.nq_log10_mean` infinite). Ordinary traces give the plain sum's value to the bit,
+/// also across a merge.
+#[test]
+fn nq_of_traces_near_f64_max_is_finite() {
+    use kalibra_metrics::{JHorizon, JStep, Merge};
+    let step = |tr_b: f64| JStep {
+        j1: 0.5,
+        j2: 0.25,
+        tr_n: 0.25,
+        tr_b,
+        a_plus_b_definite: true,
+    };
+    let mut h = JHorizon::new();
+    for _ in 0..4 {
+        h.push(&step(1e308));
+    }
+    let mut other = JHorizon::new();
+    other.push(&step(1.5e308));
+    h.merge(&other);
+    let nq = h.summary(5).unwrap().nq_log10_mean;
+    let want = 308.0 + (1.1f64).log10(); // mean (4e308 + 1.5e308) / 5 = 1.1e308
+    assert!((nq - want).abs() < 1e-12, "{nq} vs {want}");
+
+    let traces = [0.3, 2.5e-3, 17.0, 1.0 / 3.0];
+    let mut plain = JHorizon::new();
+    for t in traces {
+        plain.push(&step(t));
+    }
+    let sum: f64 = traces.iter().fold(0.0, |s, t| s + t);
+    assert_eq!(
+        plain.summary(4).unwrap().nq_log10_mean.to_bits(),
+        (sum / 4.0).log10().to_bits()
+    );
+}
