@@ -12,6 +12,13 @@
 //! so a lane agrees with the scalar filter of its run to rounding (fused multiply-adds where
 //! the instruction set has them are the one difference).
 //!
+//! [`EkfBatch`] is the extended Kalman filter on the same kernel: the model is evaluated lane
+//! by lane (`f(x)`, `F`, `Q`, the innovation `z (-) h(x)`, `H`, `R`) through
+//! [`LaneDynamics`] and [`LaneMeasurement`], which [`PerLane`] implements for any scalar
+//! model by calling it once per lane and which a model may implement itself to evaluate its
+//! lanes together; the per-lane Jacobians are then loaded into the kernel in place of the
+//! broadcast matrices, and the covariance algebra is the KF's, vector by vector.
+//!
 //! It is not a general filter API: the scalar filters are the reference and the interface for
 //! one filter; this is how studies step many.
 //!
@@ -51,11 +58,13 @@
 //! # Ok::<(), kalibra_filters::FilterError>(())
 //! ```
 
-// The kernels index matrices as the formulas do (`a[i][k] b[k][j]`); iterator chains would
-// hide the algebra and add closures, which must not leave the dispatched function.
-#![allow(clippy::needless_range_loop)]
-
 use std::str::FromStr;
+
+mod ekf;
+mod kernel;
+
+pub use ekf::{EkfBatch, LaneDynamics, LaneMeasurement, PerLane};
+use kernel::Kernel;
 
 use kalibra_linalg::{Definiteness, SMatrix, SVector, check_covariance, check_finite};
 use pulp::{Simd, WithSimd};
@@ -274,6 +283,64 @@ pub struct BatchStep<const N: usize> {
 }
 
 impl<const N: usize> BatchStep<N> {
+    /// Completes the kernel's output for step `k`: the kernel's health sum is 0 for a lane
+    /// whose update succeeded and NaN otherwise; the NEES is checked apart, as the scalar
+    /// record's `nees` is a separate call. `x`, `p`: the lanes' states after the step.
+    fn finish<const M: usize>(
+        &mut self,
+        k: usize,
+        z: &[Lanes; M],
+        x: &[Lanes; N],
+        p: &[[Lanes; N]; N],
+    ) {
+        self.k = k;
+        for lane in 0..BATCH {
+            self.failure[lane] = (self.health[lane] != 0.0).then(|| self.explain(lane, z, x, p));
+            self.nees_failure[lane] =
+                (!self.nees[lane].is_finite()).then_some(FilterError::NotPositiveDefinite {
+                    what: "posterior covariance P+",
+                    step: k,
+                });
+        }
+    }
+
+    /// The scalar filter's error for a failed lane (off the hot path).
+    #[cold]
+    #[inline(never)]
+    fn explain<const M: usize>(
+        &self,
+        lane: usize,
+        z: &[Lanes; M],
+        x: &[Lanes; N],
+        p: &[[Lanes; N]; N],
+    ) -> FilterError {
+        let k = self.k;
+        if z.iter().any(|zi| !zi[lane].is_finite()) {
+            return FilterError::NonFinite {
+                what: "measurement",
+                step: k,
+            };
+        }
+        if (0..N).any(|i| (0..N).any(|j| !p[i][j][lane].is_finite()))
+            || (0..N).any(|i| !x[i][lane].is_finite())
+        {
+            return FilterError::NonFinite {
+                what: "predicted covariance (process noise Q?)",
+                step: k,
+            };
+        }
+        if !self.nis[lane].is_finite() {
+            return FilterError::NotPositiveDefinite {
+                what: "innovation covariance S",
+                step: k,
+            };
+        }
+        FilterError::NonFinite {
+            what: "posterior estimate",
+            step: k,
+        }
+    }
+
     fn new() -> Self {
         Self {
             k: 0,
@@ -348,6 +415,7 @@ pub struct KfBatch<const N: usize, const M: usize> {
     k: usize,
     x: [Lanes; N],
     p: [[Lanes; N]; N],
+    gain: [[Lanes; M]; N],
     out: BatchStep<N>,
 }
 
@@ -364,19 +432,14 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         p0: SMatrix<f64, N, N>,
     ) -> Result<Self, FilterError> {
         let isa = isa.checked()?;
-        let init = FilterError::Initial;
-        check_finite(&x0, "initial mean").map_err(init)?;
-        // The scalar filter's check, and its symmetrised copy.
-        let p0 = kalibra_linalg::PsdMatrix::named(p0, "initial covariance")
-            .map_err(init)?
-            .matrix()
-            .clone_owned();
+        let (x, p) = initial_lanes(&x0, p0)?;
         Ok(Self {
             isa,
             model,
             k: 0,
-            x: std::array::from_fn(|i| [x0[i]; BATCH]),
-            p: std::array::from_fn(|i| std::array::from_fn(|j| [p0[(i, j)]; BATCH])),
+            x,
+            p,
+            gain: [[[0.0; BATCH]; M]; N],
             out: BatchStep::new(),
         })
     }
@@ -395,19 +458,8 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         x: SVector<f64, N>,
         p: SMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
-        let init = FilterError::Initial;
-        check_finite(&x, "initial mean").map_err(init)?;
-        let p = kalibra_linalg::PsdMatrix::named(p, "initial covariance")
-            .map_err(init)?
-            .matrix()
-            .clone_owned();
-        for i in 0..N {
-            self.x[i][lane] = x[i];
-            for j in 0..N {
-                self.p[i][j][lane] = p[(i, j)];
-            }
-        }
-        Ok(())
+        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
+        set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
     }
 
     /// The instruction set the batch runs on.
@@ -453,376 +505,69 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
 
     fn run<const PREDICT: bool>(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
         let isa = self.isa;
-        isa.dispatch(Kernel::<N, M, PREDICT> {
-            model: &self.model,
+        isa.dispatch(Kernel::<N, M, PREDICT, _, _, _, _> {
+            f: &self.model.f,
+            q: &self.model.q,
+            h: &self.model.h,
+            r: &self.model.r,
+            innovation: None,
             x: &mut self.x,
             p: &mut self.p,
             z,
             truth,
+            gain: &mut self.gain,
             out: &mut self.out,
         });
-        self.out.k = self.k;
-        // The kernel's health sum is 0 for a lane whose update succeeded and NaN otherwise;
-        // the NEES is checked apart, as the scalar record's `nees` is a separate call.
-        for lane in 0..BATCH {
-            self.out.failure[lane] = (self.out.health[lane] != 0.0).then(|| self.explain(lane, z));
-            self.out.nees_failure[lane] =
-                (!self.out.nees[lane].is_finite()).then_some(FilterError::NotPositiveDefinite {
-                    what: "posterior covariance P+",
-                    step: self.k,
-                });
-        }
+        self.out.finish(self.k, z, &self.x, &self.p);
         &self.out
     }
 
-    /// The scalar filter's error for a failed lane (off the hot path).
-    #[cold]
-    #[inline(never)]
-    fn explain(&self, lane: usize, z: &[Lanes; M]) -> FilterError {
-        let k = self.k;
-        if z.iter().any(|zi| !zi[lane].is_finite()) {
-            return FilterError::NonFinite {
-                what: "measurement",
-                step: k,
-            };
-        }
-        if (0..N).any(|i| (0..N).any(|j| !self.p[i][j][lane].is_finite()))
-            || (0..N).any(|i| !self.x[i][lane].is_finite())
-        {
-            return FilterError::NonFinite {
-                what: "predicted covariance (process noise Q?)",
-                step: k,
-            };
-        }
-        let nis = self.out.nis[lane];
-        if !nis.is_finite() {
-            return FilterError::NotPositiveDefinite {
-                what: "innovation covariance S",
-                step: k,
-            };
-        }
-        FilterError::NonFinite {
-            what: "posterior estimate",
-            step: k,
-        }
+    /// Lane `lane`'s gain `K` of the last update (meaningful when its [`BatchStep::nis`] is
+    /// `Ok`).
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
+        SMatrix::from_fn(|i, j| self.gain[i][j][lane])
     }
 }
 
-/// One batched step as a pulp operation: `with_simd` is compiled once per instruction set.
-struct Kernel<'a, const N: usize, const M: usize, const PREDICT: bool> {
-    model: &'a BatchModel<N, M>,
-    x: &'a mut [Lanes; N],
-    p: &'a mut [[Lanes; N]; N],
-    z: &'a [Lanes; M],
-    truth: &'a [Lanes; N],
-    out: &'a mut BatchStep<N>,
+/// The lanes of a batch that all start from `(x0, P0)`, checked as the scalar filters check an
+/// initial estimate (and `P0` symmetrised as they keep it).
+fn initial_lanes<const N: usize>(
+    x0: &SVector<f64, N>,
+    p0: SMatrix<f64, N, N>,
+) -> Result<([Lanes; N], [[Lanes; N]; N]), FilterError> {
+    let init = FilterError::Initial;
+    check_finite(x0, "initial mean").map_err(init)?;
+    let p0 = kalibra_linalg::PsdMatrix::named(p0, "initial covariance")
+        .map_err(init)?
+        .matrix()
+        .clone_owned();
+    Ok((
+        std::array::from_fn(|i| [x0[i]; BATCH]),
+        std::array::from_fn(|i| std::array::from_fn(|j| [p0[(i, j)]; BATCH])),
+    ))
 }
 
-#[inline(always)]
-fn load<S: Simd>(a: &Lanes, c: usize) -> S::f64s {
-    S::as_simd_f64s(a).0[c]
-}
-
-#[inline(always)]
-fn store<S: Simd>(a: &mut Lanes, c: usize, v: S::f64s) {
-    S::as_mut_simd_f64s(a).0[c] = v;
-}
-
-// The helpers below use plain loops over arrays, never closures (`std::array::from_fn`): a
-// closure is a function of its own, compiled for the baseline instruction set unless it is
-// inlined, and one that was not made the AVX-512 kernel slower than the scalar one.
-
-#[inline(always)]
-fn splat<S: Simd, const R: usize, const C: usize>(simd: S, m: &[[f64; C]; R]) -> [[S::f64s; C]; R] {
-    let mut out = [[simd.splat_f64s(0.0); C]; R];
-    for i in 0..R {
-        for j in 0..C {
-            out[i][j] = simd.splat_f64s(m[i][j]);
+/// Sets lane `lane` to the estimate `(x, P)` (`x` already checked), after the initial check
+/// of `P`; the lane is unchanged if it fails.
+fn set_lane_estimate<const N: usize>(
+    xs: &mut [Lanes; N],
+    ps: &mut [[Lanes; N]; N],
+    lane: usize,
+    x: &SVector<f64, N>,
+    p: SMatrix<f64, N, N>,
+) -> Result<(), FilterError> {
+    let p = kalibra_linalg::PsdMatrix::named(p, "initial covariance")
+        .map_err(FilterError::Initial)?
+        .matrix()
+        .clone_owned();
+    for i in 0..N {
+        xs[i][lane] = x[i];
+        for j in 0..N {
+            ps[i][j][lane] = p[(i, j)];
         }
     }
-    out
-}
-
-/// `sum_k a[i][k] b[k][j]`, accumulated in `k` order like nalgebra's small products, with a
-/// fused multiply-add where the instruction set has one.
-#[inline(always)]
-fn mul<S: Simd, const R: usize, const K: usize, const C: usize>(
-    simd: S,
-    a: &[[S::f64s; K]; R],
-    b: &[[S::f64s; C]; K],
-) -> [[S::f64s; C]; R] {
-    let mut out = [[simd.splat_f64s(0.0); C]; R];
-    for i in 0..R {
-        for j in 0..C {
-            let mut s = simd.mul_f64s(a[i][0], b[0][j]);
-            for k in 1..K {
-                s = simd.mul_add_e_f64s(a[i][k], b[k][j], s);
-            }
-            out[i][j] = s;
-        }
-    }
-    out
-}
-
-/// `a v` for a vector `v`.
-#[inline(always)]
-fn mul_vec<S: Simd, const R: usize, const K: usize>(
-    simd: S,
-    a: &[[S::f64s; K]; R],
-    v: &[S::f64s; K],
-) -> [S::f64s; R] {
-    let mut out = [simd.splat_f64s(0.0); R];
-    for i in 0..R {
-        let mut s = simd.mul_f64s(a[i][0], v[0]);
-        for k in 1..K {
-            s = simd.mul_add_e_f64s(a[i][k], v[k], s);
-        }
-        out[i] = s;
-    }
-    out
-}
-
-/// `a b^T`.
-#[inline(always)]
-fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
-    simd: S,
-    a: &[[S::f64s; K]; R],
-    b: &[[S::f64s; K]; C],
-) -> [[S::f64s; C]; R] {
-    let mut out = [[simd.splat_f64s(0.0); C]; R];
-    for i in 0..R {
-        for j in 0..C {
-            let mut s = simd.mul_f64s(a[i][0], b[j][0]);
-            for k in 1..K {
-                s = simd.mul_add_e_f64s(a[i][k], b[j][k], s);
-            }
-            out[i][j] = s;
-        }
-    }
-    out
-}
-
-#[inline(always)]
-fn add<S: Simd, const R: usize, const C: usize>(
-    simd: S,
-    a: &[[S::f64s; C]; R],
-    b: &[[S::f64s; C]; R],
-) -> [[S::f64s; C]; R] {
-    let mut out = *a;
-    for i in 0..R {
-        for j in 0..C {
-            out[i][j] = simd.add_f64s(a[i][j], b[i][j]);
-        }
-    }
-    out
-}
-
-/// `(m + m^T) / 2` on the off-diagonal, as `kalibra_linalg::symmetrize`.
-#[inline(always)]
-fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]; D]) {
-    let half = simd.splat_f64s(0.5);
-    for j in 0..D {
-        for i in (j + 1)..D {
-            let mean = simd.mul_f64s(half, simd.add_f64s(m[i][j], m[j][i]));
-            m[i][j] = mean;
-            m[j][i] = mean;
-        }
-    }
-}
-
-/// The lower Cholesky factor `L` of a symmetric `a`, and the reciprocals of its diagonal:
-/// each pivot is divided once and the other divisions by it are multiplications, which takes
-/// the divider's latency off the chain of dependent operations (a division by `l_jj` and a
-/// multiplication by its reciprocal differ by one rounding). NaN or infinite entries, never a
-/// panic, for a matrix that is not positive definite: `sqrt` of a negative pivot is NaN, of
-/// zero 0, and its reciprocal infinite.
-#[inline(always)]
-fn cholesky<S: Simd, const D: usize>(
-    simd: S,
-    a: &[[S::f64s; D]; D],
-) -> ([[S::f64s; D]; D], [S::f64s; D]) {
-    let one = simd.splat_f64s(1.0);
-    let mut l = [[simd.splat_f64s(0.0); D]; D];
-    let mut inv = [one; D];
-    for j in 0..D {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d = simd.sub_f64s(d, simd.mul_f64s(l[j][k], l[j][k]));
-        }
-        let ljj = simd.sqrt_f64s(d);
-        l[j][j] = ljj;
-        inv[j] = simd.div_f64s(one, ljj);
-        for i in (j + 1)..D {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
-            }
-            l[i][j] = simd.mul_f64s(s, inv[j]);
-        }
-    }
-    (l, inv)
-}
-
-/// Solves `L w = b` by forward substitution (`inv`: the reciprocals of `L`'s diagonal).
-#[inline(always)]
-fn forward<S: Simd, const D: usize>(
-    simd: S,
-    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
-    b: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut w = *b;
-    for i in 0..D {
-        let mut s = w[i];
-        for k in 0..i {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
-        }
-        w[i] = simd.mul_f64s(s, inv[i]);
-    }
-    w
-}
-
-/// Solves `L^T y = w` by backward substitution.
-#[inline(always)]
-fn backward<S: Simd, const D: usize>(
-    simd: S,
-    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
-    w: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut y = *w;
-    for i in (0..D).rev() {
-        let mut s = y[i];
-        for k in (i + 1)..D {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
-        }
-        y[i] = simd.mul_f64s(s, inv[i]);
-    }
-    y
-}
-
-#[inline(always)]
-fn norm_squared<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -> S::f64s {
-    let mut s = simd.mul_f64s(w[0], w[0]);
-    for v in &w[1..] {
-        s = simd.mul_add_e_f64s(*v, *v, s);
-    }
-    s
-}
-
-/// `sum v * 0`: 0 if every entry is finite, NaN otherwise.
-#[inline(always)]
-fn health<S: Simd>(simd: S, acc: S::f64s, v: S::f64s) -> S::f64s {
-    simd.mul_add_e_f64s(v, simd.splat_f64s(0.0), acc)
-}
-
-impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd for Kernel<'_, N, M, PREDICT> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Kernel {
-            model,
-            x: xs,
-            p: ps,
-            z: zs,
-            truth,
-            out,
-        } = self;
-        // The model, broadcast once per batch.
-        let f = splat(simd, &model.f);
-        let q = splat(simd, &model.q);
-        let h = splat(simd, &model.h);
-        let r = splat(simd, &model.r);
-        let zero = simd.splat_f64s(0.0);
-        let one = simd.splat_f64s(1.0);
-        for c in 0..BATCH / S::F64_LANES {
-            let mut x = [zero; N];
-            let mut p = [[zero; N]; N];
-            for i in 0..N {
-                x[i] = load::<S>(&xs[i], c);
-                for j in 0..N {
-                    p[i][j] = load::<S>(&ps[i][j], c);
-                }
-            }
-            if PREDICT {
-                // x- = F x; P- = (F P) F^T + Q, symmetrised (KalmanCore::predict). The
-                // prediction is kept even if the update fails (the selection below keeps `x`
-                // and `p`, now the prior), as in the scalar filter.
-                x = mul_vec(simd, &f, &x);
-                let fp = mul(simd, &f, &p);
-                p = add(simd, &mul_t(simd, &fp, &f), &q);
-                symmetrize(simd, &mut p);
-            }
-            // P H^T, S = H (P H^T) + R symmetrised, its factor (KalmanCore::update).
-            let pht = mul_t(simd, &p, &h);
-            let mut s = add(simd, &mul(simd, &h, &pht), &r);
-            symmetrize(simd, &mut s);
-            let ls = cholesky(simd, &s);
-            // K = (S^-1 (P H^T)^T)^T, one column of (P H^T)^T (a row of P H^T) at a time.
-            let mut gain = [[zero; M]; N];
-            for i in 0..N {
-                gain[i] = backward(simd, &ls, &forward(simd, &ls, &pht[i]));
-            }
-            // nu = z - H x; x+ = x + K nu.
-            let hx = mul_vec(simd, &h, &x);
-            let mut hz = zero;
-            let mut nu = [zero; M];
-            for i in 0..M {
-                let zi = load::<S>(&zs[i], c);
-                hz = health(simd, hz, zi);
-                nu[i] = simd.sub_f64s(zi, hx[i]);
-            }
-            let knu = mul_vec(simd, &gain, &nu);
-            let mut x_post = [zero; N];
-            for i in 0..N {
-                x_post[i] = simd.add_f64s(x[i], knu[i]);
-            }
-            // Joseph: (I - K H) P (I - K H)^T + (K R) K^T, symmetrised.
-            let mut ikh = mul(simd, &gain, &h);
-            for i in 0..N {
-                for j in 0..N {
-                    ikh[i][j] = simd.neg_f64s(ikh[i][j]);
-                }
-                ikh[i][i] = simd.add_f64s(ikh[i][i], one);
-            }
-            let ikhp = mul(simd, &ikh, &p);
-            let kr = mul(simd, &gain, &r);
-            let mut p_post = add(simd, &mul_t(simd, &ikhp, &ikh), &mul_t(simd, &kr, &gain));
-            symmetrize(simd, &mut p_post);
-            // NIS through the factor of S.
-            let nis = norm_squared(simd, &forward(simd, &ls, &nu));
-            // Health: 0 if the measurement, the NIS (so S's factor) and the posterior are all
-            // finite, NaN otherwise; a lane keeps its old estimate unless it is 0.
-            let mut ok = health(simd, hz, nis);
-            for i in 0..N {
-                ok = health(simd, ok, x_post[i]);
-                for j in 0..N {
-                    ok = health(simd, ok, p_post[i][j]);
-                }
-            }
-            let keep = simd.equal_f64s(ok, zero);
-            for i in 0..N {
-                store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
-                for j in 0..N {
-                    store::<S>(
-                        &mut ps[i][j],
-                        c,
-                        simd.select_f64s(keep, p_post[i][j], p[i][j]),
-                    );
-                }
-            }
-            // NEES of the truth against the posterior, through P+'s factor.
-            let mut e = [zero; N];
-            for i in 0..N {
-                e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x_post[i]);
-            }
-            let lp = cholesky(simd, &p_post);
-            let nees = norm_squared(simd, &forward(simd, &lp, &e));
-            store::<S>(&mut out.nis, c, nis);
-            store::<S>(&mut out.nees, c, nees);
-            store::<S>(&mut out.health, c, ok);
-            for i in 0..N {
-                store::<S>(&mut out.error[i], c, e[i]);
-            }
-        }
-    }
+    Ok(())
 }

@@ -1,0 +1,276 @@
+//! The batched extended Kalman filter: [`BATCH`] runs of one nonlinear model, the model
+//! evaluated lane by lane and the covariance algebra stepped together.
+
+use kalibra_linalg::{Const, SMatrix, SVector, check_finite};
+use kalibra_models::{Dynamics, Measurement};
+
+use super::kernel::Kernel;
+use super::{BATCH, BatchStep, Isa, Lanes};
+use crate::FilterError;
+
+/// Dynamics a batch evaluates for all its lanes at once: for every lane, the predicted mean
+/// `f_k(x)`, the Jacobian `F_k` at `x` and the process noise `Q_k`.
+///
+/// [`PerLane`] implements it for any scalar [`Dynamics`] by calling the model once per lane;
+/// a model implements it directly when it can evaluate the lanes faster together (in SIMD,
+/// or sharing work between `f` and `F`). It must give each lane what the scalar calls give,
+/// so that the batch agrees with the scalar [`Ekf`](crate::Ekf) run by run.
+pub trait LaneDynamics<const N: usize> {
+    /// At step `k`: replaces each lane's mean in `x` by `f_k(x)`, and writes `F_k` evaluated
+    /// at the old mean into `f` and `Q_k` into `q`.
+    fn predict_lanes(
+        &self,
+        k: usize,
+        x: &mut [Lanes; N],
+        f: &mut [[Lanes; N]; N],
+        q: &mut [[Lanes; N]; N],
+    );
+}
+
+/// A measurement a batch evaluates for all its lanes at once: for every lane, the innovation
+/// `nu = z (-) h_k(x)` (the model's residual, so angles wrap), the Jacobian `H_k` and the
+/// noise `R_k`, all at the lane's predicted mean `x`.
+///
+/// [`PerLane`] implements it for any scalar [`Measurement`]; see [`LaneDynamics`].
+pub trait LaneMeasurement<const N: usize, const M: usize> {
+    /// At step `k`, for predicted means `x` and measurements `z`: writes the innovation into
+    /// `nu`, `H_k(x)` into `h` and `R_k(x)` into `r`.
+    fn innovate_lanes(
+        &self,
+        k: usize,
+        x: &[Lanes; N],
+        z: &[Lanes; M],
+        nu: &mut [Lanes; M],
+        h: &mut [[Lanes; N]; M],
+        r: &mut [[Lanes; M]; M],
+    );
+}
+
+/// A scalar model evaluated lane by lane: the [`LaneDynamics`] of a [`Dynamics`] and the
+/// [`LaneMeasurement`] of a [`Measurement`], through exactly the calls the scalar
+/// [`Ekf`](crate::Ekf) makes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PerLane<T>(pub T);
+
+fn lane<const N: usize>(x: &[Lanes; N], l: usize) -> SVector<f64, N> {
+    SVector::from_fn(|i, _| x[i][l])
+}
+
+fn set_lane<const R: usize, const C: usize>(
+    out: &mut [[Lanes; C]; R],
+    l: usize,
+    m: &SMatrix<f64, R, C>,
+) {
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            v[l] = m[(i, j)];
+        }
+    }
+}
+
+impl<const N: usize, T: Dynamics<Const<N>>> LaneDynamics<N> for PerLane<T> {
+    fn predict_lanes(
+        &self,
+        k: usize,
+        x: &mut [Lanes; N],
+        f: &mut [[Lanes; N]; N],
+        q: &mut [[Lanes; N]; N],
+    ) {
+        for l in 0..BATCH {
+            let xl = lane(x, l);
+            let pred = self.0.transition(k, &xl);
+            set_lane(f, l, &self.0.jacobian(k, &xl));
+            set_lane(q, l, &self.0.noise_cov(k));
+            for (i, xi) in x.iter_mut().enumerate() {
+                xi[l] = pred[i];
+            }
+        }
+    }
+}
+
+impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneMeasurement<N, M>
+    for PerLane<T>
+{
+    fn innovate_lanes(
+        &self,
+        k: usize,
+        x: &[Lanes; N],
+        z: &[Lanes; M],
+        nu: &mut [Lanes; M],
+        h: &mut [[Lanes; N]; M],
+        r: &mut [[Lanes; M]; M],
+    ) {
+        for l in 0..BATCH {
+            let xl = lane(x, l);
+            let zhat = self.0.measure(k, &xl);
+            let residual = self.0.residual(&lane(z, l), &zhat);
+            for (i, v) in nu.iter_mut().enumerate() {
+                v[l] = residual[i];
+            }
+            set_lane(h, l, &self.0.jacobian(k, &xl));
+            set_lane(r, l, &self.0.noise_cov(k, &xl));
+        }
+    }
+}
+
+/// [`BATCH`] extended Kalman filters on one model, stepped together: the scalar
+/// [`Ekf`](crate::Ekf)'s arithmetic (Joseph update, symmetrised covariances, Cholesky of `S`),
+/// with the model evaluated per lane through [`LaneDynamics`] and [`LaneMeasurement`] and the
+/// covariance algebra in the batch kernel of [`KfBatch`](super::KfBatch), on per-lane
+/// Jacobians. See the [module docs](super) for the layout, dispatch and per-lane errors.
+///
+/// ```
+/// use kalibra_filters::batch::{BATCH, EkfBatch, Isa, PerLane};
+/// use kalibra_linalg::{Matrix1, Matrix2, Vector2};
+/// use kalibra_models::{LinearGaussian, LinearObservation};
+/// use nalgebra::SMatrix;
+///
+/// let dynamics = LinearGaussian::new(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity() * 0.01)?;
+/// let sensor = LinearObservation::new(SMatrix::<f64, 1, 2>::new(1.0, 0.0), Matrix1::new(1.0))?;
+/// let mut ekf = EkfBatch::new(Isa::detect(), PerLane(dynamics), PerLane(sensor), Vector2::zeros(), Matrix2::identity())?;
+/// let z = [[0.5; BATCH]; 1];
+/// let step = ekf.predict_update(&z, &[[0.0; BATCH]; 2]);
+/// assert!(step.all_ok());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct EkfBatch<const N: usize, const M: usize, D, H> {
+    isa: Isa,
+    dynamics: D,
+    measurement: H,
+    k: usize,
+    x: [Lanes; N],
+    p: [[Lanes; N]; N],
+    gain: [[Lanes; M]; N],
+    // Per-lane model evaluations of the current step (kept to avoid re-zeroing each step).
+    f: [[Lanes; N]; N],
+    q: [[Lanes; N]; N],
+    h: [[Lanes; N]; M],
+    r: [[Lanes; M]; M],
+    nu: [Lanes; M],
+    out: BatchStep<N>,
+}
+
+impl<const N: usize, const M: usize, D, H> EkfBatch<N, M, D, H>
+where
+    D: LaneDynamics<N>,
+    H: LaneMeasurement<N, M>,
+{
+    /// [`BATCH`] filters at step 0, each from the estimate `(x0, P0)`, on instruction set `isa`.
+    ///
+    /// # Errors
+    /// [`FilterError::Unsupported`] if the CPU does not run `isa`; [`FilterError::Initial`] if
+    /// `x0` is not finite or `P0` not symmetric positive semi-definite (the scalar check).
+    pub fn new(
+        isa: Isa,
+        dynamics: D,
+        measurement: H,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+    ) -> Result<Self, FilterError> {
+        let isa = isa.checked()?;
+        let (x, p) = super::initial_lanes(&x0, p0)?;
+        Ok(Self {
+            isa,
+            dynamics,
+            measurement,
+            k: 0,
+            x,
+            p,
+            gain: [[[0.0; BATCH]; M]; N],
+            f: [[[0.0; BATCH]; N]; N],
+            q: [[[0.0; BATCH]; N]; N],
+            h: [[[0.0; BATCH]; N]; M],
+            r: [[[0.0; BATCH]; M]; M],
+            nu: [[0.0; BATCH]; M],
+            out: BatchStep::new(),
+        })
+    }
+
+    /// Restarts lane `lane` from its own estimate `(x, P)`, checked as [`EkfBatch::new`]
+    /// checks the shared one.
+    ///
+    /// # Errors
+    /// [`FilterError::Initial`] as [`EkfBatch::new`]; the lane is then unchanged.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn set_lane(
+        &mut self,
+        lane: usize,
+        x: SVector<f64, N>,
+        p: SMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
+        super::set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
+    }
+
+    /// The instruction set the batch runs on.
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    /// The current step index.
+    pub fn step_index(&self) -> usize {
+        self.k
+    }
+
+    /// Lane `lane`'s current mean.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn mean(&self, lane: usize) -> SVector<f64, N> {
+        SVector::from_fn(|i, _| self.x[i][lane])
+    }
+
+    /// Lane `lane`'s current covariance.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn cov(&self, lane: usize) -> SMatrix<f64, N, N> {
+        SMatrix::from_fn(|i, j| self.p[i][j][lane])
+    }
+
+    /// Lane `lane`'s gain `K` of the last update (meaningful when its [`BatchStep::nis`] is
+    /// `Ok`).
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
+        SMatrix::from_fn(|i, j| self.gain[i][j][lane])
+    }
+
+    /// Every lane's current mean, entry by entry (`means()[i][lane]`).
+    pub fn means(&self) -> &[Lanes; N] {
+        &self.x
+    }
+
+    /// Predicts every lane from step `k` to `k + 1` (`f_k`, `F_k` and `Q_k` at the lane's
+    /// estimate), then updates it with its measurement `z[i][lane]` (the innovation, `H` and
+    /// `R` at the lane's prediction) and computes its NIS, and its NEES against
+    /// `truth[i][lane]` (pass zeros where there is no truth and ignore the NEES). A lane whose
+    /// update fails keeps its prediction, as the scalar filter does.
+    pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        self.dynamics
+            .predict_lanes(self.k, &mut self.x, &mut self.f, &mut self.q);
+        self.k += 1;
+        self.measurement
+            .innovate_lanes(self.k, &self.x, z, &mut self.nu, &mut self.h, &mut self.r);
+        let isa = self.isa;
+        isa.dispatch(Kernel::<N, M, true, _, _, _, _> {
+            f: &self.f,
+            q: &self.q,
+            h: &self.h,
+            r: &self.r,
+            innovation: Some(&self.nu),
+            x: &mut self.x,
+            p: &mut self.p,
+            z,
+            truth,
+            gain: &mut self.gain,
+            out: &mut self.out,
+        });
+        self.out.finish(self.k, z, &self.x, &self.p);
+        &self.out
+    }
+}

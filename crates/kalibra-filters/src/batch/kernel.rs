@@ -1,0 +1,403 @@
+//! The batched step as a pulp operation, shared by [`KfBatch`](super::KfBatch) and
+//! [`EkfBatch`](super::EkfBatch): the same arithmetic, in the same order, whether the model
+//! matrices are broadcast (a linear model shared by every lane) or given per lane (a
+//! nonlinear model's Jacobians, evaluated at each lane's own estimate).
+
+// The kernels index matrices as the formulas do (`a[i][k] b[k][j]`); iterator chains would
+// hide the algebra and add closures, which must not leave the dispatched function.
+#![allow(clippy::needless_range_loop)]
+
+use pulp::{Simd, WithSimd};
+
+use super::{BATCH, BatchStep, Lanes};
+
+/// Where the kernel reads a model matrix: one matrix broadcast to every lane
+/// (`&[[f64; C]; R]`), or one per lane (`&[[Lanes; C]; R]`).
+pub(super) trait Operand<const R: usize, const C: usize> {
+    /// The matrix for the lanes of chunk `c` (one vector of the instruction set per entry).
+    fn get<S: Simd>(&self, simd: S, c: usize) -> [[S::f64s; C]; R];
+}
+
+impl<const R: usize, const C: usize> Operand<R, C> for &[[f64; C]; R] {
+    #[inline(always)]
+    fn get<S: Simd>(&self, simd: S, _c: usize) -> [[S::f64s; C]; R] {
+        splat(simd, self)
+    }
+}
+
+impl<const R: usize, const C: usize> Operand<R, C> for &[[Lanes; C]; R] {
+    #[inline(always)]
+    fn get<S: Simd>(&self, simd: S, c: usize) -> [[S::f64s; C]; R] {
+        let mut out = [[simd.splat_f64s(0.0); C]; R];
+        for i in 0..R {
+            for j in 0..C {
+                out[i][j] = load::<S>(&self[i][j], c);
+            }
+        }
+        out
+    }
+}
+
+/// One batched step: `with_simd` is compiled once per instruction set.
+///
+/// With `PREDICT`, `P` is first predicted as `F P F^T + Q`. The mean and the innovation come
+/// from one of two places:
+/// * `innovation: None` (the KF): the kernel predicts `x = F x` (with `PREDICT`) and forms
+///   `nu = z - H x` itself;
+/// * `innovation: Some(nu)` (the EKF): the caller has already written each lane's predicted
+///   mean `f(x)` into `x` and evaluated its innovation `nu = z (-) h(f(x))`.
+pub(super) struct Kernel<'a, const N: usize, const M: usize, const PREDICT: bool, F, Q, H, R> {
+    pub f: F,
+    pub q: Q,
+    pub h: H,
+    pub r: R,
+    pub innovation: Option<&'a [Lanes; M]>,
+    pub x: &'a mut [Lanes; N],
+    pub p: &'a mut [[Lanes; N]; N],
+    pub z: &'a [Lanes; M],
+    pub truth: &'a [Lanes; N],
+    pub gain: &'a mut [[Lanes; M]; N],
+    pub out: &'a mut BatchStep<N>,
+}
+
+#[inline(always)]
+pub(super) fn load<S: Simd>(a: &Lanes, c: usize) -> S::f64s {
+    S::as_simd_f64s(a).0[c]
+}
+
+#[inline(always)]
+pub(super) fn store<S: Simd>(a: &mut Lanes, c: usize, v: S::f64s) {
+    S::as_mut_simd_f64s(a).0[c] = v;
+}
+
+// The helpers below use plain loops over arrays, never closures (`std::array::from_fn`): a
+// closure is a function of its own, compiled for the baseline instruction set unless it is
+// inlined, and one that was not made the AVX-512 kernel slower than the scalar one.
+
+#[inline(always)]
+fn splat<S: Simd, const R: usize, const C: usize>(simd: S, m: &[[f64; C]; R]) -> [[S::f64s; C]; R] {
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            out[i][j] = simd.splat_f64s(m[i][j]);
+        }
+    }
+    out
+}
+
+/// `sum_k a[i][k] b[k][j]`, accumulated in `k` order like nalgebra's small products, with a
+/// fused multiply-add where the instruction set has one.
+#[inline(always)]
+fn mul<S: Simd, const R: usize, const K: usize, const C: usize>(
+    simd: S,
+    a: &[[S::f64s; K]; R],
+    b: &[[S::f64s; C]; K],
+) -> [[S::f64s; C]; R] {
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            let mut s = simd.mul_f64s(a[i][0], b[0][j]);
+            for k in 1..K {
+                s = simd.mul_add_e_f64s(a[i][k], b[k][j], s);
+            }
+            out[i][j] = s;
+        }
+    }
+    out
+}
+
+/// `a v` for a vector `v`.
+#[inline(always)]
+fn mul_vec<S: Simd, const R: usize, const K: usize>(
+    simd: S,
+    a: &[[S::f64s; K]; R],
+    v: &[S::f64s; K],
+) -> [S::f64s; R] {
+    let mut out = [simd.splat_f64s(0.0); R];
+    for i in 0..R {
+        let mut s = simd.mul_f64s(a[i][0], v[0]);
+        for k in 1..K {
+            s = simd.mul_add_e_f64s(a[i][k], v[k], s);
+        }
+        out[i] = s;
+    }
+    out
+}
+
+/// `a b^T`.
+#[inline(always)]
+fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
+    simd: S,
+    a: &[[S::f64s; K]; R],
+    b: &[[S::f64s; K]; C],
+) -> [[S::f64s; C]; R] {
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            let mut s = simd.mul_f64s(a[i][0], b[j][0]);
+            for k in 1..K {
+                s = simd.mul_add_e_f64s(a[i][k], b[j][k], s);
+            }
+            out[i][j] = s;
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn add<S: Simd, const R: usize, const C: usize>(
+    simd: S,
+    a: &[[S::f64s; C]; R],
+    b: &[[S::f64s; C]; R],
+) -> [[S::f64s; C]; R] {
+    let mut out = *a;
+    for i in 0..R {
+        for j in 0..C {
+            out[i][j] = simd.add_f64s(a[i][j], b[i][j]);
+        }
+    }
+    out
+}
+
+/// `(m + m^T) / 2` on the off-diagonal, as `kalibra_linalg::symmetrize`.
+#[inline(always)]
+fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]; D]) {
+    let half = simd.splat_f64s(0.5);
+    for j in 0..D {
+        for i in (j + 1)..D {
+            let mean = simd.mul_f64s(half, simd.add_f64s(m[i][j], m[j][i]));
+            m[i][j] = mean;
+            m[j][i] = mean;
+        }
+    }
+}
+
+/// The lower Cholesky factor `L` of a symmetric `a`, and the reciprocals of its diagonal:
+/// each pivot is divided once and the other divisions by it are multiplications, which takes
+/// the divider's latency off the chain of dependent operations (a division by `l_jj` and a
+/// multiplication by its reciprocal differ by one rounding). NaN or infinite entries, never a
+/// panic, for a matrix that is not positive definite: `sqrt` of a negative pivot is NaN, of
+/// zero 0, and its reciprocal infinite.
+#[inline(always)]
+fn cholesky<S: Simd, const D: usize>(
+    simd: S,
+    a: &[[S::f64s; D]; D],
+) -> ([[S::f64s; D]; D], [S::f64s; D]) {
+    let one = simd.splat_f64s(1.0);
+    let mut l = [[simd.splat_f64s(0.0); D]; D];
+    let mut inv = [one; D];
+    for j in 0..D {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d = simd.sub_f64s(d, simd.mul_f64s(l[j][k], l[j][k]));
+        }
+        let ljj = simd.sqrt_f64s(d);
+        l[j][j] = ljj;
+        inv[j] = simd.div_f64s(one, ljj);
+        for i in (j + 1)..D {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
+            }
+            l[i][j] = simd.mul_f64s(s, inv[j]);
+        }
+    }
+    (l, inv)
+}
+
+/// Solves `L w = b` by forward substitution (`inv`: the reciprocals of `L`'s diagonal).
+#[inline(always)]
+fn forward<S: Simd, const D: usize>(
+    simd: S,
+    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
+    b: &[S::f64s; D],
+) -> [S::f64s; D] {
+    let mut w = *b;
+    for i in 0..D {
+        let mut s = w[i];
+        for k in 0..i {
+            s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
+        }
+        w[i] = simd.mul_f64s(s, inv[i]);
+    }
+    w
+}
+
+/// Solves `L^T y = w` by backward substitution.
+#[inline(always)]
+fn backward<S: Simd, const D: usize>(
+    simd: S,
+    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
+    w: &[S::f64s; D],
+) -> [S::f64s; D] {
+    let mut y = *w;
+    for i in (0..D).rev() {
+        let mut s = y[i];
+        for k in (i + 1)..D {
+            s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
+        }
+        y[i] = simd.mul_f64s(s, inv[i]);
+    }
+    y
+}
+
+#[inline(always)]
+fn norm_squared<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -> S::f64s {
+    let mut s = simd.mul_f64s(w[0], w[0]);
+    for v in &w[1..] {
+        s = simd.mul_add_e_f64s(*v, *v, s);
+    }
+    s
+}
+
+/// `sum v * 0`: 0 if every entry is finite, NaN otherwise.
+#[inline(always)]
+fn health<S: Simd>(simd: S, acc: S::f64s, v: S::f64s) -> S::f64s {
+    simd.mul_add_e_f64s(v, simd.splat_f64s(0.0), acc)
+}
+
+impl<const N: usize, const M: usize, const PREDICT: bool, F, Q, H, R> WithSimd
+    for Kernel<'_, N, M, PREDICT, F, Q, H, R>
+where
+    F: Operand<N, N>,
+    Q: Operand<N, N>,
+    H: Operand<M, N>,
+    R: Operand<M, M>,
+{
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Kernel {
+            f: fs,
+            q: qs,
+            h: hs,
+            r: rs,
+            innovation,
+            x: xs,
+            p: ps,
+            z: zs,
+            truth,
+            gain: gains,
+            out,
+        } = self;
+        let zero = simd.splat_f64s(0.0);
+        let one = simd.splat_f64s(1.0);
+        for c in 0..BATCH / S::F64_LANES {
+            // The model for these lanes (a broadcast is loop-invariant and hoisted).
+            let (f, q, h, r) = (
+                fs.get(simd, c),
+                qs.get(simd, c),
+                hs.get(simd, c),
+                rs.get(simd, c),
+            );
+            let mut x = [zero; N];
+            let mut p = [[zero; N]; N];
+            for i in 0..N {
+                x[i] = load::<S>(&xs[i], c);
+                for j in 0..N {
+                    p[i][j] = load::<S>(&ps[i][j], c);
+                }
+            }
+            if PREDICT {
+                // x- = F x (the KF; the EKF's caller wrote f(x)); P- = (F P) F^T + Q,
+                // symmetrised (KalmanCore::predict). The prediction is kept even if the update
+                // fails (the selection below keeps `x` and `p`, now the prior), as in the
+                // scalar filter.
+                if innovation.is_none() {
+                    x = mul_vec(simd, &f, &x);
+                }
+                let fp = mul(simd, &f, &p);
+                p = add(simd, &mul_t(simd, &fp, &f), &q);
+                symmetrize(simd, &mut p);
+            }
+            // P H^T, S = H (P H^T) + R symmetrised, its factor (KalmanCore::update).
+            let pht = mul_t(simd, &p, &h);
+            let mut s = add(simd, &mul(simd, &h, &pht), &r);
+            symmetrize(simd, &mut s);
+            let ls = cholesky(simd, &s);
+            // K = (S^-1 (P H^T)^T)^T, one column of (P H^T)^T (a row of P H^T) at a time.
+            let mut gain = [[zero; M]; N];
+            for i in 0..N {
+                gain[i] = backward(simd, &ls, &forward(simd, &ls, &pht[i]));
+            }
+            // nu = z - H x (or the caller's), the health of the measurement in it; x+ = x + K nu.
+            let mut hz = zero;
+            let mut nu = [zero; M];
+            match innovation {
+                None => {
+                    let hx = mul_vec(simd, &h, &x);
+                    for i in 0..M {
+                        let zi = load::<S>(&zs[i], c);
+                        hz = health(simd, hz, zi);
+                        nu[i] = simd.sub_f64s(zi, hx[i]);
+                    }
+                }
+                Some(given) => {
+                    for i in 0..M {
+                        hz = health(simd, hz, load::<S>(&zs[i], c));
+                        nu[i] = load::<S>(&given[i], c);
+                        hz = health(simd, hz, nu[i]);
+                    }
+                }
+            }
+            let knu = mul_vec(simd, &gain, &nu);
+            let mut x_post = [zero; N];
+            for i in 0..N {
+                x_post[i] = simd.add_f64s(x[i], knu[i]);
+            }
+            // Joseph: (I - K H) P (I - K H)^T + (K R) K^T, symmetrised.
+            let mut ikh = mul(simd, &gain, &h);
+            for i in 0..N {
+                for j in 0..N {
+                    ikh[i][j] = simd.neg_f64s(ikh[i][j]);
+                }
+                ikh[i][i] = simd.add_f64s(ikh[i][i], one);
+            }
+            let ikhp = mul(simd, &ikh, &p);
+            let kr = mul(simd, &gain, &r);
+            let mut p_post = add(simd, &mul_t(simd, &ikhp, &ikh), &mul_t(simd, &kr, &gain));
+            symmetrize(simd, &mut p_post);
+            // NIS through the factor of S.
+            let nis = norm_squared(simd, &forward(simd, &ls, &nu));
+            // Health: 0 if the measurement, the NIS (so S's factor) and the posterior are all
+            // finite, NaN otherwise; a lane keeps its old estimate unless it is 0.
+            let mut ok = health(simd, hz, nis);
+            for i in 0..N {
+                ok = health(simd, ok, x_post[i]);
+                for j in 0..N {
+                    ok = health(simd, ok, p_post[i][j]);
+                }
+            }
+            let keep = simd.equal_f64s(ok, zero);
+            for i in 0..N {
+                store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
+                for j in 0..N {
+                    store::<S>(
+                        &mut ps[i][j],
+                        c,
+                        simd.select_f64s(keep, p_post[i][j], p[i][j]),
+                    );
+                }
+            }
+            // NEES of the truth against the posterior, through P+'s factor.
+            let mut e = [zero; N];
+            for i in 0..N {
+                e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x_post[i]);
+            }
+            let lp = cholesky(simd, &p_post);
+            let nees = norm_squared(simd, &forward(simd, &lp, &e));
+            store::<S>(&mut out.nis, c, nis);
+            store::<S>(&mut out.nees, c, nees);
+            store::<S>(&mut out.health, c, ok);
+            for i in 0..N {
+                for j in 0..M {
+                    store::<S>(&mut gains[i][j], c, gain[i][j]);
+                }
+            }
+            for i in 0..N {
+                store::<S>(&mut out.error[i], c, e[i]);
+            }
+        }
+    }
+}
