@@ -106,6 +106,59 @@ impl MonteCarlo {
         Ok(Partial::new(study.clone(), shard, accs))
     }
 
+    /// Runs the study in groups of [`BATCH`] consecutive runs and returns each run's output,
+    /// in run order: `group(runs, rngs)` simulates the runs `runs` (`rngs[i]` is the generator
+    /// of run `runs.start + i`, [`MonteCarlo::rng`]) and returns one value per run, in order.
+    /// The batched counterpart of [`MonteCarlo::map`]: a run's draws, and so its output, are
+    /// the same whatever the thread count.
+    ///
+    /// ```
+    /// use kalibra_sim::{MonteCarlo, RunFailure};
+    /// use rand::RngExt;
+    ///
+    /// let mc = MonteCarlo::new(20, 3);
+    /// let one = mc.map(|_, rng| Ok::<f64, std::fmt::Error>(rng.random::<f64>()))?;
+    /// let batched = mc.map_batched(|_, rngs| {
+    ///     Ok::<_, RunFailure<std::fmt::Error>>(rngs.iter_mut().map(|r| r.random::<f64>()).collect())
+    /// })?;
+    /// assert_eq!(one, batched);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::Run`] with the failing run a group reports (the lowest failing group's),
+    /// [`SimError::ThreadPool`] if an explicit pool cannot be built.
+    pub fn map_batched<T, E, Group>(&self, group: Group) -> Result<Vec<T>, SimError<E>>
+    where
+        T: Send,
+        E: std::error::Error + Send + 'static,
+        Group: Fn(std::ops::Range<usize>, &mut [ChaCha8Rng]) -> Result<Vec<T>, RunFailure<E>>
+            + Sync
+            + Send,
+    {
+        use rayon::prelude::*;
+        let groups = self.runs().div_ceil(BATCH);
+        self.in_pool(|| {
+            let parts = (0..groups)
+                .into_par_iter()
+                .map(|g| {
+                    let runs = g * BATCH..((g + 1) * BATCH).min(self.runs());
+                    let mut rngs: Vec<ChaCha8Rng> = runs.clone().map(|r| self.rng(r)).collect();
+                    group(runs, &mut rngs).map_err(|f| SimError::Run {
+                        run: f.run,
+                        source: f.source,
+                    })
+                })
+                .collect::<Vec<_>>();
+            // The lowest failing group, whatever thread finished first.
+            let mut out = Vec::with_capacity(self.runs());
+            for part in parts {
+                out.extend(part?);
+            }
+            Ok(out)
+        })
+    }
+
     /// Block `b` of `blocks` into a fresh accumulator, in groups of [`BATCH`] runs from its
     /// start: the piece of work [`MonteCarlo::accumulate_batched`] and
     /// [`MonteCarlo::accumulate_batched_shard`] share.

@@ -27,6 +27,11 @@
 //!   trajectory `t` of Table 1 from stream `t` of `seed` (trajectory 0 is the one reported
 //!   and the one the surrogate comes from). Within a stream the axes run in order x, y, z,
 //!   each drawing its initial state, then per step its process noise and measurement noise.
+//! * The EKFs run batched ([`EkfBatch`](kalibra_filters::batch::EkfBatch), eight runs per
+//!   group, `Config::simd` or the detected instruction set): every run draws what it drew
+//!   one run at a time, and its estimates agree with the scalar `Ekf` to 1e-12 (a test);
+//!   before batching, the published-size results differed from these by at most 5.2e-12
+//!   relative, with the same verdicts.
 //! * Test p-values of one trajectory are random; the rejection rate over
 //!   `trajectories` further trajectories at level 0.05 is what can be checked.
 
@@ -54,7 +59,7 @@ const TEMPLATE: &str = include_str!("report.md");
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper004;
 
-crate::study_config!(Config, seed);
+crate::study_config!(Config, seed, simd);
 
 impl Study for Paper004 {
     type Config = Config;

@@ -2,14 +2,14 @@
 //! and the Table 2 quantiles from independent replicates.
 
 use kalibra_bounds::{ErgodicAverage, Surrogate, gaussian_half_widths};
-use kalibra_filters::{Ekf, Filter};
+use kalibra_filters::batch::{BATCH, EkfBatch, Isa, PerLane};
 use kalibra_linalg::nalgebra::SMatrix;
-use kalibra_linalg::{Alloc, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
+use kalibra_linalg::{Alloc, Const, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
 use kalibra_metrics::hypothesis::{
     TestResult, batch_means, ks_two_sample, paired_t_test, runs_test,
 };
 use kalibra_models::{AccelAxis, Dynamics, LinearObservation, Measurement, Target3d};
-use kalibra_sim::{ChaCha8Rng, MonteCarlo};
+use kalibra_sim::{ChaCha8Rng, MonteCarlo, RunFailure};
 use serde::Serialize;
 
 use super::claims::claims;
@@ -39,6 +39,10 @@ pub struct Config {
     pub trajectories: usize,
     /// Bins of the density figures.
     pub density_bins: usize,
+    /// Instruction set of the batched EKF (`None`: detected at run time). It changes the
+    /// results only by rounding, and is not part of the report.
+    #[serde(skip)]
+    pub simd: Option<Isa>,
 }
 
 impl Config {
@@ -54,6 +58,7 @@ impl Config {
             batch: 250,
             trajectories: 100,
             density_bins: 60,
+            simd: None,
         }
     }
 
@@ -156,78 +161,116 @@ pub struct Report {
 }
 
 /// One axis's models.
-struct AxisSetup<MA: DimName>
-where
-    DefaultAllocator: Alloc<U3, MA>,
-{
+struct AxisSetup<const M: usize> {
     dynamics: AccelAxis,
-    measurement: LinearObservation<U3, MA>,
+    measurement: LinearObservation<U3, Const<M>>,
 }
 
 /// What one axis of one trajectory yields.
-struct AxisTrajectory<MA: DimName>
-where
-    DefaultAllocator: Alloc<U3, MA>,
-{
-    averages: ErgodicAverage<U3, MA>,
+struct AxisTrajectory<const M: usize> {
+    averages: ErgodicAverage<U3, Const<M>>,
     /// Errors `x - x_hat` of steps `1 ..= n` per component of the axis.
     errors: [Vec<f64>; 3],
 }
 
-/// Runs one axis for `steps` steps from a fresh truth, calling `visit(k, x, x_hat, P, K, J)`.
-fn run_axis<MA: DimName>(
-    axis: &AxisSetup<MA>,
+/// The batched EKF of one axis, on borrowed models evaluated lane by lane.
+type AxisEkf<'a, const M: usize> =
+    EkfBatch<3, M, PerLane<&'a AccelAxis>, PerLane<&'a LinearObservation<U3, Const<M>>>>;
+
+/// Runs one axis for `steps` steps from fresh truths, for the runs of `rngs` together (lane
+/// `l` is run `first + l`, drawing from `rngs[l]` exactly what the one-run study drew: its
+/// initial state, then per step its process noise and its measurement noise), calling
+/// `visit(k, truths, ekf)` after each update. Lanes beyond `rngs` carry zeros and are ignored.
+fn run_axis<const M: usize>(
+    axis: &AxisSetup<M>,
     steps: usize,
-    rng: &mut ChaCha8Rng,
-    mut visit: impl FnMut(usize, &Vector3<f64>, &kalibra_filters::StepRecord<U3, MA>),
-) -> Result<(), StudyError>
-where
-    DefaultAllocator: Alloc<U3, MA>,
-{
-    let mut x: Vector3<f64> = kalibra_models::standard_normal(U3, rng);
-    let mut ekf = Ekf::new(
-        &axis.dynamics,
-        &axis.measurement,
+    isa: Isa,
+    first: usize,
+    rngs: &mut [ChaCha8Rng],
+    mut visit: impl FnMut(usize, &[Vector3<f64>; BATCH], &AxisEkf<'_, M>),
+) -> Result<(), RunFailure<StudyError>> {
+    let fail = |l: usize, source: StudyError| RunFailure {
+        run: first + l,
+        source,
+    };
+    let mut x = [Vector3::zeros(); BATCH];
+    for (l, rng) in rngs.iter_mut().enumerate() {
+        x[l] = kalibra_models::standard_normal(U3, rng);
+    }
+    let mut ekf = EkfBatch::new(
+        isa,
+        PerLane(&axis.dynamics),
+        PerLane(&axis.measurement),
         Vector3::zeros(),
         Matrix3::identity(),
-    )?;
+    )
+    .map_err(|e| fail(0, e.into()))?;
+    let mut z = [[0.0; BATCH]; M];
+    let mut truth = [[0.0; BATCH]; 3];
     for k in 1..=steps {
-        x = axis.dynamics.transition(k - 1, &x) + axis.dynamics.sample_noise(k - 1, rng)?;
-        let z = axis.measurement.measure(k, &x) + axis.measurement.sample_noise(k, &x, rng)?;
-        ekf.predict()?;
-        let rec = ekf.update(&z)?;
-        visit(k, &x, rec);
+        for (l, rng) in rngs.iter_mut().enumerate() {
+            let w = axis
+                .dynamics
+                .sample_noise(k - 1, rng)
+                .map_err(|e| fail(l, e.into()))?;
+            x[l] = axis.dynamics.transition(k - 1, &x[l]) + w;
+            let v = axis
+                .measurement
+                .sample_noise(k, &x[l], rng)
+                .map_err(|e| fail(l, e.into()))?;
+            let zl = axis.measurement.measure(k, &x[l]) + v;
+            for i in 0..M {
+                z[i][l] = zl[i];
+            }
+            for i in 0..3 {
+                truth[i][l] = x[l][i];
+            }
+        }
+        let step = ekf.predict_update(&z, &truth);
+        for l in 0..rngs.len() {
+            step.nis(l).map_err(|e| fail(l, e.into()))?;
+        }
+        visit(k, &x, &ekf);
     }
     Ok(())
 }
 
-fn trajectory_axis<MA: DimName>(
-    axis: &AxisSetup<MA>,
+fn trajectory_axis<const M: usize>(
+    axis: &AxisSetup<M>,
     config: &Config,
-    rng: &mut ChaCha8Rng,
-) -> Result<AxisTrajectory<MA>, StudyError>
-where
-    DefaultAllocator: Alloc<U3, MA>,
-{
-    let mut averages = ErgodicAverage::new(U3, MA::name());
-    let mut errors: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(config.trajectory));
+    isa: Isa,
+    first: usize,
+    rngs: &mut [ChaCha8Rng],
+) -> Result<Vec<AxisTrajectory<M>>, RunFailure<StudyError>> {
+    let mut out: Vec<AxisTrajectory<M>> = rngs
+        .iter()
+        .map(|_| AxisTrajectory {
+            averages: ErgodicAverage::new(U3, Const::<M>),
+            errors: std::array::from_fn(|_| Vec::with_capacity(config.trajectory)),
+        })
+        .collect();
     let mut failure = None;
-    run_axis(axis, config.trajectory, rng, |k, x, rec| {
-        let post = &rec.posterior().mean;
-        for (i, e) in errors.iter_mut().enumerate() {
-            e.push(x[i] - post[i]);
-        }
-        if k > config.burn_in {
-            let j = axis.dynamics.jacobian(k, post);
-            if let Err(e) = averages.push(rec.gain(), &j) {
-                failure.get_or_insert(e);
+    run_axis(axis, config.trajectory, isa, first, rngs, |k, x, ekf| {
+        for (l, run) in out.iter_mut().enumerate() {
+            let post = ekf.mean(l);
+            for (i, e) in run.errors.iter_mut().enumerate() {
+                e.push(x[l][i] - post[i]);
+            }
+            if k > config.burn_in {
+                let j = axis.dynamics.jacobian(k, &post);
+                if let Err(e) = run.averages.push(&ekf.gain(l), &j) {
+                    failure.get_or_insert((l, e));
+                }
             }
         }
     })?;
-    if let Some(e) = failure {
-        return Err(e.into());
+    if let Some((l, e)) = failure {
+        return Err(RunFailure {
+            run: first + l,
+            source: e.into(),
+        });
     }
-    Ok(AxisTrajectory { averages, errors })
+    Ok(out)
 }
 
 /// The 9-state block-diagonal matrix from three per-axis `3 x c` blocks.
@@ -271,21 +314,47 @@ struct TrajectoryOutcome {
     spectral_radius: f64,
 }
 
-fn trajectory<MA: DimName, M9: DimName>(
-    axes: &[AxisSetup<MA>; 3],
+/// Trajectories `first ..` of the runs of `rngs`, together: the three axes in turn (each
+/// lane's stream continuing from axis to axis, as one run's does), then each trajectory's
+/// surrogate and tests.
+fn trajectories<const M: usize, M9: DimName>(
+    axes: &[AxisSetup<M>; 3],
     full: &LinearObservation<U9, M9>,
     target: &Target3d,
     config: &Config,
-    rng: &mut ChaCha8Rng,
+    isa: Isa,
+    first: usize,
+    rngs: &mut [ChaCha8Rng],
+) -> Result<Vec<TrajectoryOutcome>, RunFailure<StudyError>>
+where
+    DefaultAllocator: Alloc<U9, M9>,
+{
+    let xs = trajectory_axis(&axes[0], config, isa, first, rngs)?;
+    let ys = trajectory_axis(&axes[1], config, isa, first, rngs)?;
+    let zs = trajectory_axis(&axes[2], config, isa, first, rngs)?;
+    xs.into_iter()
+        .zip(ys)
+        .zip(zs)
+        .enumerate()
+        .map(|(l, ((x, y), z))| {
+            trajectory(&[x, y, z], full, target, config).map_err(|source| RunFailure {
+                run: first + l,
+                source,
+            })
+        })
+        .collect()
+}
+
+/// The surrogate and the tests of one trajectory from its three axes.
+fn trajectory<const M: usize, M9: DimName>(
+    runs: &[AxisTrajectory<M>; 3],
+    full: &LinearObservation<U9, M9>,
+    target: &Target3d,
+    config: &Config,
 ) -> Result<TrajectoryOutcome, StudyError>
 where
-    DefaultAllocator: Alloc<U3, MA> + Alloc<U9, M9>,
+    DefaultAllocator: Alloc<U9, M9>,
 {
-    let runs = [
-        trajectory_axis(&axes[0], config, rng)?,
-        trajectory_axis(&axes[1], config, rng)?,
-        trajectory_axis(&axes[2], config, rng)?,
-    ];
     let gains = [
         runs[0].averages.gain()?,
         runs[1].averages.gain()?,
@@ -296,7 +365,8 @@ where
         runs[1].averages.jacobian()?,
         runs[2].averages.jacobian()?,
     ];
-    let k9: OMatrix<f64, U9, M9> = block_diagonal::<MA, M9>([&gains[0], &gains[1], &gains[2]]);
+    let k9: OMatrix<f64, U9, M9> =
+        block_diagonal::<Const<M>, M9>([&gains[0], &gains[1], &gains[2]]);
     let j9: SMatrix<f64, 9, 9> =
         block_diagonal::<U3, U9>([&jacobians[0], &jacobians[1], &jacobians[2]]);
     let x0 = OMatrix::<f64, U9, kalibra_linalg::U1>::zeros();
@@ -325,29 +395,33 @@ where
     })
 }
 
-/// `e_steps` and the EKF's own variances `P_ii` of one replicate.
-fn replicate<MA: DimName>(
-    axes: &[AxisSetup<MA>; 3],
+/// One replicate's `e_steps` and the EKF's own variances `P_ii` at that step.
+type Replicate = ([f64; 9], [f64; 9]);
+
+/// `e_steps` and the EKF's own variances `P_ii` of the replicates of `rngs` (`first ..`),
+/// stepped together axis by axis.
+fn replicates<const M: usize>(
+    axes: &[AxisSetup<M>; 3],
     steps: usize,
-    rng: &mut ChaCha8Rng,
-) -> Result<([f64; 9], [f64; 9]), StudyError>
-where
-    DefaultAllocator: Alloc<U3, MA>,
-{
-    let mut e = [0.0; 9];
-    let mut var = [0.0; 9];
+    isa: Isa,
+    first: usize,
+    rngs: &mut [ChaCha8Rng],
+) -> Result<Vec<Replicate>, RunFailure<StudyError>> {
+    let mut out = vec![([0.0; 9], [0.0; 9]); rngs.len()];
     for (a, axis) in axes.iter().enumerate() {
-        run_axis(axis, steps, rng, |k, x, rec| {
+        run_axis(axis, steps, isa, first, rngs, |k, x, ekf| {
             if k == steps {
-                let post = rec.posterior();
-                for i in 0..3 {
-                    e[3 * a + i] = x[i] - post.mean[i];
-                    var[3 * a + i] = post.cov[(i, i)];
+                for (l, (e, var)) in out.iter_mut().enumerate() {
+                    let (mean, cov) = (ekf.mean(l), ekf.cov(l));
+                    for i in 0..3 {
+                        e[3 * a + i] = x[l][i] - mean[i];
+                        var[3 * a + i] = cov[(i, i)];
+                    }
                 }
             }
         })?;
     }
-    Ok((e, var))
+    Ok(out)
 }
 
 /// The empirical quantile with linear interpolation between order statistics (numpy's
@@ -383,26 +457,38 @@ fn density(values: &[f64], sd: f64, bins: usize) -> Density {
 
 /// Runs one reading. The models are built inside each Monte Carlo task from the `make_*`
 /// functions (they are cheap), so no nalgebra buffer of a generic size has to be `Sync`.
-fn study<MA: DimName, M9: DimName>(
+fn study<const M: usize, M9: DimName>(
     reading: &Reading,
-    make_axes: impl Fn() -> Result<[AxisSetup<MA>; 3], StudyError> + Sync,
+    make_axes: impl Fn() -> Result<[AxisSetup<M>; 3], StudyError> + Sync,
     make_full: impl Fn() -> Result<LinearObservation<U9, M9>, StudyError> + Sync,
     config: &Config,
 ) -> Result<ReadingReport, StudyError>
 where
-    DefaultAllocator: Alloc<U3, MA> + Alloc<U9, M9>,
+    DefaultAllocator: Alloc<U9, M9>,
 {
     let target = Target3d::new(reading.params())?;
-    let trajectories =
+    let isa = config.simd.unwrap_or_else(Isa::detect);
+    // A model that cannot be built fails every run alike: blame the first of the group.
+    let build = |first: usize, e: StudyError| RunFailure {
+        run: first,
+        source: e,
+    };
+    let trajectories_mc =
         MonteCarlo::new(config.trajectories + 1, config.seed).threads(config.threads);
-    let outcomes = trajectories
-        .map(|_, rng| trajectory(&make_axes()?, &make_full()?, &target, config, rng))?;
+    let outcomes = trajectories_mc.map_batched(|runs, rngs| {
+        let axes = make_axes().map_err(|e| build(runs.start, e))?;
+        let full = make_full().map_err(|e| build(runs.start, e))?;
+        trajectories(&axes, &full, &target, config, isa, runs.start, rngs)
+    })?;
     let first = &outcomes[0];
     let rest = &outcomes[1..];
 
-    let replicates =
+    let replicates_mc =
         MonteCarlo::new(config.replicates, config.seed.wrapping_add(1)).threads(config.threads);
-    let reps = replicates.map(|_, rng| replicate(&make_axes()?, config.steps, rng))?;
+    let reps = replicates_mc.map_batched(|runs, rngs| {
+        let axes = make_axes().map_err(|e| build(runs.start, e))?;
+        replicates(&axes, config.steps, isa, runs.start, rngs)
+    })?;
 
     let mut q025 = [0.0; 9];
     let mut q975 = [0.0; 9];
@@ -480,7 +566,7 @@ where
     })
 }
 
-fn axes_positions(reading: &Reading) -> Result<[AxisSetup<kalibra_linalg::U1>; 3], StudyError> {
+fn axes_positions(reading: &Reading) -> Result<[AxisSetup<1>; 3], StudyError> {
     let params = reading.params();
     let make = |a| -> Result<_, StudyError> {
         Ok(AxisSetup {
@@ -491,9 +577,7 @@ fn axes_positions(reading: &Reading) -> Result<[AxisSetup<kalibra_linalg::U1>; 3
     Ok([make(0)?, make(1)?, make(2)?])
 }
 
-fn axes_positions_velocities(
-    reading: &Reading,
-) -> Result<[AxisSetup<kalibra_linalg::U2>; 3], StudyError> {
+fn axes_positions_velocities(reading: &Reading) -> Result<[AxisSetup<2>; 3], StudyError> {
     let params = reading.params();
     let make = |a| -> Result<_, StudyError> {
         Ok(AxisSetup {
@@ -552,5 +636,81 @@ impl Report {
     /// The report of reading `name`.
     pub fn reading(&self, name: &str) -> Option<&ReadingReport> {
         self.readings.iter().find(|r| r.reading.name == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kalibra_filters::{Ekf, Filter};
+
+    /// Per step of one run: truth, mean, covariance and gain.
+    type Trace<const M: usize> =
+        Vec<(Vector3<f64>, Vector3<f64>, Matrix3<f64>, SMatrix<f64, 3, M>)>;
+
+    /// One axis of one run through the scalar EKF, as the study ran before it was batched.
+    fn scalar_axis<const M: usize>(
+        axis: &AxisSetup<M>,
+        steps: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Trace<M> {
+        let mut x: Vector3<f64> = kalibra_models::standard_normal(U3, rng);
+        let mut ekf = Ekf::new(
+            &axis.dynamics,
+            &axis.measurement,
+            Vector3::zeros(),
+            Matrix3::identity(),
+        )
+        .unwrap();
+        let mut out = Vec::new();
+        for k in 1..=steps {
+            x = axis.dynamics.transition(k - 1, &x)
+                + axis.dynamics.sample_noise(k - 1, rng).unwrap();
+            let z = axis.measurement.measure(k, &x)
+                + axis.measurement.sample_noise(k, &x, rng).unwrap();
+            ekf.predict().unwrap();
+            let rec = ekf.update(&z).unwrap();
+            let post = rec.posterior();
+            out.push((x, post.mean, post.cov, *rec.gain()));
+        }
+        out
+    }
+
+    fn agree<const M: usize>(axes: &[AxisSetup<M>; 3]) {
+        // Five runs: a group shorter than BATCH, whose spare lanes must not matter.
+        let (runs, steps) = (5, 400);
+        let mc = MonteCarlo::new(runs, 11);
+        for isa in Isa::available() {
+            let mut rngs: Vec<_> = (0..runs).map(|r| mc.rng(r)).collect();
+            let mut scalar_rngs = rngs.clone();
+            let mut worst = 0.0f64;
+            for axis in axes {
+                let mut batched: Vec<Trace<M>> = vec![Vec::new(); runs];
+                run_axis(axis, steps, isa, 0, &mut rngs, |_, x, ekf| {
+                    for (l, trace) in batched.iter_mut().enumerate() {
+                        trace.push((x[l], ekf.mean(l), ekf.cov(l), ekf.gain(l)));
+                    }
+                })
+                .unwrap();
+                for (rng, trace) in scalar_rngs.iter_mut().zip(&batched) {
+                    let scalar = scalar_axis(axis, steps, rng);
+                    for (a, b) in trace.iter().zip(&scalar) {
+                        // The same draws: the truths are equal to the bit.
+                        assert_eq!(a.0, b.0, "{isa}");
+                        worst = worst
+                            .max((a.1 - b.1).amax() / b.1.amax().max(1e-300))
+                            .max((a.2 - b.2).amax() / b.2.amax())
+                            .max((a.3 - b.3).amax() / b.3.amax());
+                    }
+                }
+            }
+            assert!(worst <= 1e-12, "{isa}: {worst:e}");
+        }
+    }
+
+    #[test]
+    fn the_batched_axes_agree_with_the_scalar_ekf_run_by_run() {
+        agree(&axes_positions(&READINGS[0]).unwrap());
+        agree(&axes_positions_velocities(&READINGS[1]).unwrap());
     }
 }
