@@ -254,10 +254,20 @@ where
         self.dynamics
             .predict_lanes(self.k, &mut self.x, &mut self.f, &mut self.q);
         self.k += 1;
+        self.run::<true>(z, truth)
+    }
+
+    /// Updates every lane at the current step without a prediction (a filter whose first
+    /// measurement is at its initial step), as [`EkfBatch::predict_update`] updates.
+    pub fn update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        self.run::<false>(z, truth)
+    }
+
+    fn run<const PREDICT: bool>(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
         self.measurement
             .innovate_lanes(self.k, &self.x, z, &mut self.nu, &mut self.h, &mut self.r);
         let isa = self.isa;
-        isa.dispatch(Kernel::<N, M, true, _, _, _, _> {
+        isa.dispatch(Kernel::<N, M, PREDICT, _, _, _, _> {
             f: &self.f,
             q: &self.q,
             h: &self.h,
