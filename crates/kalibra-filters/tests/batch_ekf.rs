@@ -278,3 +278,88 @@ fn bad_initial_estimates_are_errors_and_leave_the_lane_unchanged() {
     assert_eq!(b.cov(2), p0);
     assert_eq!(b.mean(2), m0);
 }
+
+/// Paper 003's re-entry EKF (ballistic dynamics, radar range rate / elevation / sightline
+/// rate): the batch's J1/J2 step terms against `kalibra_metrics::j_step` on the scalar
+/// records, over process-noise levels from tiny to large.
+#[test]
+fn the_j_terms_agree_with_j_step_on_the_reentry_radar() {
+    use kalibra_linalg::{Matrix4, Vector4};
+    use kalibra_models::{Ballistic, BallisticParams, Dynamics, RadarRates};
+    let params = BallisticParams {
+        period: 2.0,
+        beta: 40_000.0,
+        gravity: 9.81,
+    };
+    let q_nom = Matrix4::new(
+        20.80, 0.06, -0.96, -0.40, 0.06, 0.06, -0.12, 0.01, -0.96, -0.12, 6.00, 0.13, -0.40, 0.01,
+        0.13, 0.04,
+    ) * 1e2;
+    let p0 = Matrix4::new(
+        99.39, -0.56, 22.38, -1.73, -0.56, 0.23, -0.01, 0.04, 22.38, -0.01, 9.15, -0.58, -1.73,
+        0.04, -0.58, 0.09,
+    ) * 1e3;
+    let x0 = Vector4::new(2.336e5, -0.022e5, 0.889e5, -0.004e5);
+    let radar = RadarRates::new(Matrix3::from_diagonal(&Vector3::new(
+        225.0,
+        (0.1f64 / 57.3).powi(2),
+        (0.01f64 / 57.3).powi(2),
+    )))
+    .unwrap();
+    let angle = 190f64.to_radians();
+    let truth0 = Vector4::new(232e3, 2290.0 * angle.cos(), 88e3, 2290.0 * angle.sin());
+    for p in [-8.0, 0.0, 5.0] {
+        let dynamics = Ballistic::new(params, q_nom * 10f64.powf(p)).unwrap();
+        for isa in Isa::available() {
+            let mut batch =
+                EkfBatch::new(isa, PerLane(&dynamics), PerLane(&radar), x0, p0).unwrap();
+            let mut scalar: Vec<_> = (0..BATCH)
+                .map(|_| Ekf::new(&dynamics, &radar, x0, p0).unwrap())
+                .collect();
+            // Lane l's truth starts 100 l metres higher; its measurements are noise-free.
+            let mut truth: Vec<Vector4<f64>> = (0..BATCH)
+                .map(|l| truth0 + Vector4::new(0.0, 0.0, 100.0 * l as f64, 0.0))
+                .collect();
+            let mut worst = 0.0f64;
+            for k in 1..=40 {
+                let mut z = [[0.0; BATCH]; 3];
+                let mut x = [[0.0; BATCH]; 4];
+                for (l, t) in truth.iter_mut().enumerate() {
+                    *t = dynamics.transition(k - 1, t);
+                    let zl = radar.measure(k, t);
+                    for i in 0..3 {
+                        z[i][l] = zl[i];
+                    }
+                    for i in 0..4 {
+                        x[i][l] = t[i];
+                    }
+                }
+                let (step, terms) = batch.predict_update_j(&z, &x);
+                assert!(step.all_ok(), "{isa}, p {p}, step {k}");
+                for (l, ekf) in scalar.iter_mut().enumerate() {
+                    ekf.predict().unwrap();
+                    let zl = Vector3::new(z[0][l], z[1][l], z[2][l]);
+                    let rec = ekf.update(&zl).unwrap();
+                    let j = kalibra_metrics::j_step(
+                        &rec.compute_a(),
+                        &rec.compute_b(),
+                        rec.r(),
+                        &rec.compute_c(),
+                    )
+                    .unwrap();
+                    assert!(j.a_plus_b_definite);
+                    // The J's lie in [0, 3]: relative to 1 where they are smaller.
+                    worst = worst
+                        .max(rel(terms.j1(l), j.j1, 1.0))
+                        .max(rel(terms.j2(l), j.j2, 1.0))
+                        .max(rel(terms.tr_n(l), j.tr_n, 1.0))
+                        .max(rel(terms.tr_b(l), j.tr_b, 0.0));
+                    let b = rec.compute_b();
+                    worst = worst.max((terms.b(l) - b).amax() / b.amax());
+                    assert_eq!(terms.r(l), *rec.r());
+                }
+            }
+            assert!(worst <= 1e-12, "{isa}, p {p}: {worst:e}");
+        }
+    }
+}

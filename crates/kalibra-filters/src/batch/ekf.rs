@@ -113,6 +113,79 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneMea
     }
 }
 
+/// The J1/J2 step terms of a batched update (paper 003, eqs 10-15), lane by lane:
+/// `A_k = H F P+_{k-1} F^T H^T`, `B_k = H Q H^T`, `C_k = H P+_k H^T` and `R_k`, and from them
+/// the traces `J1k = tr(S_k^-1 R_k)` (with `S_k = A_k + B_k + R_k`), `J2k = tr((A_k + B_k)^-1
+/// B_k)`, `tr(N_k) = tr((A_k + B_k)^-1 (A_k - C_k))` and `tr(B_k)`, formed as
+/// `kalibra_metrics::j_step` forms them (through Cholesky factors, symmetrised sums).
+///
+/// A lane whose `A_k + B_k` is not positive definite (an indefinite prior) has NaN traces:
+/// pass its matrices to `j_step`, which solves by LU there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JLanes<const M: usize> {
+    pub(super) a: [[Lanes; M]; M],
+    pub(super) b: [[Lanes; M]; M],
+    pub(super) c: [[Lanes; M]; M],
+    pub(super) r: [[Lanes; M]; M],
+    pub(super) j1: Lanes,
+    pub(super) j2: Lanes,
+    pub(super) tr_n: Lanes,
+    pub(super) tr_b: Lanes,
+}
+
+fn matrix_of<const M: usize>(m: &[[Lanes; M]; M], lane: usize) -> SMatrix<f64, M, M> {
+    SMatrix::from_fn(|i, j| m[i][j][lane])
+}
+
+impl<const M: usize> JLanes<M> {
+    fn new() -> Self {
+        let zero = [[[0.0; BATCH]; M]; M];
+        Self {
+            a: zero,
+            b: zero,
+            c: zero,
+            r: zero,
+            j1: [0.0; BATCH],
+            j2: [0.0; BATCH],
+            tr_n: [0.0; BATCH],
+            tr_b: [0.0; BATCH],
+        }
+    }
+
+    /// Lane `lane`'s `A_k`. Every accessor panics if `lane >= BATCH`.
+    pub fn a(&self, lane: usize) -> SMatrix<f64, M, M> {
+        matrix_of(&self.a, lane)
+    }
+    /// Lane `lane`'s `B_k`.
+    pub fn b(&self, lane: usize) -> SMatrix<f64, M, M> {
+        matrix_of(&self.b, lane)
+    }
+    /// Lane `lane`'s `C_k`.
+    pub fn c(&self, lane: usize) -> SMatrix<f64, M, M> {
+        matrix_of(&self.c, lane)
+    }
+    /// Lane `lane`'s `R_k`.
+    pub fn r(&self, lane: usize) -> SMatrix<f64, M, M> {
+        matrix_of(&self.r, lane)
+    }
+    /// Lane `lane`'s `J1k`.
+    pub fn j1(&self, lane: usize) -> f64 {
+        self.j1[lane]
+    }
+    /// Lane `lane`'s `J2k` (NaN if `A_k + B_k` is not positive definite).
+    pub fn j2(&self, lane: usize) -> f64 {
+        self.j2[lane]
+    }
+    /// Lane `lane`'s `tr(N_k)` (NaN if `A_k + B_k` is not positive definite).
+    pub fn tr_n(&self, lane: usize) -> f64 {
+        self.tr_n[lane]
+    }
+    /// Lane `lane`'s `tr(B_k)`.
+    pub fn tr_b(&self, lane: usize) -> f64 {
+        self.tr_b[lane]
+    }
+}
+
 /// [`BATCH`] extended Kalman filters on one model, stepped together: the scalar
 /// [`Ekf`](crate::Ekf)'s arithmetic (Joseph update, symmetrised covariances, Cholesky of `S`),
 /// with the model evaluated per lane through [`LaneDynamics`] and [`LaneMeasurement`] and the
@@ -149,6 +222,7 @@ pub struct EkfBatch<const N: usize, const M: usize, D, H> {
     r: [[Lanes; M]; M],
     nu: [Lanes; M],
     out: BatchStep<N>,
+    terms: JLanes<M>,
 }
 
 impl<const N: usize, const M: usize, D, H> EkfBatch<N, M, D, H>
@@ -184,6 +258,7 @@ where
             r: [[[0.0; BATCH]; M]; M],
             nu: [[0.0; BATCH]; M],
             out: BatchStep::new(),
+            terms: JLanes::new(),
         })
     }
 
@@ -251,19 +326,42 @@ where
     /// `truth[i][lane]` (pass zeros where there is no truth and ignore the NEES). A lane whose
     /// update fails keeps its prediction, as the scalar filter does.
     pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        self.predict_lanes();
+        self.run::<true>(z, truth, false)
+    }
+
+    /// [`EkfBatch::predict_update`], and the J1/J2 step terms of every lane's update (meaningful
+    /// for a lane whose [`BatchStep::nis`] is `Ok`).
+    pub fn predict_update_j(
+        &mut self,
+        z: &[Lanes; M],
+        truth: &[Lanes; N],
+    ) -> (&BatchStep<N>, &JLanes<M>) {
+        self.predict_lanes();
+        self.run::<true>(z, truth, true);
+        (&self.out, &self.terms)
+    }
+
+    /// Each lane's `f(x)`, `F` and `Q` from the model, and the step index advanced: the part
+    /// of a prediction outside the kernel (which propagates `P`).
+    fn predict_lanes(&mut self) {
         self.dynamics
             .predict_lanes(self.k, &mut self.x, &mut self.f, &mut self.q);
         self.k += 1;
-        self.run::<true>(z, truth)
     }
 
     /// Updates every lane at the current step without a prediction (a filter whose first
     /// measurement is at its initial step), as [`EkfBatch::predict_update`] updates.
     pub fn update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
-        self.run::<false>(z, truth)
+        self.run::<false>(z, truth, false)
     }
 
-    fn run<const PREDICT: bool>(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+    fn run<const PREDICT: bool>(
+        &mut self,
+        z: &[Lanes; M],
+        truth: &[Lanes; N],
+        terms: bool,
+    ) -> &BatchStep<N> {
         self.measurement
             .innovate_lanes(self.k, &self.x, z, &mut self.nu, &mut self.h, &mut self.r);
         let isa = self.isa;
@@ -279,6 +377,7 @@ where
             truth,
             gain: &mut self.gain,
             out: &mut self.out,
+            terms: terms.then_some(&mut self.terms),
         });
         self.out.finish(self.k, z, &self.x, &self.p);
         &self.out

@@ -9,7 +9,7 @@
 
 use pulp::{Simd, WithSimd};
 
-use super::{BATCH, BatchStep, Lanes};
+use super::{BATCH, BatchStep, JLanes, Lanes};
 
 /// Where the kernel reads a model matrix: one matrix broadcast to every lane
 /// (`&[[f64; C]; R]`), or one per lane (`&[[Lanes; C]; R]`).
@@ -58,6 +58,8 @@ pub(super) struct Kernel<'a, const N: usize, const M: usize, const PREDICT: bool
     pub truth: &'a [Lanes; N],
     pub gain: &'a mut [[Lanes; M]; N],
     pub out: &'a mut BatchStep<N>,
+    /// With `PREDICT`: where to write the J1/J2 step terms, or `None` to skip them.
+    pub terms: Option<&'a mut JLanes<M>>,
 }
 
 #[inline(always)]
@@ -280,6 +282,7 @@ where
             truth,
             gain: gains,
             out,
+            mut terms,
         } = self;
         let zero = simd.splat_f64s(0.0);
         let one = simd.splat_f64s(1.0);
@@ -299,6 +302,8 @@ where
                     p[i][j] = load::<S>(&ps[i][j], c);
                 }
             }
+            // F P F^T, the propagated part of the prior (the J terms' A_k).
+            let mut propagated = p;
             if PREDICT {
                 // x- = F x (the KF; the EKF's caller wrote f(x)); P- = (F P) F^T + Q,
                 // symmetrised (KalmanCore::predict). The prediction is kept even if the update
@@ -308,7 +313,8 @@ where
                     x = mul_vec(simd, &f, &x);
                 }
                 let fp = mul(simd, &f, &p);
-                p = add(simd, &mul_t(simd, &fp, &f), &q);
+                propagated = mul_t(simd, &fp, &f);
+                p = add(simd, &propagated, &q);
                 symmetrize(simd, &mut p);
             }
             // P H^T, S = H (P H^T) + R symmetrised, its factor (KalmanCore::update).
@@ -389,6 +395,9 @@ where
             let nees = norm_squared(simd, &forward(simd, &lp, &e));
             store::<S>(&mut out.nis, c, nis);
             store::<S>(&mut out.nees, c, nees);
+            if let (true, Some(t)) = (PREDICT, terms.as_deref_mut()) {
+                j_terms(simd, c, &h, &r, &propagated, &q, &p_post, t);
+            }
             store::<S>(&mut out.health, c, ok);
             for i in 0..N {
                 for j in 0..M {
@@ -400,4 +409,81 @@ where
             }
         }
     }
+}
+
+/// `sum_j (M^-1 b_j)_j = tr(M^-1 B)` through `M`'s Cholesky factor, for a symmetric `B` (so its
+/// rows are its columns).
+#[inline(always)]
+fn trace_solve<S: Simd, const D: usize>(
+    simd: S,
+    factor: &([[S::f64s; D]; D], [S::f64s; D]),
+    b: &[[S::f64s; D]; D],
+) -> S::f64s {
+    let mut t = simd.splat_f64s(0.0);
+    for j in 0..D {
+        let y = backward(simd, factor, &forward(simd, factor, &b[j]));
+        t = simd.add_f64s(t, y[j]);
+    }
+    t
+}
+
+/// `(H X) H^T`, symmetrised: a covariance seen through `H`, as the scalar record's
+/// `compute_a`, `compute_b` and `compute_c`.
+#[inline(always)]
+fn projected<S: Simd, const N: usize, const M: usize>(
+    simd: S,
+    h: &[[S::f64s; N]; M],
+    x: &[[S::f64s; N]; N],
+) -> [[S::f64s; M]; M] {
+    let mut out = mul_t(simd, &mul(simd, h, x), h);
+    symmetrize(simd, &mut out);
+    out
+}
+
+/// The J1/J2 step terms (paper 003) of chunk `c`, as `kalibra_metrics::j_step` forms them:
+/// `A = H F P F^T H^T`, `B = H Q H^T`, `C = H P+ H^T`; `J1k = tr(S^-1 R)` with
+/// `S = (A + B) + R`, `J2k = tr((A + B)^-1 B)`, `tr(N_k) = tr((A + B)^-1 (A - C))`, `tr(B)`.
+/// A lane whose `A + B` is not positive definite gets NaN traces (its caller falls back to
+/// the scalar function, which solves by LU there).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn j_terms<S: Simd, const N: usize, const M: usize>(
+    simd: S,
+    c: usize,
+    h: &[[S::f64s; N]; M],
+    r: &[[S::f64s; M]; M],
+    propagated: &[[S::f64s; N]; N],
+    q: &[[S::f64s; N]; N],
+    p_post: &[[S::f64s; N]; N],
+    t: &mut JLanes<M>,
+) {
+    let a = projected(simd, h, propagated);
+    let b = projected(simd, h, q);
+    let cc = projected(simd, h, p_post);
+    let mut ab = add(simd, &a, &b);
+    symmetrize(simd, &mut ab);
+    let mut s = add(simd, &ab, r);
+    symmetrize(simd, &mut s);
+    let j1 = trace_solve(simd, &cholesky(simd, &s), r);
+    let lab = cholesky(simd, &ab);
+    let j2 = trace_solve(simd, &lab, &b);
+    let mut a_minus_c = a;
+    let mut tr_b = b[0][0];
+    for i in 0..M {
+        for j in 0..M {
+            a_minus_c[i][j] = simd.sub_f64s(a[i][j], cc[i][j]);
+            store::<S>(&mut t.a[i][j], c, a[i][j]);
+            store::<S>(&mut t.b[i][j], c, b[i][j]);
+            store::<S>(&mut t.c[i][j], c, cc[i][j]);
+            store::<S>(&mut t.r[i][j], c, r[i][j]);
+        }
+        if i > 0 {
+            tr_b = simd.add_f64s(tr_b, b[i][i]);
+        }
+    }
+    let tr_n = trace_solve(simd, &lab, &a_minus_c);
+    store::<S>(&mut t.j1, c, j1);
+    store::<S>(&mut t.j2, c, j2);
+    store::<S>(&mut t.tr_n, c, tr_n);
+    store::<S>(&mut t.tr_b, c, tr_b);
 }

@@ -63,7 +63,7 @@ use std::str::FromStr;
 mod ekf;
 mod kernel;
 
-pub use ekf::{EkfBatch, LaneDynamics, LaneMeasurement, PerLane};
+pub use ekf::{EkfBatch, JLanes, LaneDynamics, LaneMeasurement, PerLane};
 use kernel::Kernel;
 
 use kalibra_linalg::{Definiteness, SMatrix, SVector, check_covariance, check_finite};
@@ -517,6 +517,7 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
             truth,
             gain: &mut self.gain,
             out: &mut self.out,
+            terms: None,
         });
         self.out.finish(self.k, z, &self.x, &self.p);
         &self.out
