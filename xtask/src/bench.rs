@@ -1,8 +1,9 @@
 //! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
 //!
-//! `cargo xtask bench [w1|w2|w4|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
+//! `cargo xtask bench [w1|w2|w3|w4|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
 //! [--seed N] [--sizes N,N,...] [--kernels] [--ukf] [--no-python]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
-//! `--runs` x 51 steps, in `bench_w2`) by default, or only the one named. `--steps` applies to
+//! `--runs` x 51 steps, in `bench_w2`) and W3 (paper 003's re-entry EKF with J1/J2, 41 values
+//! of Q x 100 runs x 59 steps, in `bench_w3`) by default, or only the one named. `--steps` applies to
 //! W1 and eval, `--threads` to W1, W2 and W4, `--seed` to eval only.
 //!
 //! `eval` (in `bench_eval`) times the `kalibra` executable against a pandas + numpy script
@@ -30,7 +31,7 @@ use rand_distr::{Distribution, StandardNormal};
 /// Which workloads to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum Workloads {
-    /// W1 then W2 (not eval, which needs Python and PyPI).
+    /// W1, W2 then W3 (not eval, which needs Python and PyPI).
     All,
     /// W1: 2-D constant-velocity KF with per-step NEES and NIS.
     #[value(alias = "W1")]
@@ -38,6 +39,10 @@ enum Workloads {
     /// W2: paper 001's problem III, EKF and UKF, 51 steps.
     #[value(alias = "W2")]
     W2,
+    /// W3: paper 003's re-entry EKF with J1/J2 at every step, 41 values of Q x 100 runs x 59
+    /// steps: library, hand-written loop and batched.
+    #[value(alias = "W3")]
+    W3,
     /// `kalibra eval` on CSV, NPZ and JSON logs against a pandas + numpy script.
     Eval,
     /// W4: one KF at run-time sizes n = 8 .. 1024, faer's kernels against nalgebra's, and a
@@ -113,14 +118,21 @@ pub fn main(args: &Args) -> Result<()> {
     if args.workloads == Workloads::Shards {
         return crate::bench_shards::shards_bench(args);
     }
-    if args.workloads != Workloads::W2 {
+    let all = args.workloads == Workloads::All;
+    if all || args.workloads == Workloads::W1 {
         w1_bench(args)?;
     }
-    if args.workloads != Workloads::W1 {
-        if args.workloads == Workloads::All {
+    if all || args.workloads == Workloads::W2 {
+        if all {
             println!();
         }
         crate::bench_w2::w2_bench(args)?;
+    }
+    if all || args.workloads == Workloads::W3 {
+        if all {
+            println!();
+        }
+        crate::bench_w3::w3_bench(args)?;
     }
     Ok(())
 }

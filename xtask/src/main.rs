@@ -7,7 +7,7 @@
 //!   Monte Carlo and writes its partial result to `DIR/<study>/shard-I-of-S.cbor`;
 //!   `cargo xtask merge DIR... [--out DIR]` merges all shards into the reports and index the
 //!   unsharded run writes, bit for bit (docs/distributed.md).
-//! * `cargo xtask bench [w1|w2|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs
+//! * `cargo xtask bench [w1|w2|w3|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs
 //!   the benchmark workloads through the public API and through hand-written nalgebra loops in
 //!   the same process, and prints steps per second and their ratio.
 //! * `cargo xtask bench eval [--runs N] [--steps N] [--seed N] [--repeats N]`: generates a W1
@@ -26,6 +26,7 @@ mod bench;
 mod bench_eval;
 mod bench_shards;
 mod bench_w2;
+mod bench_w3;
 mod bench_w4;
 mod reproduce;
 
