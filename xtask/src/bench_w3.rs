@@ -164,11 +164,11 @@ fn batched(models: &[Ballistic], radar: &RadarRates, truths: &[Truth], isa: Isa)
             let mut x = [[0.0; BATCH]; 4];
             for k in 0..group[0].measurements.len() {
                 for (l, t) in group.iter().enumerate() {
-                    for i in 0..3 {
-                        z[i][l] = t.measurements[k][i];
+                    for (zi, v) in z.iter_mut().zip(t.measurements[k].iter()) {
+                        zi[l] = *v;
                     }
-                    for i in 0..4 {
-                        x[i][l] = t.states[k][i];
+                    for (xi, v) in x.iter_mut().zip(t.states[k].iter()) {
+                        xi[l] = *v;
                     }
                 }
                 let (step, terms) = ekf.predict_update_j(&z, &x);
