@@ -61,7 +61,7 @@ const TEMPLATE: &str = include_str!("report.md");
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper003;
 
-crate::study_config!(Config, seed);
+crate::study_config!(Config, seed, simd);
 
 impl Study for Paper003 {
     type Config = Config;

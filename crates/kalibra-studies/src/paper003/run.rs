@@ -2,11 +2,12 @@
 //! Monte Carlo at five settings, the posterior CRLB, observability, and the report they fill.
 
 use kalibra_bounds::Pcrlb;
+use kalibra_filters::batch::{BATCH, EkfBatch, Isa, PerLane};
 use kalibra_filters::{Ekf, Filter, Start};
 use kalibra_linalg::{Matrix4, Vector3, Vector4};
 use kalibra_metrics::{JHorizon, SquaredErrors, itse};
 use kalibra_models::{Dynamics, Measurement, Simulator};
-use kalibra_sim::MonteCarlo;
+use kalibra_sim::{MonteCarlo, RunFailure};
 use serde::Serialize;
 
 use super::scenario::{
@@ -28,6 +29,10 @@ pub struct Config {
     pub threads: usize,
     /// Step of the fine `p` grid for the figure and the crossover.
     pub fine_step: f64,
+    /// Instruction set of the batched Monte Carlo EKF (`None`: detected at run time). It
+    /// changes the results only by rounding, and is not part of the report.
+    #[serde(skip)]
+    pub simd: Option<Isa>,
 }
 
 impl Config {
@@ -38,6 +43,7 @@ impl Config {
             seed: 2014,
             threads: 0,
             fine_step: 0.02,
+            simd: None,
         }
     }
 
@@ -278,31 +284,50 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
         ("R3", p_r3),
     ];
     let times: Vec<f64> = (0..=horizon).map(|k| k as f64 * reentry::T).collect();
+    let isa = config.simd.unwrap_or_else(Isa::detect);
     let mut monte_carlo = Vec::new();
     for (name, p) in settings {
         let dynamics = reentry::dynamics(reentry::scaled(&q_nom(), p))?;
-        let acc = mc.accumulate(
+        // Eight runs per group through the batched EKF; each step's sums take the runs in run
+        // order, as the one-run study added them.
+        let acc = mc.accumulate_batched(
             || SquaredErrors::new(horizon + 1, 4),
-            |run, _rng, acc| {
-                let truth = &truths[run];
-                let mut ekf = Ekf::new(&dynamics, &setup.radar, x0_table(), p0_table())?;
-                acc.push(0, &(truth.states[0] - x0_table()))?;
-                let mut k = 0;
-                let mut failure = None;
-                ekf.run(
-                    truth.measurements.iter().map(Some),
-                    Start::PredictFirst,
-                    |rec| {
-                        k += 1;
-                        if let Err(e) = acc.push(k, &(truth.states[k] - rec.posterior().mean)) {
-                            failure = failure.take().or(Some(e));
-                        }
-                    },
-                )?;
-                match failure {
-                    Some(e) => Err(StudyError::from(e)),
-                    None => Ok(()),
+            |runs, _rngs, acc| {
+                let fail = |run: usize, source: StudyError| RunFailure { run, source };
+                let group = &truths[runs.clone()];
+                let mut ekf = EkfBatch::new(
+                    isa,
+                    PerLane(&dynamics),
+                    PerLane(&setup.radar),
+                    x0_table(),
+                    p0_table(),
+                )
+                .map_err(|e| fail(runs.start, e.into()))?;
+                for (l, truth) in group.iter().enumerate() {
+                    acc.push(0, &(truth.states[0] - x0_table()))
+                        .map_err(|e| fail(runs.start + l, e.into()))?;
                 }
+                let mut z = [[0.0; BATCH]; 3];
+                let mut x = [[0.0; BATCH]; 4];
+                for k in 1..=horizon {
+                    for (l, truth) in group.iter().enumerate() {
+                        for (zi, v) in z.iter_mut().zip(truth.measurements[k - 1].iter()) {
+                            zi[l] = *v;
+                        }
+                        for (xi, v) in x.iter_mut().zip(truth.states[k].iter()) {
+                            xi[l] = *v;
+                        }
+                    }
+                    let step = ekf.predict_update(&z, &x);
+                    for l in 0..group.len() {
+                        let run = runs.start + l;
+                        step.nis(l).map_err(|e| fail(run, e.into()))?;
+                        // The kernel's `x - x+` against the truth it was given.
+                        acc.push(k, &Vector4::from(step.error(l)))
+                            .map_err(|e| fail(run, e.into()))?;
+                    }
+                }
+                Ok(())
             },
         )?;
         let rmse: Vec<[f64; 4]> = (0..=horizon)
