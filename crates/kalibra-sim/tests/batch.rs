@@ -263,3 +263,47 @@ fn a_diverging_truth_lane_is_its_runs_failure() {
         failure.source
     );
 }
+
+#[test]
+fn map_batched_gives_map_s_outputs_in_run_order_for_any_thread_count() {
+    use rand::RngExt;
+    // 29 runs: three full groups and a short one.
+    let mc = MonteCarlo::new(29, 4);
+    let one = mc
+        .map(|run, rng| Ok::<_, MetricsError>((run, rng.random::<u64>())))
+        .unwrap();
+    for threads in [1, 2, 3] {
+        let batched = mc
+            .threads(threads)
+            .map_batched(|runs, rngs| {
+                assert!(runs.len() <= BATCH && runs.start % BATCH == 0);
+                Ok::<_, RunFailure<MetricsError>>(
+                    runs.zip(rngs.iter_mut())
+                        .map(|(run, rng)| (run, rng.random::<u64>()))
+                        .collect(),
+                )
+            })
+            .unwrap();
+        assert_eq!(batched, one, "{threads} threads");
+    }
+}
+
+#[test]
+fn map_batched_reports_the_lowest_failing_group_for_any_thread_count() {
+    for threads in [1, 2, 5] {
+        let err = MonteCarlo::new(100, 1)
+            .threads(threads)
+            .map_batched(|runs, _| {
+                // Runs 21 and 90 fail; each group names its lowest failing run.
+                match runs.clone().find(|r| [21, 90].contains(r)) {
+                    Some(run) => Err(RunFailure {
+                        run,
+                        source: MetricsError::Empty { what: "test" },
+                    }),
+                    None => Ok(runs.collect::<Vec<_>>()),
+                }
+            })
+            .unwrap_err();
+        assert!(matches!(err, SimError::Run { run: 21, .. }), "{err}");
+    }
+}
