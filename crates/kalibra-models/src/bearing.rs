@@ -388,6 +388,92 @@ fn check_variance(value: f64, name: &'static str) -> Result<(), ModelError> {
     }
 }
 
+/// Lane-wise: the relative positions, the arctangent ([`lanes::math::atan2`], within 3 ulp of
+/// glibc's), the gradient and the noise across the lanes, in the scalar model's order of
+/// operations; the residual wraps as [`wrap_angle`] does, to the bit (a difference of two
+/// angles in (-pi, pi] needs one add or subtract of `2 pi`; a larger one, from a measurement
+/// outside that range, takes the scalar function).
+///
+/// [`lanes::math::atan2`]: crate::lanes::math::atan2
+impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
+    for Bearing<kalibra_linalg::Const<N>, P>
+{
+    #[inline(always)]
+    fn innovate_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[crate::lanes::Lanes; N],
+        z: &[crate::lanes::Lanes; 1],
+        nu: &mut [crate::lanes::Lanes; 1],
+        h: &mut [[crate::lanes::Lanes; N]; 1],
+        r: &mut [[crate::lanes::Lanes; 1]; 1],
+    ) {
+        use crate::lanes::{BATCH, load, math, store};
+        let p = self.platform.position(k);
+        let (vx, vy) = self.translational;
+        let variance = simd.splat_f64s(self.variance);
+        for row in h.iter_mut() {
+            for v in row.iter_mut() {
+                *v = [0.0; BATCH];
+            }
+        }
+        for c in 0..BATCH / S::F64_LANES {
+            let coordinate = |a: usize| match self.coordinates[a] {
+                Coordinate::State(i) => load::<S>(&x[i], c),
+                Coordinate::Constant(v) => simd.splat_f64s(v),
+            };
+            let dx = simd.sub_f64s(coordinate(0), simd.splat_f64s(p[0]));
+            let dy = simd.sub_f64s(coordinate(1), simd.splat_f64s(p[1]));
+            let zhat = match self.reference {
+                BearingReference::XAxis => math::atan2(simd, dy, dx),
+                BearingReference::North => math::atan2(simd, dx, dy),
+            };
+            // The raw difference; wrapped below, lane by lane.
+            store::<S>(&mut nu[0], c, simd.sub_f64s(load::<S>(&z[0], c), zhat));
+            let r2 = simd.add_f64s(simd.mul_f64s(dx, dx), simd.mul_f64s(dy, dy));
+            let (gx, gy) = match self.reference {
+                BearingReference::XAxis => {
+                    (simd.div_f64s(simd.neg_f64s(dy), r2), simd.div_f64s(dx, r2))
+                }
+                BearingReference::North => {
+                    (simd.div_f64s(dy, r2), simd.div_f64s(simd.neg_f64s(dx), r2))
+                }
+            };
+            for (a, g) in [gx, gy].into_iter().enumerate() {
+                if let Coordinate::State(i) = self.coordinates[a] {
+                    let hi = simd.add_f64s(load::<S>(&h[0][i], c), g);
+                    store::<S>(&mut h[0][i], c, hi);
+                }
+            }
+            let rv = if vx == 0.0 && vy == 0.0 {
+                variance
+            } else {
+                let gx2 = simd.mul_f64s(simd.mul_f64s(gx, gx), simd.splat_f64s(vx));
+                let gy2 = simd.mul_f64s(simd.mul_f64s(gy, gy), simd.splat_f64s(vy));
+                simd.add_f64s(simd.add_f64s(variance, gx2), gy2)
+            };
+            store::<S>(&mut r[0][0], c, rv);
+        }
+        for d in nu[0].iter_mut() {
+            *d = wrap_difference(*d);
+        }
+    }
+}
+
+/// [`wrap_angle`] of `d`, without its floating-point remainder for `|d| < 2 pi` (the
+/// difference of two angles in (-pi, pi]), where `d % 2 pi` is `d` itself: the same additions
+/// it makes, so the same bits.
+#[inline(always)]
+fn wrap_difference(d: f64) -> f64 {
+    if d.abs() < 2.0 * PI {
+        let r = if d < 0.0 { d + 2.0 * PI } else { d };
+        if r > PI { r - 2.0 * PI } else { r }
+    } else {
+        wrap_angle(d)
+    }
+}
+
 impl<N: Dim, P: Platform<2>> Measurement<N, U1> for Bearing<N, P>
 where
     DefaultAllocator: Alloc<N, U1>,

@@ -54,6 +54,7 @@ mod bearing;
 mod error;
 mod jacobian;
 mod kinematic;
+pub mod lanes;
 mod linear;
 mod noise;
 mod simulate;

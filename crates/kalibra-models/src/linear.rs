@@ -98,6 +98,38 @@ where
     }
 }
 
+/// Lane-wise: `x = F x` across the lanes (products accumulated in column order with fused
+/// multiply-adds where the instruction set has them), `F` and `Q` broadcast to every lane.
+impl<const N: usize> crate::lanes::LaneDynamics<N> for LinearGaussian<kalibra_linalg::Const<N>> {
+    #[inline(always)]
+    fn predict_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        _k: usize,
+        x: &mut [crate::lanes::Lanes; N],
+        f: &mut [[crate::lanes::Lanes; N]; N],
+        q: &mut [[crate::lanes::Lanes; N]; N],
+    ) {
+        use crate::lanes::{BATCH, broadcast, load, store};
+        let fm = &self.f;
+        for c in 0..BATCH / S::F64_LANES {
+            let mut xc = [simd.splat_f64s(0.0); N];
+            for (i, v) in xc.iter_mut().enumerate() {
+                *v = load::<S>(&x[i], c);
+            }
+            for (i, xi) in x.iter_mut().enumerate() {
+                let mut s = simd.mul_f64s(simd.splat_f64s(fm[(i, 0)]), xc[0]);
+                for (j, v) in xc.iter().enumerate().skip(1) {
+                    s = simd.mul_add_e_f64s(simd.splat_f64s(fm[(i, j)]), *v, s);
+                }
+                store::<S>(xi, c, s);
+            }
+        }
+        broadcast(f, fm);
+        broadcast(q, self.q.matrix());
+    }
+}
+
 impl<N: Dim> LinearDynamics<N> for LinearGaussian<N>
 where
     DefaultAllocator: Alloc<N>,

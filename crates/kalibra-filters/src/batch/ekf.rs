@@ -1,115 +1,50 @@
 //! The batched extended Kalman filter: [`BATCH`] runs of one nonlinear model, the model
 //! evaluated lane by lane and the covariance algebra stepped together.
 
-use kalibra_linalg::{Const, SMatrix, SVector, check_finite};
-use kalibra_models::{Dynamics, Measurement};
+use kalibra_linalg::{SMatrix, SVector, check_finite};
+use kalibra_models::lanes::{LaneDynamics, LaneMeasurement};
+use pulp::{Simd, WithSimd};
 
 use super::kernel::Kernel;
 use super::{BATCH, BatchStep, Isa, Lanes};
 use crate::FilterError;
 
-/// Dynamics a batch evaluates for all its lanes at once: for every lane, the predicted mean
-/// `f_k(x)`, the Jacobian `F_k` at `x` and the process noise `Q_k`.
-///
-/// [`PerLane`] implements it for any scalar [`Dynamics`] by calling the model once per lane;
-/// a model implements it directly when it can evaluate the lanes faster together (in SIMD,
-/// or sharing work between `f` and `F`). It must give each lane what the scalar calls give,
-/// so that the batch agrees with the scalar [`Ekf`](crate::Ekf) run by run.
-pub trait LaneDynamics<const N: usize> {
-    /// At step `k`: replaces each lane's mean in `x` by `f_k(x)`, and writes `F_k` evaluated
-    /// at the old mean into `f` and `Q_k` into `q`.
-    fn predict_lanes(
-        &self,
-        k: usize,
-        x: &mut [Lanes; N],
-        f: &mut [[Lanes; N]; N],
-        q: &mut [[Lanes; N]; N],
-    );
+/// The model's part of a prediction, as a pulp operation: a lane-wise model's SIMD code runs
+/// on the batch's instruction set.
+struct Predict<'a, const N: usize, D> {
+    dynamics: &'a D,
+    k: usize,
+    x: &'a mut [Lanes; N],
+    f: &'a mut [[Lanes; N]; N],
+    q: &'a mut [[Lanes; N]; N],
 }
 
-/// A measurement a batch evaluates for all its lanes at once: for every lane, the innovation
-/// `nu = z (-) h_k(x)` (the model's residual, so angles wrap), the Jacobian `H_k` and the
-/// noise `R_k`, all at the lane's predicted mean `x`.
-///
-/// [`PerLane`] implements it for any scalar [`Measurement`]; see [`LaneDynamics`].
-pub trait LaneMeasurement<const N: usize, const M: usize> {
-    /// At step `k`, for predicted means `x` and measurements `z`: writes the innovation into
-    /// `nu`, `H_k(x)` into `h` and `R_k(x)` into `r`.
-    fn innovate_lanes(
-        &self,
-        k: usize,
-        x: &[Lanes; N],
-        z: &[Lanes; M],
-        nu: &mut [Lanes; M],
-        h: &mut [[Lanes; N]; M],
-        r: &mut [[Lanes; M]; M],
-    );
-}
-
-/// A scalar model evaluated lane by lane: the [`LaneDynamics`] of a [`Dynamics`] and the
-/// [`LaneMeasurement`] of a [`Measurement`], through exactly the calls the scalar
-/// [`Ekf`](crate::Ekf) makes.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PerLane<T>(pub T);
-
-fn lane<const N: usize>(x: &[Lanes; N], l: usize) -> SVector<f64, N> {
-    SVector::from_fn(|i, _| x[i][l])
-}
-
-fn set_lane<const R: usize, const C: usize>(
-    out: &mut [[Lanes; C]; R],
-    l: usize,
-    m: &SMatrix<f64, R, C>,
-) {
-    for (i, row) in out.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            v[l] = m[(i, j)];
-        }
+impl<const N: usize, D: LaneDynamics<N>> WithSimd for Predict<'_, N, D> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        self.dynamics
+            .predict_lanes(simd, self.k, self.x, self.f, self.q);
     }
 }
 
-impl<const N: usize, T: Dynamics<Const<N>>> LaneDynamics<N> for PerLane<T> {
-    fn predict_lanes(
-        &self,
-        k: usize,
-        x: &mut [Lanes; N],
-        f: &mut [[Lanes; N]; N],
-        q: &mut [[Lanes; N]; N],
-    ) {
-        for l in 0..BATCH {
-            let xl = lane(x, l);
-            let pred = self.0.transition(k, &xl);
-            set_lane(f, l, &self.0.jacobian(k, &xl));
-            set_lane(q, l, &self.0.noise_cov(k));
-            for (i, xi) in x.iter_mut().enumerate() {
-                xi[l] = pred[i];
-            }
-        }
-    }
+/// The model's part of an update (innovation, `H`, `R`), as a pulp operation.
+struct Innovate<'a, const N: usize, const M: usize, H> {
+    measurement: &'a H,
+    k: usize,
+    x: &'a [Lanes; N],
+    z: &'a [Lanes; M],
+    nu: &'a mut [Lanes; M],
+    h: &'a mut [[Lanes; N]; M],
+    r: &'a mut [[Lanes; M]; M],
 }
 
-impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneMeasurement<N, M>
-    for PerLane<T>
-{
-    fn innovate_lanes(
-        &self,
-        k: usize,
-        x: &[Lanes; N],
-        z: &[Lanes; M],
-        nu: &mut [Lanes; M],
-        h: &mut [[Lanes; N]; M],
-        r: &mut [[Lanes; M]; M],
-    ) {
-        for l in 0..BATCH {
-            let xl = lane(x, l);
-            let zhat = self.0.measure(k, &xl);
-            let residual = self.0.residual(&lane(z, l), &zhat);
-            for (i, v) in nu.iter_mut().enumerate() {
-                v[l] = residual[i];
-            }
-            set_lane(h, l, &self.0.jacobian(k, &xl));
-            set_lane(r, l, &self.0.noise_cov(k, &xl));
-        }
+impl<const N: usize, const M: usize, H: LaneMeasurement<N, M>> WithSimd for Innovate<'_, N, M, H> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        self.measurement
+            .innovate_lanes(simd, self.k, self.x, self.z, self.nu, self.h, self.r);
     }
 }
 
@@ -345,8 +280,13 @@ where
     /// Each lane's `f(x)`, `F` and `Q` from the model, and the step index advanced: the part
     /// of a prediction outside the kernel (which propagates `P`).
     fn predict_lanes(&mut self) {
-        self.dynamics
-            .predict_lanes(self.k, &mut self.x, &mut self.f, &mut self.q);
+        self.isa.dispatch(Predict {
+            dynamics: &self.dynamics,
+            k: self.k,
+            x: &mut self.x,
+            f: &mut self.f,
+            q: &mut self.q,
+        });
         self.k += 1;
     }
 
@@ -362,8 +302,15 @@ where
         truth: &[Lanes; N],
         terms: bool,
     ) -> &BatchStep<N> {
-        self.measurement
-            .innovate_lanes(self.k, &self.x, z, &mut self.nu, &mut self.h, &mut self.r);
+        self.isa.dispatch(Innovate {
+            measurement: &self.measurement,
+            k: self.k,
+            x: &self.x,
+            z,
+            nu: &mut self.nu,
+            h: &mut self.h,
+            r: &mut self.r,
+        });
         let isa = self.isa;
         isa.dispatch(Kernel::<N, M, PREDICT, _, _, _, _> {
             f: &self.f,

@@ -63,7 +63,8 @@ use std::str::FromStr;
 mod ekf;
 mod kernel;
 
-pub use ekf::{EkfBatch, JLanes, LaneDynamics, LaneMeasurement, PerLane};
+pub use ekf::{EkfBatch, JLanes};
+pub use kalibra_models::lanes::{LaneDynamics, LaneMeasurement, PerLane};
 use kernel::Kernel;
 
 use kalibra_linalg::{Definiteness, SMatrix, SVector, check_covariance, check_finite};
@@ -71,13 +72,12 @@ use pulp::{Simd, WithSimd};
 
 use crate::FilterError;
 
-/// Runs per batch: the lanes of one AVX-512 vector of f64. Narrower instruction sets step a
-/// batch as several vectors, so the grouping of runs (and so every result) does not depend on
-/// the instruction set.
-pub const BATCH: usize = 8;
-
+/// Runs per batch ([`kalibra_models::lanes::BATCH`]): the lanes of one AVX-512 vector of f64.
+/// Narrower instruction sets step a batch as several vectors, so the grouping of runs (and so
+/// every result) does not depend on the instruction set.
+pub use kalibra_models::lanes::BATCH;
 /// One f64 per run of a batch.
-pub type Lanes = [f64; BATCH];
+pub use kalibra_models::lanes::Lanes;
 
 /// An instruction set a batched kernel runs on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -167,7 +167,7 @@ impl Isa {
     /// Runs `op` with this instruction set's pulp token (the scalar fallback if the CPU does
     /// not have it; constructors check with [`Isa::checked`] first).
     #[inline]
-    fn dispatch<Op: WithSimd>(self, op: Op) -> Op::Output {
+    pub(crate) fn dispatch<Op: WithSimd>(self, op: Op) -> Op::Output {
         match self {
             #[cfg(target_arch = "x86_64")]
             Isa::Avx512 => {

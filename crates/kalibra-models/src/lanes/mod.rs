@@ -1,0 +1,187 @@
+//! Models evaluated for [`BATCH`] Monte Carlo runs at once, in the lane layout of
+//! `kalibra_filters::batch`: every scalar of a state, a measurement or a matrix is a
+//! [`Lanes`] array with one entry per run.
+//!
+//! A batched filter asks its model for every lane's `f(x)`, `F`, `Q` ([`LaneDynamics`]) and
+//! every lane's innovation `z (-) h(x)`, `H`, `R` ([`LaneMeasurement`]). [`PerLane`] answers for
+//! any scalar model by calling it once per lane, exactly as the scalar filters call it; a
+//! model implements the traits itself to evaluate its lanes together in SIMD (the methods are
+//! generic over [`pulp::Simd`] and called inside the filter's dispatched kernel, so they
+//! compile for its instruction set; implementations should be `#[inline(always)]`). The
+//! models of this crate that do: [`LinearGaussian`](crate::LinearGaussian) (its `F` and `Q`
+//! broadcast) and [`Bearing`](crate::Bearing) (the arctangent of [`math::atan2`]).
+//!
+//! A lane-wise implementation must give each lane what the scalar calls give, to rounding:
+//! the batched filters are checked against the scalar ones run by run.
+
+pub mod math;
+
+use kalibra_linalg::{Const, SMatrix, SVector};
+use pulp::Simd;
+
+use crate::{Dynamics, Measurement};
+
+/// Runs per batch: the lanes of one AVX-512 vector of f64.
+pub const BATCH: usize = 8;
+
+/// One f64 per run of a batch.
+pub type Lanes = [f64; BATCH];
+
+/// Dynamics a batch evaluates for all its lanes at once: for every lane, the predicted mean
+/// `f_k(x)`, the Jacobian `F_k` at `x` and the process noise `Q_k`.
+pub trait LaneDynamics<const N: usize> {
+    /// At step `k`: replaces each lane's mean in `x` by `f_k(x)`, and writes `F_k` evaluated
+    /// at the old mean into `f` and `Q_k` into `q`, on the instruction set of `simd`.
+    fn predict_lanes<S: Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &mut [Lanes; N],
+        f: &mut [[Lanes; N]; N],
+        q: &mut [[Lanes; N]; N],
+    );
+}
+
+/// A measurement a batch evaluates for all its lanes at once: for every lane, the innovation
+/// `nu = z (-) h_k(x)` (the model's residual, so angles wrap), the Jacobian `H_k` and the
+/// noise `R_k`, all at the lane's predicted mean `x`.
+pub trait LaneMeasurement<const N: usize, const M: usize> {
+    /// At step `k`, for predicted means `x` and measurements `z`: writes the innovation into
+    /// `nu`, `H_k(x)` into `h` and `R_k(x)` into `r`, on the instruction set of `simd`.
+    #[allow(clippy::too_many_arguments)] // The lane arrays are the interface.
+    fn innovate_lanes<S: Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[Lanes; N],
+        z: &[Lanes; M],
+        nu: &mut [Lanes; M],
+        h: &mut [[Lanes; N]; M],
+        r: &mut [[Lanes; M]; M],
+    );
+}
+
+impl<const N: usize, T: LaneDynamics<N>> LaneDynamics<N> for &T {
+    #[inline(always)]
+    fn predict_lanes<S: Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &mut [Lanes; N],
+        f: &mut [[Lanes; N]; N],
+        q: &mut [[Lanes; N]; N],
+    ) {
+        (**self).predict_lanes(simd, k, x, f, q);
+    }
+}
+
+impl<const N: usize, const M: usize, T: LaneMeasurement<N, M>> LaneMeasurement<N, M> for &T {
+    #[inline(always)]
+    fn innovate_lanes<S: Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[Lanes; N],
+        z: &[Lanes; M],
+        nu: &mut [Lanes; M],
+        h: &mut [[Lanes; N]; M],
+        r: &mut [[Lanes; M]; M],
+    ) {
+        (**self).innovate_lanes(simd, k, x, z, nu, h, r);
+    }
+}
+
+/// A scalar model evaluated lane by lane: the [`LaneDynamics`] of a [`Dynamics`] and the
+/// [`LaneMeasurement`] of a [`Measurement`], through exactly the calls the scalar EKF makes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PerLane<T>(pub T);
+
+/// The lanes of chunk `c` of `a` as one vector of the instruction set of `S`
+/// (`BATCH / S::F64_LANES` chunks per batch).
+#[inline(always)]
+pub fn load<S: Simd>(a: &Lanes, c: usize) -> S::f64s {
+    S::as_simd_f64s(a).0[c]
+}
+
+/// Stores `v` into the lanes of chunk `c` of `a`.
+#[inline(always)]
+pub fn store<S: Simd>(a: &mut Lanes, c: usize, v: S::f64s) {
+    S::as_mut_simd_f64s(a).0[c] = v;
+}
+
+/// Lane `l` of `x` as a vector.
+pub fn lane<const N: usize>(x: &[Lanes; N], l: usize) -> SVector<f64, N> {
+    SVector::from_fn(|i, _| x[i][l])
+}
+
+/// Writes `m` into lane `l` of `out`.
+pub fn set_lane<const R: usize, const C: usize>(
+    out: &mut [[Lanes; C]; R],
+    l: usize,
+    m: &SMatrix<f64, R, C>,
+) {
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            v[l] = m[(i, j)];
+        }
+    }
+}
+
+/// Writes `m` into every lane of `out` (a model's matrix shared by all runs).
+pub fn broadcast<const R: usize, const C: usize>(
+    out: &mut [[Lanes; C]; R],
+    m: &SMatrix<f64, R, C>,
+) {
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = [m[(i, j)]; BATCH];
+        }
+    }
+}
+
+impl<const N: usize, T: Dynamics<Const<N>>> LaneDynamics<N> for PerLane<T> {
+    fn predict_lanes<S: Simd>(
+        &self,
+        _simd: S,
+        k: usize,
+        x: &mut [Lanes; N],
+        f: &mut [[Lanes; N]; N],
+        q: &mut [[Lanes; N]; N],
+    ) {
+        for l in 0..BATCH {
+            let xl = lane(x, l);
+            let pred = self.0.transition(k, &xl);
+            set_lane(f, l, &self.0.jacobian(k, &xl));
+            set_lane(q, l, &self.0.noise_cov(k));
+            for (i, xi) in x.iter_mut().enumerate() {
+                xi[l] = pred[i];
+            }
+        }
+    }
+}
+
+impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneMeasurement<N, M>
+    for PerLane<T>
+{
+    fn innovate_lanes<S: Simd>(
+        &self,
+        _simd: S,
+        k: usize,
+        x: &[Lanes; N],
+        z: &[Lanes; M],
+        nu: &mut [Lanes; M],
+        h: &mut [[Lanes; N]; M],
+        r: &mut [[Lanes; M]; M],
+    ) {
+        for l in 0..BATCH {
+            let xl = lane(x, l);
+            let zhat = self.0.measure(k, &xl);
+            let residual = self.0.residual(&lane(z, l), &zhat);
+            for (i, v) in nu.iter_mut().enumerate() {
+                v[l] = residual[i];
+            }
+            set_lane(h, l, &self.0.jacobian(k, &xl));
+            set_lane(r, l, &self.0.noise_cov(k, &xl));
+        }
+    }
+}

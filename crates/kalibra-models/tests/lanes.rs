@@ -1,0 +1,315 @@
+//! The lane-wise elementary functions of `kalibra_models::lanes::math` against glibc's, on
+//! every instruction set this CPU has, and the lane-wise models against their scalar selves.
+
+use kalibra_models::lanes::math;
+use pulp::{Simd, WithSimd};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Distance in units in the last place between two doubles of the same sign (0 for equal
+/// values, NaN and NaN included; `u64::MAX` for a NaN against a number).
+fn ulps(a: f64, b: f64) -> u64 {
+    if a.is_nan() || b.is_nan() {
+        return if a.is_nan() && b.is_nan() {
+            0
+        } else {
+            u64::MAX
+        };
+    }
+    if a == b {
+        return 0;
+    }
+    // Map the doubles to a monotonic integer line (negative values below positive ones).
+    let key = |x: f64| {
+        let bits = x.to_bits() as i64;
+        if bits < 0 { i64::MIN - bits } else { bits }
+    };
+    key(a).abs_diff(key(b))
+}
+
+/// `atan2` of 8 lanes on one instruction set.
+struct Atan2<'a> {
+    y: &'a [f64; 8],
+    x: &'a [f64; 8],
+    out: &'a mut [f64; 8],
+}
+
+impl WithSimd for Atan2<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let n = S::F64_LANES;
+        for c in 0..8 / n {
+            let y = S::as_simd_f64s(self.y).0[c];
+            let x = S::as_simd_f64s(self.x).0[c];
+            S::as_mut_simd_f64s(self.out).0[c] = math::atan2(simd, y, x);
+        }
+    }
+}
+
+/// Runs `op` on every instruction set this CPU has, by name.
+fn on_every_isa(mut run: impl FnMut(&str, &dyn Fn(Atan2<'_>))) {
+    run("scalar", &|op| Simd::vectorize(pulp::Scalar::new(), op));
+    #[cfg(target_arch = "x86_64")]
+    {
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            run("avx2", &move |op| Simd::vectorize(simd, op));
+        }
+        if let Some(simd) = pulp::x86::V4::try_new() {
+            run("avx512", &move |op| Simd::vectorize(simd, op));
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    if let Some(simd) = pulp::aarch64::Neon::try_new() {
+        run("neon", &move |op| Simd::vectorize(simd, op));
+    }
+}
+
+/// Log-uniform magnitudes from 1e-300 to 1e300 with random signs, and points near the axes,
+/// the diagonals and the reduction boundary tan(pi/8).
+fn samples(n: usize) -> Vec<(f64, f64)> {
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let mut out = Vec::with_capacity(n);
+    let signed = |rng: &mut ChaCha8Rng, v: f64| if rng.random::<bool>() { v } else { -v };
+    for i in 0..n {
+        let (y, x) = match i % 3 {
+            0 => {
+                let y = 10f64.powf(rng.random_range(-300.0..300.0));
+                let x = 10f64.powf(rng.random_range(-300.0..300.0));
+                (y, x)
+            }
+            1 => {
+                // Ratios near 1, tan(pi/8) and 1/tan(pi/8), at one scale.
+                let s = 10f64.powf(rng.random_range(-20.0..20.0));
+                let r = [1.0, 0.41421356237309503, 2.414213562373095][rng.random_range(0..3)];
+                (s * r * (1.0 + rng.random_range(-1e-3..1e-3)), s)
+            }
+            _ => {
+                // Ordinary bearings: a unit circle's worth of angles.
+                let a: f64 = rng.random_range(-4.0..4.0);
+                let r = 10f64.powf(rng.random_range(-3.0..6.0));
+                (r * a.sin(), r * a.cos())
+            }
+        };
+        out.push((signed(&mut rng, y), signed(&mut rng, x)));
+    }
+    out
+}
+
+const SPECIALS: [f64; 10] = [
+    0.0,
+    -0.0,
+    1.0,
+    -1.0,
+    f64::INFINITY,
+    f64::NEG_INFINITY,
+    f64::NAN,
+    f64::MIN_POSITIVE,
+    5e-324,
+    f64::MAX,
+];
+
+#[test]
+fn atan2_is_within_3_ulp_of_glibc_over_the_whole_range_on_every_isa() {
+    let mut points = samples(1_000_000);
+    for y in SPECIALS {
+        for x in SPECIALS {
+            points.push((y, x));
+        }
+    }
+    let mut failures = Vec::new();
+    on_every_isa(|isa, run| {
+        let mut worst = (0u64, 0.0, 0.0);
+        for chunk in points.chunks(8) {
+            let mut y = [0.0; 8];
+            let mut x = [0.0; 8];
+            for (i, (py, px)) in chunk.iter().enumerate() {
+                y[i] = *py;
+                x[i] = *px;
+            }
+            let mut out = [0.0; 8];
+            run(Atan2 {
+                y: &y,
+                x: &x,
+                out: &mut out,
+            });
+            for i in 0..chunk.len() {
+                let d = ulps(out[i], y[i].atan2(x[i]));
+                if d > worst.0 {
+                    worst = (d, y[i], x[i]);
+                }
+            }
+        }
+        if worst.0 > 3 {
+            failures.push(format!(
+                "{isa}: {} ulp at atan2({:e}, {:e})",
+                worst.0, worst.1, worst.2
+            ));
+        }
+    });
+    assert!(failures.is_empty(), "{failures:?}");
+}
+
+mod models {
+    use super::*;
+    use kalibra_linalg::{Matrix2, U2, Vector2};
+    use kalibra_models::lanes::{BATCH, LaneDynamics, LaneMeasurement, Lanes, PerLane};
+    use kalibra_models::{Bearing, BearingReference, Coordinate, LinearGaussian, Tabulated};
+
+    /// Predicts `x`, and evaluates the measurement at `at` (the same for both models, so that
+    /// `H` and `R` can be compared to the bit).
+    struct Eval<'a, D, H> {
+        dynamics: &'a D,
+        measurement: &'a H,
+        at: &'a [Lanes; 2],
+        x: &'a mut [Lanes; 2],
+        f: &'a mut [[Lanes; 2]; 2],
+        q: &'a mut [[Lanes; 2]; 2],
+        z: &'a [Lanes; 1],
+        nu: &'a mut [Lanes; 1],
+        h: &'a mut [[Lanes; 2]; 1],
+        r: &'a mut [[Lanes; 1]; 1],
+    }
+
+    impl<D: LaneDynamics<2>, H: LaneMeasurement<2, 1>> WithSimd for Eval<'_, D, H> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            self.dynamics.predict_lanes(simd, 3, self.x, self.f, self.q);
+            self.measurement
+                .innovate_lanes(simd, 4, self.at, self.z, self.nu, self.h, self.r);
+        }
+    }
+
+    type Out = (
+        [Lanes; 2],
+        [[Lanes; 2]; 2],
+        [[Lanes; 2]; 2],
+        [Lanes; 1],
+        [[Lanes; 2]; 1],
+        [[Lanes; 1]; 1],
+    );
+
+    fn eval<S: Simd, D: LaneDynamics<2>, H: LaneMeasurement<2, 1>>(
+        simd: S,
+        d: &D,
+        m: &H,
+        x0: &[Lanes; 2],
+        z: &[Lanes; 1],
+    ) -> Out {
+        let mut out: Out = (
+            *x0,
+            [[[0.0; BATCH]; 2]; 2],
+            [[[0.0; BATCH]; 2]; 2],
+            [[0.0; BATCH]; 1],
+            [[[0.0; BATCH]; 2]; 1],
+            [[[0.0; BATCH]; 1]; 1],
+        );
+        Simd::vectorize(
+            simd,
+            Eval {
+                dynamics: d,
+                measurement: m,
+                at: x0,
+                x: &mut out.0,
+                f: &mut out.1,
+                q: &mut out.2,
+                z,
+                nu: &mut out.3,
+                h: &mut out.4,
+                r: &mut out.5,
+            },
+        );
+        out
+    }
+
+    fn check<S: Simd>(simd: S, isa: &str) {
+        let dynamics = LinearGaussian::new(
+            Matrix2::new(0.9, 0.1, -0.2, 1.0),
+            Matrix2::new(0.1, 0.01, 0.01, 0.1),
+        )
+        .unwrap();
+        let platform = Tabulated::new(
+            (0..10)
+                .map(|k| Vector2::new((k as f64).cos(), (k as f64).sin()))
+                .collect(),
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for (reference, translational) in [
+            (BearingReference::XAxis, (0.0, 0.0)),
+            (BearingReference::North, (0.3, 0.7)),
+        ] {
+            let bearing = Bearing::from_coordinates(
+                U2,
+                [Coordinate::State(0), Coordinate::State(1)],
+                reference,
+                0.025,
+                platform.clone(),
+            )
+            .unwrap()
+            .with_translational_noise(translational.0, translational.1)
+            .unwrap();
+            let line = Bearing::from_coordinates(
+                U2,
+                [Coordinate::State(0), Coordinate::Constant(-3.0)],
+                reference,
+                0.025,
+                platform.clone(),
+            )
+            .unwrap();
+            for sensor in [bearing, line] {
+                let mut worst_x = 0.0f64;
+                let mut worst_nu = 0u64;
+                for _ in 0..2000 {
+                    let mut x = [[0.0; BATCH]; 2];
+                    let mut z = [[0.0; BATCH]; 1];
+                    for l in 0..BATCH {
+                        x[0][l] = rng.random_range(-30.0..30.0);
+                        x[1][l] = rng.random_range(-30.0..30.0);
+                        // Measurements anywhere in (-pi, pi], and a few far outside it.
+                        z[0][l] = if rng.random_range(0..50) == 0 {
+                            rng.random_range(-100.0..100.0)
+                        } else {
+                            rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)
+                        };
+                    }
+                    let a = eval(simd, &dynamics, &sensor, &x, &z);
+                    let b = eval(simd, &PerLane(&dynamics), &PerLane(&sensor), &x, &z);
+                    // F and Q broadcast, H and R by the scalar operations: equal to the bit.
+                    assert_eq!((a.1, a.2, a.4, a.5), (b.1, b.2, b.4, b.5), "{isa}");
+                    for l in 0..BATCH {
+                        // F x: relative to the input's size (a sum that cancels keeps the
+                        // absolute error of its terms).
+                        let size = x[0][l].abs().max(x[1][l].abs());
+                        for i in 0..2 {
+                            worst_x = worst_x.max((a.0[i][l] - b.0[i][l]).abs() / size);
+                        }
+                        // The innovation: atan2 within 3 ulp of glibc's, on an angle of pi at
+                        // most, so within 3 ulp of pi of the scalar one
+                        // (in ulp of the larger of pi and |z|: z - h(x) rounds at |z|'s scale).
+                        let d = (a.3[0][l] - b.3[0][l]).abs();
+                        let scale = z[0][l].abs().max(std::f64::consts::PI);
+                        worst_nu = worst_nu.max((d / f64::EPSILON / scale).ceil() as u64);
+                    }
+                }
+                assert!(worst_x <= 4.0 * f64::EPSILON, "{isa}: {worst_x:e}");
+                assert!(worst_nu <= 3, "{isa}: {worst_nu}");
+            }
+        }
+    }
+
+    #[test]
+    fn lane_wise_models_agree_with_their_scalar_selves_on_every_isa() {
+        check(pulp::Scalar::new(), "scalar");
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                check(simd, "avx2");
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                check(simd, "avx512");
+            }
+        }
+    }
+}
