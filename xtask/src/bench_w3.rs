@@ -7,8 +7,9 @@
 //! * a hand-written loop: the same EKF (Joseph update, symmetrised covariances) and the same
 //!   J terms written out in fixed-size nalgebra, calling the models only for the physics
 //!   (`f`, `F`, `h`, `H`), as a user without kalibra would write it;
-//! * the batched EKF ([`EkfBatch::predict_update_j`]), eight runs per group, the models
-//!   evaluated lane by lane.
+//! * the batched EKF ([`EkfBatch::predict_update_j`]), eight runs per group, the radar
+//!   evaluated for the lanes together (its lane-wise implementation), the ballistic dynamics
+//!   lane by lane ([`PerLane`]).
 //!
 //! The truths (the study's, seed 2003) are simulated once outside the timed region. The three
 //! must agree on every `p`'s horizon J1 and J2 to [`TOLERANCE`]; the bench fails otherwise.

@@ -546,6 +546,80 @@ impl Measurement<U4, U3> for RadarRates {
     }
 }
 
+/// Lane-wise: every lane's `h(x)`, `H` and innovation across the lanes in the scalar model's
+/// order of operations, the elevation by [`lanes::math::atan2`] (within 3 ulp of glibc's) and
+/// its residual wrapped as [`wrap_angle`] wraps it, to the bit; `R` broadcast.
+///
+/// [`lanes::math::atan2`]: crate::lanes::math::atan2
+impl crate::lanes::LaneMeasurement<4, 3> for RadarRates {
+    #[inline(always)]
+    fn innovate_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        _k: usize,
+        x: &[crate::lanes::Lanes; 4],
+        z: &[crate::lanes::Lanes; 3],
+        nu: &mut [crate::lanes::Lanes; 3],
+        h: &mut [[crate::lanes::Lanes; 4]; 3],
+        r: &mut [[crate::lanes::Lanes; 3]; 3],
+    ) {
+        use crate::lanes::{BATCH, broadcast, load, math, store};
+        for c in 0..BATCH / S::F64_LANES {
+            let (x1, v1, x2, v2) = (
+                load::<S>(&x[0], c),
+                load::<S>(&x[1], c),
+                load::<S>(&x[2], c),
+                load::<S>(&x[3], c),
+            );
+            let (add, sub, mul, div) = (
+                |a, b| simd.add_f64s(a, b),
+                |a, b| simd.sub_f64s(a, b),
+                |a, b| simd.mul_f64s(a, b),
+                |a, b| simd.div_f64s(a, b),
+            );
+            let r2 = add(mul(x1, x1), mul(x2, x2));
+            let r = simd.sqrt_f64s(r2);
+            let dot = add(mul(x1, v1), mul(x2, v2));
+            let cross = sub(mul(x1, v2), mul(x2, v1));
+            let zhat = [div(dot, r), math::atan2(simd, x2, x1), div(cross, r2)];
+            for (i, zh) in zhat.into_iter().enumerate() {
+                store::<S>(&mut nu[i], c, sub(load::<S>(&z[i], c), zh));
+            }
+            let r3 = mul(r2, r);
+            let r4 = mul(r2, r2);
+            let two = simd.splat_f64s(2.0);
+            let zero = simd.splat_f64s(0.0);
+            let rows = [
+                [
+                    sub(div(v1, r), div(mul(dot, x1), r3)),
+                    div(x1, r),
+                    sub(div(v2, r), div(mul(dot, x2), r3)),
+                    div(x2, r),
+                ],
+                [div(simd.neg_f64s(x2), r2), zero, div(x1, r2), zero],
+                [
+                    sub(div(v2, r2), div(mul(mul(two, x1), cross), r4)),
+                    div(simd.neg_f64s(x2), r2),
+                    sub(
+                        div(simd.neg_f64s(v1), r2),
+                        div(mul(mul(two, x2), cross), r4),
+                    ),
+                    div(x1, r2),
+                ],
+            ];
+            for (hi, row) in h.iter_mut().zip(rows) {
+                for (hij, v) in hi.iter_mut().zip(row) {
+                    store::<S>(hij, c, v);
+                }
+            }
+        }
+        for d in nu[Self::ELEVATION].iter_mut() {
+            *d = crate::bearing::wrap_difference(*d);
+        }
+        broadcast(r, self.r.matrix());
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

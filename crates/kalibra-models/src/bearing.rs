@@ -465,7 +465,7 @@ impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
 /// difference of two angles in (-pi, pi]), where `d % 2 pi` is `d` itself: the same additions
 /// it makes, so the same bits.
 #[inline(always)]
-fn wrap_difference(d: f64) -> f64 {
+pub(crate) fn wrap_difference(d: f64) -> f64 {
     if d.abs() < 2.0 * PI {
         let r = if d < 0.0 { d + 2.0 * PI } else { d };
         if r > PI { r - 2.0 * PI } else { r }

@@ -313,3 +313,98 @@ mod models {
         }
     }
 }
+
+mod radar {
+    use super::*;
+    use kalibra_linalg::Matrix3;
+    use kalibra_models::RadarRates;
+    use kalibra_models::lanes::{BATCH, LaneMeasurement, Lanes, PerLane};
+
+    type Out = ([Lanes; 3], [[Lanes; 4]; 3], [[Lanes; 3]; 3]);
+
+    struct Innovate<'a, H> {
+        m: &'a H,
+        x: &'a [Lanes; 4],
+        z: &'a [Lanes; 3],
+        out: &'a mut Out,
+    }
+
+    impl<H: LaneMeasurement<4, 3>> WithSimd for Innovate<'_, H> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            let (nu, h, r) = self.out;
+            self.m.innovate_lanes(simd, 0, self.x, self.z, nu, h, r);
+        }
+    }
+
+    fn check<S: Simd>(simd: S, isa: &str) {
+        let radar = RadarRates::new(Matrix3::from_diagonal(&[225.0, 3e-6, 3e-8].into())).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let mut worst = 0u64;
+        for _ in 0..5000 {
+            let mut x = [[0.0; BATCH]; 4];
+            let mut z = [[0.0; BATCH]; 3];
+            for l in 0..BATCH {
+                // Re-entry scales: positions to 3e5 m either side, velocities to 3e3 m/s.
+                for (i, xi) in x.iter_mut().enumerate() {
+                    let scale = if i % 2 == 0 { 3e5 } else { 3e3 };
+                    xi[l] = rng.random_range(-scale..scale);
+                }
+                z[0][l] = rng.random_range(-3e3..3e3);
+                z[1][l] = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+                z[2][l] = rng.random_range(-0.1..0.1);
+            }
+            let mut a: Out = (
+                [[0.0; BATCH]; 3],
+                [[[0.0; BATCH]; 4]; 3],
+                [[[0.0; BATCH]; 3]; 3],
+            );
+            let mut b = a;
+            Simd::vectorize(
+                simd,
+                Innovate {
+                    m: &radar,
+                    x: &x,
+                    z: &z,
+                    out: &mut a,
+                },
+            );
+            Simd::vectorize(
+                simd,
+                Innovate {
+                    m: &PerLane(&radar),
+                    x: &x,
+                    z: &z,
+                    out: &mut b,
+                },
+            );
+            // Range rate, sightline rate, H and R: the scalar operations, to the bit.
+            assert_eq!(
+                (a.0[0], a.0[2], a.1, a.2),
+                (b.0[0], b.0[2], b.1, b.2),
+                "{isa}"
+            );
+            for l in 0..BATCH {
+                let d = (a.0[1][l] - b.0[1][l]).abs();
+                worst = worst.max((d / f64::EPSILON / std::f64::consts::PI).ceil() as u64);
+            }
+        }
+        // The elevation innovation: atan2 within 3 ulp of glibc's, on an angle of pi at most.
+        assert!(worst <= 3, "{isa}: {worst}");
+    }
+
+    #[test]
+    fn the_lane_wise_radar_agrees_with_the_scalar_one_on_every_isa() {
+        check(pulp::Scalar::new(), "scalar");
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                check(simd, "avx2");
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                check(simd, "avx512");
+            }
+        }
+    }
+}
