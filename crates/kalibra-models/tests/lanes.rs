@@ -408,3 +408,182 @@ mod radar {
         }
     }
 }
+
+mod trig {
+    use super::*;
+    use kalibra_models::lanes::math::{SIN_COS_LIMIT, sin_cos_lanes};
+    use kalibra_models::lanes::{BATCH, Lanes};
+
+    struct SinCos<'a> {
+        x: &'a Lanes,
+        out: &'a mut (Lanes, Lanes),
+    }
+
+    impl WithSimd for SinCos<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            *self.out = sin_cos_lanes(simd, self.x);
+        }
+    }
+
+    /// Log-uniform magnitudes up to 1e6 (beyond the SIMD range too), ordinary angles, the
+    /// doubles nearest to multiples of pi/2, points next to multiples of pi/4, and the special
+    /// values.
+    fn samples() -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(23);
+        let mut out = Vec::new();
+        for i in 0..1_000_000 {
+            let v: f64 = match i % 4 {
+                0 => 10f64.powf(rng.random_range(-300.0..6.0)),
+                1 => rng.random_range(-20.0..20.0),
+                // The doubles nearest to multiples of pi/2: the hardest reductions.
+                2 => rng.random_range(-70_000i64..70_000) as f64 * std::f64::consts::FRAC_PI_2,
+                _ => {
+                    let k = rng.random_range(-200_000i64..200_000) as f64;
+                    k * std::f64::consts::FRAC_PI_4 * (1.0 + rng.random_range(-1e-12..1e-12))
+                }
+            };
+            out.push(if rng.random::<bool>() { v } else { -v });
+        }
+        out.extend([
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            5e-324,
+            f64::MAX,
+        ]);
+        out.extend([
+            SIN_COS_LIMIT,
+            -SIN_COS_LIMIT,
+            SIN_COS_LIMIT * (1.0 + f64::EPSILON),
+        ]);
+        out
+    }
+
+    fn check<S: Simd>(simd: S, isa: &str, points: &[f64]) -> Option<String> {
+        let mut worst = (0u64, 0.0);
+        for chunk in points.chunks(BATCH) {
+            let mut x = [0.0; BATCH];
+            x[..chunk.len()].copy_from_slice(chunk);
+            let mut out = ([0.0; BATCH], [0.0; BATCH]);
+            Simd::vectorize(
+                simd,
+                SinCos {
+                    x: &x,
+                    out: &mut out,
+                },
+            );
+            for (l, v) in chunk.iter().enumerate() {
+                let d = ulps(out.0[l], v.sin()).max(ulps(out.1[l], v.cos()));
+                if v.abs() > SIN_COS_LIMIT && d != 0 {
+                    return Some(format!("{isa}: libm's own beyond the limit, not at {v:e}"));
+                }
+                if d > worst.0 {
+                    worst = (d, *v);
+                }
+            }
+        }
+        (worst.0 > 2).then(|| format!("{isa}: {} ulp at {:e}", worst.0, worst.1))
+    }
+
+    #[test]
+    fn sin_cos_is_within_2_ulp_of_glibc_on_every_isa() {
+        let points = samples();
+        let mut failures = Vec::new();
+        failures.extend(check(pulp::Scalar::new(), "scalar", &points));
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                failures.extend(check(simd, "avx2", &points));
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                failures.extend(check(simd, "avx512", &points));
+            }
+        }
+        assert!(failures.is_empty(), "{failures:?}");
+    }
+}
+
+mod accel_axis {
+    use super::*;
+    use kalibra_models::lanes::{BATCH, LaneDynamics, Lanes, PerLane};
+    use kalibra_models::{AccelAxis, Target3dParams};
+
+    type Out = ([Lanes; 3], [[Lanes; 3]; 3], [[Lanes; 3]; 3]);
+
+    struct Predict<'a, D> {
+        d: &'a D,
+        out: &'a mut Out,
+    }
+
+    impl<D: LaneDynamics<3>> WithSimd for Predict<'_, D> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            let (x, f, q) = self.out;
+            self.d.predict_lanes(simd, 5, x, f, q);
+        }
+    }
+
+    fn check<S: Simd>(simd: S, isa: &str) {
+        let mut rng = ChaCha8Rng::seed_from_u64(31);
+        for axis in 0..3 {
+            let model = AccelAxis::new(Target3dParams::default(), axis).unwrap();
+            let mut worst = 0.0f64;
+            for _ in 0..5000 {
+                let mut x = [[0.0; BATCH]; 3];
+                for xi in x.iter_mut() {
+                    for v in xi.iter_mut() {
+                        *v = rng.random_range(-50.0..50.0);
+                    }
+                }
+                let mut a: Out = (x, [[[0.0; BATCH]; 3]; 3], [[[0.0; BATCH]; 3]; 3]);
+                let mut b = a;
+                Simd::vectorize(
+                    simd,
+                    Predict {
+                        d: &model,
+                        out: &mut a,
+                    },
+                );
+                Simd::vectorize(
+                    simd,
+                    Predict {
+                        d: &PerLane(&model),
+                        out: &mut b,
+                    },
+                );
+                assert_eq!(a.2, b.2, "{isa}: Q");
+                for l in 0..BATCH {
+                    // Relative to the state's size: sin and cos within 2 ulp of glibc's enter
+                    // a sum with the other terms.
+                    let size = x.iter().map(|xi| xi[l].abs()).fold(1.0, f64::max);
+                    for i in 0..3 {
+                        worst = worst.max((a.0[i][l] - b.0[i][l]).abs() / size);
+                        for j in 0..3 {
+                            worst = worst.max((a.1[i][j][l] - b.1[i][j][l]).abs());
+                        }
+                    }
+                }
+            }
+            assert!(worst <= 2.0 * f64::EPSILON, "{isa}, axis {axis}: {worst:e}");
+        }
+    }
+
+    #[test]
+    fn the_lane_wise_axis_agrees_with_the_scalar_one_on_every_isa() {
+        check(pulp::Scalar::new(), "scalar");
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                check(simd, "avx2");
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                check(simd, "avx512");
+            }
+        }
+    }
+}

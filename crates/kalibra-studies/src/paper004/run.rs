@@ -173,9 +173,10 @@ struct AxisTrajectory<const M: usize> {
     errors: [Vec<f64>; 3],
 }
 
-/// The batched EKF of one axis, on borrowed models evaluated lane by lane.
+/// The batched EKF of one axis, on borrowed models: the axis's dynamics evaluate their lanes
+/// together (SIMD sine and cosine), the linear observation lane by lane.
 type AxisEkf<'a, const M: usize> =
-    EkfBatch<3, M, PerLane<&'a AccelAxis>, PerLane<&'a LinearObservation<U3, Const<M>>>>;
+    EkfBatch<3, M, &'a AccelAxis, PerLane<&'a LinearObservation<U3, Const<M>>>>;
 
 /// Runs one axis for `steps` steps from fresh truths, for the runs of `rngs` together (lane
 /// `l` is run `first + l`, drawing from `rngs[l]` exactly what the one-run study drew: its
@@ -199,7 +200,7 @@ fn run_axis<const M: usize>(
     }
     let mut ekf = EkfBatch::new(
         isa,
-        PerLane(&axis.dynamics),
+        &axis.dynamics,
         PerLane(&axis.measurement),
         Vector3::zeros(),
         Matrix3::identity(),
