@@ -115,10 +115,10 @@ pub fn atan2<S: Simd>(simd: S, y: S::f64s, x: S::f64s) -> S::f64s {
 /// (`pio2_3t`): without it, `x` next to a multiple of `pi/2` (`r` near 1e-13 at `x` near
 /// 7e4) kept an error of `n * 8.5e-32`, hundreds of ulp of `r`.
 const PIO2: [f64; 4] = [
-    1.57079632673412561417e+00,
-    6.07710050630396597660e-11,
-    2.02226624871116645580e-21,
-    8.47842766036889956997e-32,
+    1.5707963267341256,
+    6.077100506303966e-11,
+    2.0222662487111665e-21,
+    8.4784276603689e-32,
 ];
 /// Above this magnitude [`sin_cos`] leaves the lane to libm (the three-part reduction is
 /// exact while `|x| 2/pi < 2^20`; this keeps a wide margin).
