@@ -216,7 +216,8 @@ pub fn sin_cos_lanes<S: Simd>(simd: S, x: &Lanes) -> (Lanes, Lanes) {
         store::<S>(&mut c, chunk, cv);
     }
     for l in 0..BATCH {
-        if !(x[l].abs() <= SIN_COS_LIMIT) {
+        // Beyond the limit, infinite or NaN.
+        if x[l].abs() > SIN_COS_LIMIT || x[l].is_nan() {
             (s[l], c[l]) = x[l].sin_cos();
         }
     }
