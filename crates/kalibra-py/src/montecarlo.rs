@@ -373,16 +373,22 @@ fn monte_carlo<'py>(
     groups: Option<&Bound<'py, PyDict>>,
     lags: usize,
     return_log: bool,
-    shard: Option<(usize, usize)>,
+    shard: Option<(i64, i64)>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let whole = shard.is_none();
     let shard = match shard {
         None => Shard::WHOLE,
-        Some((i, count)) => Shard::new(i, count).map_err(|_| {
-            error(format!(
-                "argument shard: ({i}, {count}) is not a shard; expected (i, S) with 0 <= i < S"
-            ))
-        })?,
+        // Signed, so that a negative index is named here rather than as an OverflowError.
+        Some((i, count)) => usize::try_from(i)
+            .ok()
+            .zip(usize::try_from(count).ok())
+            .and_then(|(i, count)| Shard::new(i, count).ok())
+            .ok_or_else(|| {
+                error(format!(
+                    "argument shard: ({i}, {count}) is not a shard; expected (i, S) with \
+                     0 <= i < S"
+                ))
+            })?,
     };
     if !whole && return_log {
         return Err(error(
