@@ -97,6 +97,52 @@ impl Arrays {
     }
 }
 
+/// A constant model, for `J1`/`J2`.
+const MODEL: ModelCell<'static> = ModelCell {
+    f: &[1.0, 1.0, 0.0, 1.0],
+    h: &[1.0, 0.0],
+    q: &[0.25, 0.5, 0.5, 1.0],
+    r: &[4.0],
+};
+
+impl Arrays {
+    /// An evaluator of `evaluation` fed the whole runs `runs`, each cell with [`MODEL`].
+    fn feed_with_model(
+        &self,
+        evaluation: &Evaluation,
+        runs: std::ops::Range<usize>,
+    ) -> kalibra_eval::Evaluator {
+        let mut e = evaluation.evaluator(model_contents()).unwrap();
+        for run in runs {
+            for step in 0..self.steps {
+                let cell = Cell {
+                    model: Some(MODEL),
+                    ..self.cell(run, step)
+                };
+                e.push(run, step, &cell).unwrap();
+            }
+        }
+        e
+    }
+}
+
+/// `a` with every `every`-th cell's covariance made asymmetric (a finding, left out).
+fn with_asymmetric_covariances(mut a: Arrays, every: usize) -> Arrays {
+    for i in (0..a.runs * a.steps).step_by(every) {
+        a.cov[i * N * N + 1] = 5.0;
+        a.cov[i * N * N + 2] = 5.0;
+    }
+    a
+}
+
+/// [`contents`] with the model.
+fn model_contents() -> Contents {
+    Contents {
+        model: Some((N, M)),
+        ..contents()
+    }
+}
+
 fn contents() -> Contents {
     Contents {
         truth: Some(N),
@@ -381,40 +427,10 @@ fn indices_beyond_the_limits_are_refused_before_anything_grows() {
 /// findings; merging the same blocks in the same order on any threads gives the same bits.
 #[test]
 fn merged_evaluators_of_run_blocks_give_the_report_to_rounding() {
-    let mut a = arrays(11, 23, 17);
-    for i in (0..a.runs * a.steps).step_by(11) {
-        a.cov[i * N * N + 1] = 5.0;
-        a.cov[i * N * N + 2] = 5.0;
-    }
-    let (h, r, q, f) = (
-        [1.0, 0.0],
-        [4.0],
-        [0.25, 0.5, 0.5, 1.0],
-        [1.0, 1.0, 0.0, 1.0],
-    );
-    let cell = |run: usize, step: usize| Cell {
-        model: Some(ModelCell {
-            f: &f,
-            h: &h,
-            q: &q,
-            r: &r,
-        }),
-        ..a.cell(run, step)
-    };
-    let contents = Contents {
-        model: Some((N, M)),
-        ..contents()
-    };
+    let a = with_asymmetric_covariances(arrays(11, 23, 17), 11);
+    let contents = model_contents();
     let evaluation = Evaluation::new().window(4).unwrap().diagnostic_run(9);
-    let feed = |runs: std::ops::Range<usize>| {
-        let mut e = evaluation.evaluator(contents).unwrap();
-        for run in runs {
-            for step in 0..a.steps {
-                e.push(run, step, &cell(run, step)).unwrap();
-            }
-        }
-        e
-    };
+    let feed = |runs| a.feed_with_model(&evaluation, runs);
     let want = feed(0..a.runs).finish(None).unwrap();
     assert!(want.j.is_some());
     let blocked = |cuts: &[usize]| {
@@ -452,40 +468,10 @@ fn merged_evaluators_of_run_blocks_give_the_report_to_rounding() {
 /// contradict themselves, are refused.
 #[test]
 fn evaluator_states_resume_to_the_same_bits() {
-    let mut a = arrays(12, 19, 70);
-    for i in (0..a.runs * a.steps).step_by(13) {
-        a.cov[i * N * N + 1] = 5.0;
-        a.cov[i * N * N + 2] = 5.0;
-    }
-    let (h, r, q, f) = (
-        [1.0, 0.0],
-        [4.0],
-        [0.25, 0.5, 0.5, 1.0],
-        [1.0, 1.0, 0.0, 1.0],
-    );
-    let cell = |run: usize, step: usize| Cell {
-        model: Some(ModelCell {
-            f: &f,
-            h: &h,
-            q: &q,
-            r: &r,
-        }),
-        ..a.cell(run, step)
-    };
-    let contents = Contents {
-        model: Some((N, M)),
-        ..contents()
-    };
+    let a = with_asymmetric_covariances(arrays(12, 19, 70), 13);
+    let contents = model_contents();
     let evaluation = Evaluation::new().window(5).unwrap().diagnostic_run(7);
-    let feed = |runs: std::ops::Range<usize>| {
-        let mut e = evaluation.evaluator(contents).unwrap();
-        for run in runs {
-            for step in 0..a.steps {
-                e.push(run, step, &cell(run, step)).unwrap();
-            }
-        }
-        e
-    };
+    let feed = |runs| a.feed_with_model(&evaluation, runs);
     let cbor = |state: &kalibra_eval::EvaluatorState| {
         let mut bytes = Vec::new();
         ciborium::into_writer(state, &mut bytes).unwrap();

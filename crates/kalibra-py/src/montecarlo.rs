@@ -1,7 +1,7 @@
 //! `kalibra.monte_carlo`: a seeded Monte Carlo of a linear-Gaussian model through kalibra's
 //! Kalman filter, evaluated, entirely in Rust.
 
-use kalibra_eval::{Cell, Contents, Evaluation, MatrixCell, ModelCell};
+use kalibra_eval::{Cell, Evaluation, MatrixCell, ModelCell};
 use kalibra_filters::{Filter, Kf};
 use kalibra_linalg::semidefinite_factor;
 use kalibra_linalg::{
@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use crate::arrays::{new_array, read};
 use crate::error;
 use crate::eval::{Report, evaluation};
-use crate::shards::{PyPartial, StudyConfig, VERSION, fold};
+use crate::shards::{PyPartial, StudyConfig, VERSION, fold, study_contents};
 
 /// One run's log, row-major per cell.
 struct RunLog {
@@ -184,14 +184,7 @@ where
         q: &q_rows,
         r: &r_rows,
     };
-    let contents = Contents {
-        truth: Some(n),
-        estimate: Some(n),
-        covariance: Some(n),
-        innovation: Some(m),
-        innovation_cov: Some(m),
-        model: Some((n, m)),
-    };
+    let contents = study_contents(n, m);
     // The runs are cut into the Monte Carlo blocks (fixed by the number of runs); each block
     // is simulated, filtered and evaluated on its own evaluator, its runs in order, the blocks
     // in parallel, and the evaluators merge in block order: the report is the same for any

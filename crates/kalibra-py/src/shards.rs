@@ -72,15 +72,20 @@ impl StudyConfig {
 
     /// What the evaluators of the study hold.
     pub(crate) fn contents(&self) -> Contents {
-        let (n, m) = (self.n, self.m);
-        Contents {
-            truth: Some(n),
-            estimate: Some(n),
-            covariance: Some(n),
-            innovation: Some(m),
-            innovation_cov: Some(m),
-            model: Some((n, m)),
-        }
+        study_contents(self.n, self.m)
+    }
+}
+
+/// What a Monte Carlo study's evaluators hold: the whole log of a state of dimension `n`
+/// measured in `m`, with the model.
+pub(crate) fn study_contents(n: usize, m: usize) -> Contents {
+    Contents {
+        truth: Some(n),
+        estimate: Some(n),
+        covariance: Some(n),
+        innovation: Some(m),
+        innovation_cov: Some(m),
+        model: Some((n, m)),
     }
 }
 
