@@ -181,28 +181,37 @@ impl PyPartial {
         if kalibra_sim::config_hash(body) != u64::from_le_bytes(le) {
             return Err(format!("{damaged} (checksum mismatch)"));
         }
-        // The format version first, so that another version's record is named as such
-        // rather than as a record that does not parse.
-        #[derive(Deserialize)]
-        struct Versioned {
-            partial: Format,
+        match ciborium::from_reader::<Record, _>(body) {
+            Ok(record) if record.partial.format == PARTIAL_FORMAT_VERSION => Ok(Self { record }),
+            Ok(record) => Err(other_version(record.partial.format)),
+            Err(e) => {
+                // Another version's record may not parse as this one: name its version if
+                // it has one (a second read only on this path, so a good partial is read once).
+                #[derive(Deserialize)]
+                struct Versioned {
+                    partial: Format,
+                }
+                #[derive(Deserialize)]
+                struct Format {
+                    format: u32,
+                }
+                match ciborium::from_reader::<Versioned, _>(body) {
+                    Ok(v) if v.partial.format != PARTIAL_FORMAT_VERSION => {
+                        Err(other_version(v.partial.format))
+                    }
+                    _ => Err(format!("{damaged}: {e}")),
+                }
+            }
         }
-        #[derive(Deserialize)]
-        struct Format {
-            format: u32,
-        }
-        let versioned: Versioned =
-            ciborium::from_reader(body).map_err(|e| format!("{damaged}: {e}"))?;
-        if versioned.partial.format != PARTIAL_FORMAT_VERSION {
-            return Err(format!(
-                "a partial result of format version {}; this kalibra ({VERSION}) reads version \
-                 {PARTIAL_FORMAT_VERSION}",
-                versioned.partial.format
-            ));
-        }
-        let record: Record = ciborium::from_reader(body).map_err(|e| format!("{damaged}: {e}"))?;
-        Ok(Self { record })
     }
+}
+
+/// The refusal of a partial of another format version.
+fn other_version(found: u32) -> String {
+    format!(
+        "a partial result of format version {found}; this kalibra ({VERSION}) reads version \
+         {PARTIAL_FORMAT_VERSION}"
+    )
 }
 
 #[pymethods]
