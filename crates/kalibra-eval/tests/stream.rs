@@ -550,4 +550,25 @@ fn evaluator_states_resume_to_the_same_bits() {
     set(&mut value, "steps", 70);
     set(&mut value, "runs", 11);
     assert!(matches!(resume_value(&value), Err(EvalError::State(_))));
+    set(&mut value, "runs", 12);
+    // A count no state of its runs and steps can hold (a merge of it could overflow).
+    let j = |value: &mut ciborium::Value| -> ciborium::Value {
+        let map = value.as_map_mut().unwrap();
+        map.iter()
+            .find(|(k, _)| k.as_text() == Some("j"))
+            .unwrap()
+            .1
+            .clone()
+    };
+    let mut side = j(&mut value);
+    set(&mut side, "failed", 12 * 70 + 1);
+    for (k, v) in value.as_map_mut().unwrap() {
+        if k.as_text() == Some("j") {
+            *v = side.clone();
+        }
+    }
+    match resume_value(&value) {
+        Err(EvalError::State(message)) => assert!(message.contains("failed J steps"), "{message}"),
+        other => panic!("{:?}", other.map(|e| e.runs())),
+    }
 }

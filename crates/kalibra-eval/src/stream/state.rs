@@ -132,7 +132,11 @@ impl PerRun {
     }
 
     /// The per-run vector again, zeros before `first`.
-    fn into_runs(self, first: usize, runs: usize) -> Result<Vec<(f64, usize)>, EvalError> {
+    fn into_runs(
+        self,
+        first: usize,
+        (runs, steps): (usize, usize),
+    ) -> Result<Vec<(f64, usize)>, EvalError> {
         if self.sum.len() != self.count.len() || first + self.sum.len() > runs {
             return Err(bad(format!(
                 "{} per-run sums and {} counts from run {first} of {runs}",
@@ -142,7 +146,10 @@ impl PerRun {
         }
         let mut out = vec![(0.0, 0); first];
         for (s, c) in self.sum.into_iter().zip(self.count) {
-            let c = usize::try_from(c).map_err(|_| bad("a per-run count beyond usize"))?;
+            let c = usize::try_from(c)
+                .ok()
+                .filter(|&c| c <= steps)
+                .ok_or_else(|| bad(format!("a run counts {c} of {steps} steps")))?;
             out.push((s, c));
         }
         Ok(out)
@@ -193,11 +200,50 @@ impl FindingTallyData {
         if beyond || self.steps.len() > self.count.cells {
             return Err(bad("findings beyond the runs and steps"));
         }
+        let c = &self.count;
+        let kinds = [
+            c.non_finite,
+            c.not_symmetric,
+            c.not_positive_definite,
+            c.non_finite_vector,
+        ];
+        if kinds.iter().any(|&k| k > c.cells) {
+            return Err(bad(
+                "a kind of finding counted more often than the findings",
+            ));
+        }
+        cells("findings", c.cells, (runs, steps))?;
         Ok(FindingTally {
             count: self.count,
             steps: self.steps,
         })
     }
+}
+
+/// Checks that no count passes what `runs x steps` cells can give (per step: `runs`), so
+/// that the merge of a state read from outside cannot overflow a count.
+fn counts(
+    what: &str,
+    per_step: impl Fn(usize) -> u64,
+    (runs, steps): (usize, usize),
+) -> Result<(), EvalError> {
+    match (0..steps).find(|&k| per_step(k) > runs as u64) {
+        Some(k) => Err(bad(format!(
+            "{what} count {} runs at step {k} of a state of {runs} runs",
+            per_step(k)
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// Checks a count over all cells against `runs x steps`.
+fn cells(what: &str, count: usize, (runs, steps): (usize, usize)) -> Result<(), EvalError> {
+    if count as u128 > runs as u128 * steps as u128 {
+        return Err(bad(format!(
+            "{count} {what} in a state of {runs} runs x {steps} steps"
+        )));
+    }
+    Ok(())
 }
 
 /// Checks that a per-step accumulator covers the horizon (and, for those with one, the
@@ -348,10 +394,16 @@ impl Evaluation {
                 (data.squared.steps(), data.squared.dim()),
                 (steps, n),
             )?;
+            counts("the NEES means", |k| data.means.count(k), (runs, steps))?;
+            counts(
+                "the squared errors",
+                |k| data.squared.count(k),
+                (runs, steps),
+            )?;
             side.means = data.means;
             side.cred = data.cred;
             side.squared = data.squared;
-            side.per_run = data.per_run.into_runs(first, runs)?;
+            side.per_run = data.per_run.into_runs(first, (runs, steps))?;
             side.findings = data.findings.into_tally((runs, steps))?;
             side.window_series = data.window_series.into_pairs(n, steps)?;
         }
@@ -359,8 +411,9 @@ impl Evaluation {
             let m = side.m;
             horizon("the innovation side", (steps, data.m), (steps, m))?;
             horizon("the NIS means", (data.means.steps(), m), (steps, m))?;
+            counts("the NIS means", |k| data.means.count(k), (runs, steps))?;
             side.means = data.means;
-            side.per_run = data.per_run.into_runs(first, runs)?;
+            side.per_run = data.per_run.into_runs(first, (runs, steps))?;
             side.findings = data.findings.into_tally((runs, steps))?;
             side.normalized = data
                 .normalized
@@ -372,6 +425,10 @@ impl Evaluation {
         if let (Some(side), Some(data)) = (&mut ev.j, state.j) {
             horizon("J1", (data.j1.steps(), 0), (steps, 0))?;
             horizon("J2", (data.j2.steps(), 0), (steps, 0))?;
+            counts("J1", |k| data.j1.count(k), (runs, steps))?;
+            counts("J2", |k| data.j2.count(k), (runs, steps))?;
+            cells("J updates", data.horizon.updates(), (runs, steps))?;
+            cells("failed J steps", data.failed, (runs, steps))?;
             side.horizon = data.horizon;
             side.j1 = data.j1;
             side.j2 = data.j2;
