@@ -111,6 +111,10 @@ pub enum EvalError {
     /// Two evaluators of different options or contents cannot be merged.
     #[error("the evaluators to merge were made with different options or contents")]
     MergeMismatch,
+    /// An [`crate::EvaluatorState`] that does not fit the evaluation and contents it is
+    /// resumed with, or contradicts itself (a corrupt or foreign partial result).
+    #[error("an evaluator's state does not fit: {0}")]
+    State(String),
     /// A cell of the runs-by-steps rectangle that was never fed to an [`crate::Evaluator`]
     /// (every run needs every step, logged or not).
     #[error("run {run}, step {step} is missing (every run needs every step 0..{steps})")]

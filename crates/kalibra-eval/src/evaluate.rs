@@ -549,11 +549,12 @@ pub(crate) fn reason(err: MetricsError) -> Result<Reason, EvalError> {
     }
 }
 
-/// Findings of one side, counted as cells come.
+/// Findings of one side, counted as cells come (fields open to the crate: an
+/// [`crate::EvaluatorState`] writes and reads them).
 #[derive(Default)]
 pub(crate) struct FindingTally {
-    count: FindingCount,
-    steps: BTreeSet<usize>,
+    pub(crate) count: FindingCount,
+    pub(crate) steps: BTreeSet<usize>,
 }
 
 impl FindingTally {

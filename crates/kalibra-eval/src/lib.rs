@@ -101,7 +101,9 @@ pub use report::{
     Reason, Report, RmseSeries, SCHEMA_VERSION, Summary, TestMethod, Verdict, VerdictKind,
     WhitenessReport, WindowReport,
 };
-pub use stream::{Cell, Contents, Evaluator, MAX_RUNS, MAX_STEPS, MatrixCell, ModelCell};
+pub use stream::{
+    Cell, Contents, Evaluator, EvaluatorState, MAX_RUNS, MAX_STEPS, MatrixCell, ModelCell,
+};
 pub use tune::{
     InitialCovariance, JDivisor, NoCrossover, PointRmse, RmseMinimum, TUNE_SCHEMA_VERSION,
     TuneCrossover, TuneError, TuneFindings, TunePoint, TuneProblem, TuneReport, Tuning,

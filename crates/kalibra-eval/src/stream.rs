@@ -13,6 +13,9 @@ use crate::log::check_times;
 use crate::report::{Findings, Reason, Report, SCHEMA_VERSION, Summary, Verdict, VerdictKind};
 use crate::{EvalError, Evaluation};
 
+mod state;
+pub use state::EvaluatorState;
+
 /// A square matrix in one cell: every entry row by row, or the diagonal alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MatrixCell<'a> {

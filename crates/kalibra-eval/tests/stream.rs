@@ -97,6 +97,52 @@ impl Arrays {
     }
 }
 
+/// A constant model, for `J1`/`J2`.
+const MODEL: ModelCell<'static> = ModelCell {
+    f: &[1.0, 1.0, 0.0, 1.0],
+    h: &[1.0, 0.0],
+    q: &[0.25, 0.5, 0.5, 1.0],
+    r: &[4.0],
+};
+
+impl Arrays {
+    /// An evaluator of `evaluation` fed the whole runs `runs`, each cell with [`MODEL`].
+    fn feed_with_model(
+        &self,
+        evaluation: &Evaluation,
+        runs: std::ops::Range<usize>,
+    ) -> kalibra_eval::Evaluator {
+        let mut e = evaluation.evaluator(model_contents()).unwrap();
+        for run in runs {
+            for step in 0..self.steps {
+                let cell = Cell {
+                    model: Some(MODEL),
+                    ..self.cell(run, step)
+                };
+                e.push(run, step, &cell).unwrap();
+            }
+        }
+        e
+    }
+}
+
+/// `a` with every `every`-th cell's covariance made asymmetric (a finding, left out).
+fn with_asymmetric_covariances(mut a: Arrays, every: usize) -> Arrays {
+    for i in (0..a.runs * a.steps).step_by(every) {
+        a.cov[i * N * N + 1] = 5.0;
+        a.cov[i * N * N + 2] = 5.0;
+    }
+    a
+}
+
+/// [`contents`] with the model.
+fn model_contents() -> Contents {
+    Contents {
+        model: Some((N, M)),
+        ..contents()
+    }
+}
+
 fn contents() -> Contents {
     Contents {
         truth: Some(N),
@@ -381,40 +427,10 @@ fn indices_beyond_the_limits_are_refused_before_anything_grows() {
 /// findings; merging the same blocks in the same order on any threads gives the same bits.
 #[test]
 fn merged_evaluators_of_run_blocks_give_the_report_to_rounding() {
-    let mut a = arrays(11, 23, 17);
-    for i in (0..a.runs * a.steps).step_by(11) {
-        a.cov[i * N * N + 1] = 5.0;
-        a.cov[i * N * N + 2] = 5.0;
-    }
-    let (h, r, q, f) = (
-        [1.0, 0.0],
-        [4.0],
-        [0.25, 0.5, 0.5, 1.0],
-        [1.0, 1.0, 0.0, 1.0],
-    );
-    let cell = |run: usize, step: usize| Cell {
-        model: Some(ModelCell {
-            f: &f,
-            h: &h,
-            q: &q,
-            r: &r,
-        }),
-        ..a.cell(run, step)
-    };
-    let contents = Contents {
-        model: Some((N, M)),
-        ..contents()
-    };
+    let a = with_asymmetric_covariances(arrays(11, 23, 17), 11);
+    let contents = model_contents();
     let evaluation = Evaluation::new().window(4).unwrap().diagnostic_run(9);
-    let feed = |runs: std::ops::Range<usize>| {
-        let mut e = evaluation.evaluator(contents).unwrap();
-        for run in runs {
-            for step in 0..a.steps {
-                e.push(run, step, &cell(run, step)).unwrap();
-            }
-        }
-        e
-    };
+    let feed = |runs| a.feed_with_model(&evaluation, runs);
     let want = feed(0..a.runs).finish(None).unwrap();
     assert!(want.j.is_some());
     let blocked = |cuts: &[usize]| {
@@ -444,4 +460,115 @@ fn merged_evaluators_of_run_blocks_give_the_report_to_rounding() {
         e.merge(other).unwrap_err(),
         kalibra_eval::EvalError::MergeMismatch
     );
+}
+
+/// The blocks' evaluators shipped as states (CBOR, as a Python shard ships them) and resumed
+/// merge into the report of the evaluators themselves, to the bit (with findings, `J1`/`J2`,
+/// windows and a diagnostic run in a later block); states that do not fit their contents, or
+/// contradict themselves, are refused.
+#[test]
+fn evaluator_states_resume_to_the_same_bits() {
+    let a = with_asymmetric_covariances(arrays(12, 19, 70), 13);
+    let contents = model_contents();
+    let evaluation = Evaluation::new().window(5).unwrap().diagnostic_run(7);
+    let feed = |runs| a.feed_with_model(&evaluation, runs);
+    let cbor = |state: &kalibra_eval::EvaluatorState| {
+        let mut bytes = Vec::new();
+        ciborium::into_writer(state, &mut bytes).unwrap();
+        bytes
+    };
+    let cuts = [0, 4, 5, 12, 19];
+    let fold = |blocks: Vec<kalibra_eval::Evaluator>| {
+        let mut blocks = blocks.into_iter();
+        let mut total = blocks.next().unwrap();
+        for b in blocks {
+            total.merge(b).unwrap();
+        }
+        format!("{:?}", total.finish(None).unwrap())
+    };
+    let want = fold(cuts.windows(2).map(|w| feed(w[0]..w[1])).collect());
+    let states: Vec<Vec<u8>> = cuts
+        .windows(2)
+        .map(|w| cbor(&feed(w[0]..w[1]).into_state()))
+        .collect();
+    let resumed = states
+        .iter()
+        .map(|bytes| {
+            let state = ciborium::from_reader(bytes.as_slice()).unwrap();
+            evaluation.resume(contents, state).unwrap()
+        })
+        .collect();
+    assert_eq!(fold(resumed), want);
+    assert!(want.contains("j: Some"), "{want}");
+
+    // A block's state starts at its first run: its size does not grow with the runs before.
+    assert!(
+        states[3].len() < states[2].len() + 64,
+        "{} {}",
+        states[3].len(),
+        states[2].len()
+    );
+
+    let state = || feed(5..12).into_state();
+    let refused = |contents: Contents, state| match evaluation.resume(contents, state) {
+        Err(EvalError::State(message)) => message,
+        other => panic!("{:?}", other.map(|e| e.runs())),
+    };
+    // Contents with another side, or another dimension.
+    let innovation_only = Contents {
+        truth: None,
+        estimate: None,
+        covariance: None,
+        model: None,
+        ..contents
+    };
+    assert!(refused(innovation_only, state()).contains("sides"));
+    let wider = Contents {
+        innovation: Some(2),
+        innovation_cov: Some(2),
+        model: Some((N, 2)),
+        ..contents
+    };
+    assert!(refused(wider, state()).contains("dimension"));
+    // A state edited to claim more steps than its accumulators hold, or fewer runs than it saw.
+    let mut value: ciborium::Value = ciborium::from_reader(cbor(&state()).as_slice()).unwrap();
+    let set = |value: &mut ciborium::Value, key: &str, to: u64| {
+        for (k, v) in value.as_map_mut().unwrap() {
+            if k.as_text() == Some(key) {
+                *v = ciborium::Value::Integer(to.into());
+            }
+        }
+    };
+    let resume_value = |value: &ciborium::Value| {
+        let mut bytes = Vec::new();
+        ciborium::into_writer(value, &mut bytes).unwrap();
+        evaluation.resume(contents, ciborium::from_reader(bytes.as_slice()).unwrap())
+    };
+    assert!(resume_value(&value).is_ok());
+    set(&mut value, "steps", 71);
+    assert!(matches!(resume_value(&value), Err(EvalError::State(_))));
+    set(&mut value, "steps", 70);
+    set(&mut value, "runs", 11);
+    assert!(matches!(resume_value(&value), Err(EvalError::State(_))));
+    set(&mut value, "runs", 12);
+    // A count no state of its runs and steps can hold (a merge of it could overflow).
+    let j = |value: &mut ciborium::Value| -> ciborium::Value {
+        let map = value.as_map_mut().unwrap();
+        map.iter()
+            .find(|(k, _)| k.as_text() == Some("j"))
+            .unwrap()
+            .1
+            .clone()
+    };
+    let mut side = j(&mut value);
+    set(&mut side, "failed", 12 * 70 + 1);
+    for (k, v) in value.as_map_mut().unwrap() {
+        if k.as_text() == Some("j") {
+            *v = side.clone();
+        }
+    }
+    match resume_value(&value) {
+        Err(EvalError::State(message)) => assert!(message.contains("failed J steps"), "{message}"),
+        other => panic!("{:?}", other.map(|e| e.runs())),
+    }
 }

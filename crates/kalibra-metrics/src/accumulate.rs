@@ -295,6 +295,11 @@ impl SquaredErrors {
         self.dim
     }
 
+    /// Number of errors pushed at `step` (0 beyond the horizon).
+    pub fn count(&self, step: usize) -> u64 {
+        self.count.get(step).copied().unwrap_or(0)
+    }
+
     /// Adds one run's error at `step`.
     ///
     /// # Errors

@@ -247,7 +247,16 @@ pub struct JSummary {
 /// assert!((paper.nq_log10_mean - 505f64.log10()).abs() < 1e-15);
 /// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Serialised (serde, for a Monte Carlo shard's partial result) as
+/// `{"sums": [...], "tr_b_exp": e, "updates": u, "indefinite": i}`, `sums` holding the IEEE-754
+/// bit patterns of `sum_j1`, `sum_j2`, `sum_log10_tr_b`, `sum_tr_b`, `max_j1k` and `max_j2k`
+/// as unsigned integers: the maxima start at `-inf` and a sum may be NaN, which JSON cannot
+/// write as numbers, and bit patterns survive every format exactly. Deserialising checks that
+/// the scale `tr_b_exp` is one the accumulator can reach (a multiple of 64 in `0..=1024`), so
+/// a merge cannot overflow it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "JHorizonData", try_from = "JHorizonData")]
 pub struct JHorizon {
     sum_j1: f64,
     sum_j2: f64,
@@ -260,6 +269,71 @@ pub struct JHorizon {
     indefinite: usize,
     max_j1k: f64,
     max_j2k: f64,
+}
+
+/// [`JHorizon`] as written and read, before its invariants are checked.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct JHorizonData {
+    sums: [u64; 6],
+    tr_b_exp: i32,
+    updates: usize,
+    indefinite: usize,
+}
+
+/// The largest scale of `tr(B)`'s sum: 2^1024 per update already passes f64's range, and
+/// 2^64 updates would not pass 2^64 more.
+const MAX_TR_B_EXP: i32 = 1024;
+
+impl From<JHorizon> for JHorizonData {
+    fn from(h: JHorizon) -> Self {
+        Self {
+            sums: [
+                h.sum_j1,
+                h.sum_j2,
+                h.sum_log10_tr_b,
+                h.sum_tr_b,
+                h.max_j1k,
+                h.max_j2k,
+            ]
+            .map(f64::to_bits),
+            tr_b_exp: h.tr_b_exp,
+            updates: h.updates,
+            indefinite: h.indefinite,
+        }
+    }
+}
+
+impl TryFrom<JHorizonData> for JHorizon {
+    type Error = String;
+
+    fn try_from(d: JHorizonData) -> Result<Self, String> {
+        if !(0..=MAX_TR_B_EXP).contains(&d.tr_b_exp) || d.tr_b_exp % 64 != 0 {
+            return Err(format!(
+                "a J horizon scaled by 2^{}: expected a multiple of 64 in 0..={MAX_TR_B_EXP}",
+                d.tr_b_exp
+            ));
+        }
+        if d.indefinite > d.updates {
+            return Err(format!(
+                "a J horizon with {} indefinite updates of {}",
+                d.indefinite, d.updates
+            ));
+        }
+        let [sum_j1, sum_j2, sum_log10_tr_b, sum_tr_b, max_j1k, max_j2k] =
+            d.sums.map(f64::from_bits);
+        Ok(Self {
+            sum_j1,
+            sum_j2,
+            sum_log10_tr_b,
+            sum_tr_b,
+            tr_b_exp: d.tr_b_exp,
+            updates: d.updates,
+            indefinite: d.indefinite,
+            max_j1k,
+            max_j2k,
+        })
+    }
 }
 
 impl Default for JHorizon {
@@ -486,6 +560,48 @@ pub fn crossover(points: &[SweepPoint]) -> Result<Option<Crossover>, MetricsErro
 mod tests {
     use super::*;
     use kalibra_linalg::{DMatrix, Matrix2, SMatrix};
+
+    #[test]
+    fn horizon_serde_keeps_every_bit_and_refuses_bad_scales() {
+        let bits = |h: &JHorizon| {
+            let d = JHorizonData::from(h.clone());
+            (d.sums, d.tr_b_exp, d.updates, d.indefinite)
+        };
+        // The empty horizon's maxima are -inf; a NaN pushed by hand reaches the sums; a huge
+        // trace rescales the tr(B) sum.
+        let mut h = JHorizon::new();
+        let empty: JHorizon = serde_json::from_str(&serde_json::to_string(&h).unwrap()).unwrap();
+        assert_eq!(bits(&empty), bits(&h));
+        for (j1, tr_b) in [(f64::NAN, 1.0), (-0.0, 1e308), (0.5, 1e308)] {
+            h.push(&JStep {
+                j1,
+                j2: 0.25,
+                tr_n: 0.0,
+                tr_b,
+                a_plus_b_definite: false,
+            });
+        }
+        assert_eq!(h.tr_b_exp, 64);
+        let back: JHorizon = serde_json::from_str(&serde_json::to_string(&h).unwrap()).unwrap();
+        assert_eq!(bits(&back), bits(&h));
+        assert!(back.sum_j1.is_nan());
+        for (exp, ok) in [
+            (0, true),
+            (1024, true),
+            (-64, false),
+            (32, false),
+            (1088, false),
+        ] {
+            let text = serde_json::to_string(&h)
+                .unwrap()
+                .replace("\"tr_b_exp\":64", &format!("\"tr_b_exp\":{exp}"));
+            assert_eq!(serde_json::from_str::<JHorizon>(&text).is_ok(), ok, "{exp}");
+        }
+        let text = serde_json::to_string(&h)
+            .unwrap()
+            .replace("\"indefinite\":3", "\"indefinite\":4");
+        assert!(serde_json::from_str::<JHorizon>(&text).is_err());
+    }
 
     fn m1(x: f64) -> SMatrix<f64, 1, 1> {
         SMatrix::<f64, 1, 1>::new(x)

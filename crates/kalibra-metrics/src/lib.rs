@@ -72,7 +72,7 @@ mod error;
 pub mod hypothesis;
 mod innovation;
 mod itse;
-mod packed;
+pub mod packed;
 mod scale;
 mod whiteness;
 mod window;

@@ -3,13 +3,19 @@
 //! little-endian 8-byte values. A shard's partial result is mostly such arrays, and reading a
 //! byte string is a copy where a sequence costs a decoder call per number: the merge of W1's
 //! 10^5-run partials took 12 ms with sequences and the byte strings make it a fraction of that.
+//!
+//! Public so that other crates' serialised accumulators (the evaluator's state in
+//! `kalibra-eval`) share the one encoding: `#[serde(with = "kalibra_metrics::packed")]` on a
+//! `Vec<f64>` or `Vec<u64>` field.
 
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serializer};
 
-/// A value of 8 little-endian bytes.
-pub(crate) trait Packed: Sized + Copy {
+/// A value of 8 little-endian bytes (`f64` and `u64`; an `f64` keeps every bit, NaN's too).
+pub trait Packed: Sized + Copy {
+    /// The value's 8 little-endian bytes.
     fn to_le(self) -> [u8; 8];
+    /// The value of 8 little-endian bytes.
     fn from_le(bytes: [u8; 8]) -> Self;
 }
 
@@ -32,7 +38,10 @@ impl Packed for u64 {
 }
 
 /// Serialises `values` as a sequence (human-readable formats) or one byte string.
-pub(crate) fn serialize<T, S>(values: &[T], serializer: S) -> Result<S::Ok, S::Error>
+///
+/// # Errors
+/// The format's error.
+pub fn serialize<T, S>(values: &[T], serializer: S) -> Result<S::Ok, S::Error>
 where
     T: Packed + serde::Serialize,
     S: Serializer,
@@ -46,7 +55,11 @@ where
 }
 
 /// Reads what [`serialize`] writes.
-pub(crate) fn deserialize<'de, T, D>(deserializer: D) -> Result<Vec<T>, D::Error>
+///
+/// # Errors
+/// The format's error for a value of another type or a byte string whose length is not a
+/// multiple of 8.
+pub fn deserialize<'de, T, D>(deserializer: D) -> Result<Vec<T>, D::Error>
 where
     T: Packed + Deserialize<'de>,
     D: Deserializer<'de>,

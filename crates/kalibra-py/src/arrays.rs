@@ -54,7 +54,20 @@ fn values<T: Element + Copy>(
 pub(crate) fn read(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Array> {
     let as_array;
     let obj = if obj.is_instance_of::<PyUntypedArray>() {
-        obj
+        // numpy arrays need not be aligned (pickle's out-of-band buffers, as Dask ships them;
+        // `frombuffer` at an odd offset), and rust-numpy reads only aligned ones: an unaligned
+        // array is copied by numpy into an aligned one first.
+        if obj
+            .getattr("flags")?
+            .getattr("aligned")?
+            .extract::<bool>()?
+        {
+            obj
+        } else {
+            let numpy = obj.py().import("numpy")?;
+            as_array = numpy.call_method1("require", (obj, obj.py().None(), "A"))?;
+            &as_array
+        }
     } else {
         let numpy = obj.py().import("numpy")?;
         as_array = numpy.call_method1("asarray", (obj,)).map_err(|e| {

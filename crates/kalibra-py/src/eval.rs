@@ -223,15 +223,7 @@ pub(crate) fn evaluation(
     groups: Option<&Bound<'_, PyDict>>,
     lags: usize,
 ) -> PyResult<Evaluation> {
-    let option = |e: kalibra_eval::EvalError| error(e.to_string());
-    let mut evaluation = Evaluation::new()
-        .confidence(confidence)
-        .map_err(option)?
-        .lags(lags)
-        .map_err(option)?;
-    if let Some(w) = window {
-        evaluation = evaluation.window(w).map_err(option)?;
-    }
+    let mut named = Vec::new();
     if let Some(groups) = groups {
         for (key, value) in groups.iter() {
             let group: String = key
@@ -242,8 +234,26 @@ pub(crate) fn evaluation(
                     "argument groups: group {group} is not a list of component indices (0, 1, ...)"
                 ))
             })?;
-            evaluation = evaluation.group(group, components).map_err(option)?;
+            named.push((group, components));
         }
+    }
+    evaluation_of(confidence, window, &named, lags).map_err(|e| error(e.to_string()))
+}
+
+/// The evaluation of options already read from Python (the groups in the order given): also
+/// how `kalibra.merge` rebuilds a sharded study's evaluation from its partial results.
+pub(crate) fn evaluation_of(
+    confidence: f64,
+    window: Option<usize>,
+    groups: &[(String, Vec<usize>)],
+    lags: usize,
+) -> Result<Evaluation, kalibra_eval::EvalError> {
+    let mut evaluation = Evaluation::new().confidence(confidence)?.lags(lags)?;
+    if let Some(w) = window {
+        evaluation = evaluation.window(w)?;
+    }
+    for (group, components) in groups {
+        evaluation = evaluation.group(group.clone(), components.clone())?;
     }
     Ok(evaluation)
 }

@@ -21,6 +21,7 @@ mod eval;
 mod filters;
 mod metrics;
 mod montecarlo;
+mod shards;
 mod tune;
 
 use pyo3::prelude::*;
@@ -50,5 +51,6 @@ fn kalibra_py(m: &Bound<'_, PyModule>) -> PyResult<()> {
     filters::register(m)?;
     tune::register(m)?;
     montecarlo::register(m)?;
+    shards::register(m)?;
     Ok(())
 }

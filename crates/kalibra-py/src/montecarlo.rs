@@ -1,14 +1,14 @@
 //! `kalibra.monte_carlo`: a seeded Monte Carlo of a linear-Gaussian model through kalibra's
 //! Kalman filter, evaluated, entirely in Rust.
 
-use kalibra_eval::{Cell, Contents, Evaluation, MatrixCell, ModelCell};
+use kalibra_eval::{Cell, Evaluation, MatrixCell, ModelCell};
 use kalibra_filters::{Filter, Kf};
 use kalibra_linalg::semidefinite_factor;
 use kalibra_linalg::{
     Alloc, Const, DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector,
 };
 use kalibra_models::{LinearGaussian, LinearObservation, Simulator, sample_with_factor};
-use kalibra_sim::MonteCarlo;
+use kalibra_sim::{MonteCarlo, Shard, StudyId};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use rayon::prelude::*;
@@ -16,6 +16,7 @@ use rayon::prelude::*;
 use crate::arrays::{new_array, read};
 use crate::error;
 use crate::eval::{Report, evaluation};
+use crate::shards::{PyPartial, StudyConfig, VERSION, fold, study_contents};
 
 /// One run's log, row-major per cell.
 struct RunLog {
@@ -82,11 +83,15 @@ struct Setup {
     steps: usize,
     seed: u64,
     threads: usize,
+    /// The blocks to evaluate: the whole study, or one shard's.
+    shard: Shard,
 }
 
-/// What a study returns: its report, and its log as arrays when asked for.
+/// What a study returns: the evaluators of its shard's blocks, in block order (unfolded, so
+/// that a shard's blocks fold with the others' exactly as the one-process run folds them),
+/// and its log as arrays when asked for.
 type Outcome = (
-    kalibra_eval::Report,
+    Vec<kalibra_eval::Evaluator>,
     Option<Vec<(String, Vec<usize>, Vec<f64>)>>,
 );
 
@@ -95,10 +100,11 @@ type Outcome = (
 ///
 /// Each run draws from its own stream `MonteCarlo::rng(run)`. The runs are cut into the
 /// Monte Carlo blocks; a block's runs are simulated, filtered and fed to the block's own
-/// [`kalibra_eval::Evaluator`] in order, blocks run in parallel, and the evaluators merge in
-/// block order ([`kalibra_eval::Evaluator::merge`]). The report is therefore the same for any
-/// thread count; against `evaluate` on the returned log (one evaluator, run after run) only
-/// the rounding of the per-step sums differs.
+/// [`kalibra_eval::Evaluator`] in order, blocks run in parallel, and the evaluators are
+/// returned in block order for the caller to merge in that order ([`fold`]). The report is
+/// therefore the same for any thread count, and for any cut into shards; against `evaluate`
+/// on the returned log (one evaluator, run after run) only the rounding of the per-step sums
+/// differs. Only the blocks of `setup.shard` run.
 fn study<N: Dim, M: Dim>(
     setup: &Setup,
     evaluation: &Evaluation,
@@ -178,14 +184,7 @@ where
         q: &q_rows,
         r: &r_rows,
     };
-    let contents = Contents {
-        truth: Some(n),
-        estimate: Some(n),
-        covariance: Some(n),
-        innovation: Some(m),
-        innovation_cov: Some(m),
-        model: Some((n, m)),
-    };
+    let contents = study_contents(n, m);
     // The runs are cut into the Monte Carlo blocks (fixed by the number of runs); each block
     // is simulated, filtered and evaluated on its own evaluator, its runs in order, the blocks
     // in parallel, and the evaluators merge in block order: the report is the same for any
@@ -205,17 +204,21 @@ where
         Ok((evaluator, kept))
     };
     // In block order, so the first error is the lowest failing run's.
-    let blocks: Vec<_> = (0..mc.blocks()).into_par_iter().map(block).collect();
-    let mut blocks = blocks.into_iter();
-    let (mut evaluator, mut kept) = blocks.next().ok_or_else(|| "no runs".to_string())??;
+    let blocks: Vec<_> = setup
+        .shard
+        .blocks(mc.blocks())
+        .into_par_iter()
+        .map(block)
+        .collect();
+    let mut evaluators = Vec::with_capacity(blocks.len());
+    let mut kept = Vec::new();
     for b in blocks {
         let (e, logs) = b?;
-        evaluator.merge(e).map_err(|e| e.to_string())?;
+        evaluators.push(e);
         kept.extend(logs);
     }
-    let report = evaluator.finish(None).map_err(|e| e.to_string())?;
     if !return_log {
-        return Ok((report, None));
+        return Ok((evaluators, None));
     }
     let runs = setup.runs;
     let gather = |field: fn(&RunLog) -> &Vec<f64>| -> Vec<f64> {
@@ -252,7 +255,7 @@ where
         ("Q".to_string(), vec![n, n], q_rows),
         ("R".to_string(), vec![m, m], r_rows),
     ];
-    Ok((report, Some(arrays)))
+    Ok((evaluators, Some(arrays)))
 }
 
 /// The study at fixed sizes for the common small models, at run-time sizes otherwise.
@@ -313,9 +316,16 @@ fn square(obj: &Bound<'_, PyAny>, name: &str, dim: Option<usize>) -> PyResult<DM
 ///     filter_Q, filter_R: the filter's noise, if not the true one.
 ///     confidence, window, groups, lags: as for `evaluate`.
 ///     return_log: also return the log as a dict of arrays (evaluate's argument names).
+///     shard: (i, S) to run only shard i of S of the study (0 <= i < S): a contiguous range
+///         of its blocks of runs, for another process or machine to run the others.
+///         ``kalibra.merge`` of the partial results of all S shards is the report of the whole
+///         study, to the bit, whatever S and the thread counts (with S above the study's
+///         blocks, min(runs, 64), some shards are empty and still needed). Not with
+///         return_log.
 ///
 /// Returns:
-///     Report, or (Report, dict[str, numpy.ndarray]) with return_log.
+///     Report, or (Report, dict[str, numpy.ndarray]) with return_log, or a picklable
+///     ``kalibra.Partial`` with shard.
 ///
 /// Example:
 ///     >>> import numpy as np, kalibra
@@ -326,10 +336,15 @@ fn square(obj: &Bound<'_, PyAny>, name: &str, dim: Option<usize>) -> PyResult<DM
 ///     'consistent'
 ///     >>> kalibra.monte_carlo(*args, runs=200, steps=50, seed=1, filter_R=R / 4).verdict
 ///     'optimistic'
+///     >>> parts = [kalibra.monte_carlo(*args, runs=200, steps=50, seed=1, shard=(i, 2))
+///     ...          for i in range(2)]
+///     >>> kalibra.merge(parts).verdict
+///     'consistent'
 #[pyfunction]
 #[pyo3(signature = (
     F, H, Q, R, x0, P0, *, runs=100, steps=100, seed=0, threads=0, filter_Q=None,
-    filter_R=None, confidence=0.95, window=None, groups=None, lags=10, return_log=false
+    filter_R=None, confidence=0.95, window=None, groups=None, lags=10, return_log=false,
+    shard=None
 ))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 fn monte_carlo<'py>(
@@ -351,7 +366,29 @@ fn monte_carlo<'py>(
     groups: Option<&Bound<'py, PyDict>>,
     lags: usize,
     return_log: bool,
+    shard: Option<(i64, i64)>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let whole = shard.is_none();
+    let shard = match shard {
+        None => Shard::WHOLE,
+        // Signed, so that a negative index is named here rather than as an OverflowError.
+        Some((i, count)) => usize::try_from(i)
+            .ok()
+            .zip(usize::try_from(count).ok())
+            .and_then(|(i, count)| Shard::new(i, count).ok())
+            .ok_or_else(|| {
+                error(format!(
+                    "argument shard: ({i}, {count}) is not a shard; expected (i, S) with \
+                     0 <= i < S"
+                ))
+            })?,
+    };
+    if !whole && return_log {
+        return Err(error(
+            "arguments shard and return_log do not go together: a shard's log is only its \
+             runs' (run the study whole for the log, or keep logs in the shards' own code)",
+        ));
+    }
     if runs == 0 || steps == 0 {
         return Err(error(format!(
             "arguments runs and steps must be at least 1 (got {runs} and {steps})"
@@ -399,6 +436,30 @@ fn monte_carlo<'py>(
         None => r.clone(),
     };
     let evaluation = evaluation(confidence, window, groups, lags)?;
+    // The study's identity: everything that decides its report but the seed and the runs
+    // (the thread count never does), bit for bit.
+    let config = (!whole)
+        .then(|| -> PyResult<StudyConfig> {
+            let rows = |a: &DMatrix<f64>| a.transpose().iter().copied().collect::<Vec<f64>>();
+            Ok(StudyConfig {
+                n,
+                m,
+                f: rows(&f),
+                h: rows(&h),
+                q: rows(&q),
+                r: rows(&r),
+                filter_q: rows(&fq),
+                filter_r: rows(&fr),
+                x0: x0.iter().copied().collect(),
+                p0: rows(&p0),
+                steps,
+                confidence,
+                window,
+                groups: group_list(groups)?,
+                lags,
+            })
+        })
+        .transpose()?;
     let (l0, _) = semidefinite_factor(&p0, "initial covariance P0")
         .map_err(|e| error(format!("argument P0: {e}")))?;
     let setup = Setup {
@@ -415,8 +476,9 @@ fn monte_carlo<'py>(
         steps,
         seed,
         threads,
+        shard,
     };
-    let (report, log) = py
+    let (evaluators, log) = py
         .detach(|| {
             let pool = (setup.threads > 0)
                 .then(|| {
@@ -432,6 +494,22 @@ fn monte_carlo<'py>(
             }
         })
         .map_err(error)?;
+    if let Some(config) = config {
+        let mc = MonteCarlo::new(runs, seed);
+        let study = StudyId::new(&mc, config.hash().map_err(error)?, VERSION);
+        return Ok(Bound::new(py, PyPartial::new(config, study, shard, evaluators))?.into_any());
+    }
+    let report = py
+        .detach(|| {
+            fold(
+                evaluators
+                    .into_iter()
+                    .map(|e| Ok(("a block".to_string(), e))),
+            )?
+            .finish(None)
+            .map_err(|e| e.to_string())
+        })
+        .map_err(error)?;
     let report = Bound::new(py, Report::new(report, "monte carlo"))?.into_any();
     match log {
         None => Ok(report),
@@ -443,6 +521,18 @@ fn monte_carlo<'py>(
             Ok(PyTuple::new(py, [report, dict.into_any()])?.into_any())
         }
     }
+}
+
+/// The groups as given (a dict's order), for the study's identity.
+fn group_list(groups: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, Vec<usize>)>> {
+    let Some(groups) = groups else {
+        return Ok(Vec::new());
+    };
+    // Read once already by `evaluation`, which named any bad key or value.
+    groups
+        .iter()
+        .map(|(k, v)| Ok((k.extract()?, v.extract()?)))
+        .collect()
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

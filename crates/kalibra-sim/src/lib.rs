@@ -41,7 +41,10 @@ mod tuning;
 pub use batch::{LinearTruthBatch, RunFailure, TruthBatch};
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
-pub use shard::{PARTIAL_FORMAT_VERSION, Partial, Shard, ShardError, StudyId, config_hash, merge};
+pub use shard::{
+    PARTIAL_FORMAT_VERSION, Partial, Shard, ShardError, StudyId, blocks_in_order, config_hash,
+    merge,
+};
 pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};
 
 use kalibra_metrics::Merge;

@@ -263,8 +263,10 @@ pub struct Partial<A> {
 }
 
 impl<A> Partial<A> {
-    /// A partial of the current format version.
-    pub(crate) fn new(study: StudyId, shard: Shard, blocks: Vec<A>) -> Self {
+    /// A partial of the current format version, for a study that runs its shard's blocks
+    /// itself ([`MonteCarlo::accumulate_shard`] makes it for the others): `blocks` are the
+    /// accumulators of [`Shard::blocks`], in order.
+    pub fn new(study: StudyId, shard: Shard, blocks: Vec<A>) -> Self {
         Self {
             format: PARTIAL_FORMAT_VERSION,
             study,
@@ -330,7 +332,27 @@ impl MonteCarlo {
 /// partials that are not exactly the shards `0..S` of one study; [`ShardError::Blocks`] for a
 /// partial with the wrong number of blocks; [`ShardError::Shape`] for accumulators that do not
 /// fit together ([`Merge::fits`]).
-pub fn merge<A: Merge>(mut parts: Vec<Partial<A>>) -> Result<A, ShardError> {
+pub fn merge<A: Merge>(parts: Vec<Partial<A>>) -> Result<A, ShardError> {
+    let parts = blocks_in_order(parts)?;
+    // Shapes first, against the first block, so that the fold cannot panic.
+    if let Some((_, first)) = parts.first() {
+        for (index, block) in &parts {
+            if !first.fits(block) {
+                return Err(ShardError::Shape { index: *index });
+            }
+        }
+    }
+    crate::fold_blocks(parts.into_iter().map(|(_, b)| b)).ok_or(ShardError::Empty)
+}
+
+/// The blocks of every shard of one study, in the study's block order, each with its shard's
+/// index, after the checks [`merge`] makes of the partials themselves: for accumulators that
+/// merge their own way (the Python package's evaluators, whose merge can fail and is not
+/// [`Merge`]), which the caller then folds from the left as [`merge`] does.
+///
+/// # Errors
+/// As [`merge`], but for [`ShardError::Shape`], which only the caller's merge can tell.
+pub fn blocks_in_order<A>(mut parts: Vec<Partial<A>>) -> Result<Vec<(usize, A)>, ShardError> {
     let first = parts.first().ok_or(ShardError::Empty)?;
     let (study, count) = (first.study.clone(), first.shard.count);
     for part in &parts {
@@ -385,18 +407,13 @@ pub fn merge<A: Merge>(mut parts: Vec<Partial<A>>) -> Result<A, ShardError> {
             });
         }
     }
-    // Shapes first, against the first block, so that the fold cannot panic.
-    let first = parts.iter().flat_map(|p| &p.blocks).next();
-    for part in &parts {
-        if let Some(first) = first
-            && part.blocks.iter().any(|b| !first.fits(b))
-        {
-            return Err(ShardError::Shape {
-                index: part.shard.index,
-            });
-        }
-    }
-    crate::fold_blocks(parts.into_iter().flat_map(|p| p.blocks)).ok_or(ShardError::Empty)
+    Ok(parts
+        .into_iter()
+        .flat_map(|p| {
+            let index = p.shard.index;
+            p.blocks.into_iter().map(move |b| (index, b))
+        })
+        .collect())
 }
 
 #[cfg(test)]

@@ -27,7 +27,9 @@ many at once, returning numpy arrays named as ``evaluate``'s arguments), and
 callables (symmetric or scaled sigma points, adaptive kappa). Tuning: ``sweep_q``, the
 J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command. Simulation:
 ``monte_carlo``, a seeded Monte Carlo of a linear model through the Kalman filter, evaluated,
-all in Rust and bit-identical for any thread count. Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
+all in Rust and bit-identical for any thread count; with ``shard=(i, S)`` it returns a
+picklable ``Partial`` and ``merge`` of all S gives the one-process report to the bit (Dask,
+job arrays). Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
 argument and, where one is at fault, the index.
 """
 
@@ -35,12 +37,14 @@ from ._kalibra import (
     ExtendedKalmanFilter,
     KalibraError,
     KalmanFilter,
+    Partial,
     Report,
     TuneReport,
     UnscentedKalmanFilter,
     __version__,
     chi2_band,
     evaluate,
+    merge,
     monte_carlo,
     nci,
     nees,
@@ -54,12 +58,14 @@ __all__ = [
     "ExtendedKalmanFilter",
     "KalibraError",
     "KalmanFilter",
+    "Partial",
     "Report",
     "TuneReport",
     "UnscentedKalmanFilter",
     "__version__",
     "chi2_band",
     "evaluate",
+    "merge",
     "monte_carlo",
     "nci",
     "nees",

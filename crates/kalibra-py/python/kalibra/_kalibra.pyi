@@ -1,7 +1,7 @@
 """Type stubs of the native module kalibra._kalibra (see kalibra's docstrings)."""
 
 import os
-from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Tuple, Union, final
+from typing import Any, Callable, Iterable, Literal, Mapping, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,8 @@ __all__ = [
     "TuneReport",
     "sweep_q",
     "monte_carlo",
+    "Partial",
+    "merge",
 ]
 
 class KalibraError(ValueError):
@@ -206,4 +208,31 @@ def monte_carlo(
     groups: Optional[Mapping[str, Sequence[int]]] = None,
     lags: int = 10,
     return_log: bool = False,
-) -> Union[Report, Tuple[Report, dict[str, _FloatArray]]]: ...
+    shard: Optional[Tuple[int, int]] = None,
+) -> Union[Report, Tuple[Report, dict[str, _FloatArray]], Partial]: ...
+
+@final
+class Partial:
+    """One shard's partial result of ``monte_carlo(..., shard=(i, S))``: picklable, and
+    ``merge`` of all S shards' is the one-process report to the bit."""
+
+    @staticmethod
+    def from_bytes(data: bytes) -> Partial: ...
+    def to_bytes(self) -> bytes: ...
+    def __reduce__(self) -> Tuple[Callable[[bytes], Partial], Tuple[bytes]]: ...
+    @property
+    def shard(self) -> int: ...
+    @property
+    def shard_count(self) -> int: ...
+    @property
+    def runs(self) -> int: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def config_hash(self) -> str: ...
+    @property
+    def version(self) -> str: ...
+    @property
+    def blocks(self) -> int: ...
+
+def merge(parts: Iterable[Union[Partial, bytes]]) -> Report: ...
