@@ -152,7 +152,7 @@ impl Evaluation {
     /// Evaluates `log` (definitions in the crate documentation): feeds its cells to
     /// [`crate::Evaluator`]s, the one implementation of the evaluation.
     ///
-    /// The steps are cut into blocks of [`RUN_SUM_STEPS`] steps, evaluated in parallel
+    /// The steps are cut into blocks of 128 steps, evaluated in parallel
     /// (rayon), each by its own evaluator fed run after run, and the evaluators are merged in
     /// block order ([`crate::Evaluator::merge`]). Every per-step sum then adds the runs in run
     /// order and every per-run sum is kept per block of steps, so the report is the same to
