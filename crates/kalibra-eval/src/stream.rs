@@ -310,10 +310,13 @@ impl JModel {
 /// and steps are learnt from the largest indices fed. Memory does not grow with the number
 /// of cells beyond what the statistics need: per step the sums over runs, and per valid cell
 /// the error and NEES that NCI needs (`n + 1` numbers; [`Credibility`]), one bit per cell to
-/// catch repeats and gaps, and the diagnostic run's series.
+/// catch repeats and gaps, per run and block of 128 steps the sums of its normalised NEES and
+/// NIS (for the t-test of the runs' time averages), and the diagnostic run's series.
 ///
 /// Sums over runs are taken in the order the cells come, so two orders of the same cells
-/// agree to rounding, and the order of [`Evaluation::evaluate`] (run after run) to the bit.
+/// agree to rounding, and run after run to the bit with [`Evaluation::evaluate`] (which
+/// evaluates blocks of 128 steps apart, each run after run, and merges them; a run's sum over
+/// its steps is added block by block in either case).
 /// `J1`/`J2` pair a step with the step before it in the same run, when they come one after
 /// the other.
 ///
