@@ -13,7 +13,11 @@ use crate::report::{
     Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, LagReport, Reason, Report,
     RmseSeries, Summary, TestMethod, Verdict, VerdictKind, WhitenessReport, WindowReport,
 };
+use crate::stream::RUN_SUM_STEPS;
 use crate::{EvalError, FilterLog};
+
+/// A cell's error with its (run, step).
+type CellError = ((usize, usize), EvalError);
 
 /// Cells handed to [`crate::Evaluator::push_batch`] at a time by [`Evaluation::evaluate`].
 const BATCH_CELLS: usize = 4096;
@@ -145,27 +149,88 @@ impl Evaluation {
         self
     }
 
-    /// Evaluates `log` (definitions in the crate documentation): feeds its cells run after
-    /// run to an [`crate::Evaluator`], the one implementation of the evaluation.
+    /// Evaluates `log` (definitions in the crate documentation): feeds its cells to
+    /// [`crate::Evaluator`]s, the one implementation of the evaluation.
+    ///
+    /// The steps are cut into blocks of 128 steps, evaluated in parallel
+    /// (rayon), each by its own evaluator fed run after run, and the evaluators are merged in
+    /// block order ([`crate::Evaluator::merge`]). Every per-step sum then adds the runs in run
+    /// order and every per-run sum is kept per block of steps, so the report is the same to
+    /// the bit as one evaluator fed run after run (as `kalibra eval` streams an NPZ or CSV
+    /// log), whatever the number of threads. A log with model matrices is one block:
+    /// `J1`/`J2` pair each step with the step before it in the same evaluator.
     ///
     /// # Errors
     /// [`EvalError::NothingToEvaluate`] if the log holds neither truth, estimate and
     /// covariance nor innovation and its covariance; [`EvalError::GroupIndex`] for a group
     /// naming a component the state does not have; [`EvalError::InvalidOption`] for a
     /// diagnostic run beyond the log; [`EvalError::Metrics`] if a metric fails on data that
-    /// passed the checks (not expected).
+    /// passed the checks (not expected). A failing cell's error is that of the first failing
+    /// cell run after run, as one pass would meet it.
     pub fn evaluate(&self, log: &FilterLog) -> Result<Report, EvalError> {
-        let mut evaluator = self.evaluator(log.contents())?;
-        let cells = (0..log.runs()).flat_map(|run| (0..log.steps()).map(move |step| (run, step)));
-        let mut batch = Vec::with_capacity(BATCH_CELLS);
-        for (run, step) in cells {
-            batch.push((run, step, log.cell(run, step)));
-            if batch.len() == BATCH_CELLS {
-                evaluator.push_batch(&batch).map_err(|(_, e)| e)?;
-                batch.clear();
-            }
+        let (runs, steps) = (log.runs(), log.steps());
+        let block = if log.model.is_some() {
+            steps
+        } else {
+            RUN_SUM_STEPS
+        };
+        let blocks: Vec<std::ops::Range<usize>> = (0..steps)
+            .step_by(block)
+            .map(|start| start..(start + block).min(steps))
+            .collect();
+        let single = blocks.len() == 1;
+        let parts: Vec<Result<crate::Evaluator, CellError>> = blocks
+            .into_par_iter()
+            .map(|range| {
+                let mut evaluator = self.evaluator(log.contents()).map_err(|e| ((0, 0), e))?;
+                evaluator.reserve(runs, range.clone());
+                let cells = (0..runs).flat_map(|run| range.clone().map(move |step| (run, step)));
+                if !single {
+                    // The blocks run in parallel with each other: each feeds its cells on its
+                    // own thread, one at a time.
+                    let mut scratch = evaluator.scratch();
+                    for (run, step) in cells {
+                        evaluator
+                            .push_with(run, step, &log.cell(run, step), &mut scratch)
+                            .map_err(|e| ((run, step), e))?;
+                    }
+                    return Ok(evaluator);
+                }
+                // A single block: its batches prepare their cells on every core instead
+                // (`push_batch`).
+                let mut batch = Vec::with_capacity(BATCH_CELLS);
+                let feed =
+                    |evaluator: &mut crate::Evaluator,
+                     batch: &mut Vec<(usize, usize, crate::Cell<'_>)>| {
+                        let fed = evaluator
+                            .push_batch(batch)
+                            .map_err(|(i, e)| ((batch[i].0, batch[i].1), e));
+                        batch.clear();
+                        fed
+                    };
+                for (run, step) in cells {
+                    batch.push((run, step, log.cell(run, step)));
+                    if batch.len() == BATCH_CELLS {
+                        feed(&mut evaluator, &mut batch)?;
+                    }
+                }
+                feed(&mut evaluator, &mut batch)?;
+                Ok(evaluator)
+            })
+            .collect();
+        // The first failing cell run after run: each block stopped at its own first.
+        let first = parts
+            .iter()
+            .filter_map(|p| p.as_ref().err())
+            .min_by_key(|(at, _)| *at);
+        if let Some((_, e)) = first {
+            return Err(e.clone());
         }
-        evaluator.push_batch(&batch).map_err(|(_, e)| e)?;
+        let mut parts = parts.into_iter().flatten();
+        let mut evaluator = parts.next().ok_or(EvalError::Empty { what: "steps" })?;
+        for part in parts {
+            evaluator.merge(part)?;
+        }
         evaluator.finish(log.times.clone())
     }
 
@@ -201,8 +266,8 @@ impl Evaluation {
                     if cred.runs(k) < 2 {
                         return Ok(None);
                     }
-                    let s = cred.step_summary(k)?;
-                    Ok(s.nci.is_finite().then_some(s.nci))
+                    let nci = cred.step_nci(k)?;
+                    Ok(nci.is_finite().then_some(nci))
                 })
                 .collect::<Result<_, MetricsError>>()?;
             let nci: Vec<f64> = report.nci_per_step.iter().flatten().copied().collect();

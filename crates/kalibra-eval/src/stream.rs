@@ -131,7 +131,7 @@ struct StateSide {
     means: StepMean,
     cred: Credibility,
     squared: SquaredErrors,
-    per_run: Vec<(f64, usize)>,
+    per_run: PerRun,
     findings: FindingTally,
     /// The diagnostic run's errors, by step (sorted when finishing).
     window_series: Vec<(usize, Vec<f64>)>,
@@ -143,7 +143,7 @@ struct InnovationSide {
     /// For the diagnostic run's normalised innovations.
     factor: Factor,
     means: StepMean,
-    per_run: Vec<(f64, usize)>,
+    per_run: PerRun,
     findings: FindingTally,
     normalized: Vec<(usize, DVector<f64>)>,
 }
@@ -313,10 +313,13 @@ impl JModel {
 /// and steps are learnt from the largest indices fed. Memory does not grow with the number
 /// of cells beyond what the statistics need: per step the sums over runs, and per valid cell
 /// the error and NEES that NCI needs (`n + 1` numbers; [`Credibility`]), one bit per cell to
-/// catch repeats and gaps, and the diagnostic run's series.
+/// catch repeats and gaps, per run and block of 128 steps the sums of its normalised NEES and
+/// NIS (for the t-test of the runs' time averages), and the diagnostic run's series.
 ///
 /// Sums over runs are taken in the order the cells come, so two orders of the same cells
-/// agree to rounding, and the order of [`Evaluation::evaluate`] (run after run) to the bit.
+/// agree to rounding, and run after run to the bit with [`Evaluation::evaluate`] (which
+/// evaluates blocks of 128 steps apart, each run after run, and merges them; a run's sum over
+/// its steps is added block by block in either case).
 /// `J1`/`J2` pair a step with the step before it in the same run, when they come one after
 /// the other.
 ///
@@ -393,7 +396,7 @@ impl Evaluation {
                 means: StepMean::new(0),
                 cred: Credibility::new(0, n),
                 squared: SquaredErrors::new(0, n),
-                per_run: Vec::new(),
+                per_run: PerRun::default(),
                 findings: FindingTally::default(),
                 window_series: Vec::new(),
             }),
@@ -401,7 +404,7 @@ impl Evaluation {
                 m,
                 factor: Factor::new(m),
                 means: StepMean::new(0),
-                per_run: Vec::new(),
+                per_run: PerRun::default(),
                 findings: FindingTally::default(),
                 normalized: Vec::new(),
             }),
@@ -528,6 +531,55 @@ impl Factor {
         self.w.norm_squared()
     }
 
+    /// The NEES of error `v` under covariance `cell`: [`Factor::nees`] after
+    /// [`Factor::load`], at a fixed size for the common dimensions (1 to 6).
+    fn nees_of(
+        &mut self,
+        cell: MatrixCell<'_>,
+        v: &[f64],
+        what: &'static str,
+    ) -> Result<f64, LinalgError> {
+        macro_rules! sizes {
+            ($($n:literal)*) => {
+                match self.dim {
+                    $($n => return fixed::nees::<$n>(cell, v, what),)*
+                    _ => {}
+                }
+            };
+        }
+        sizes!(1 2 3 4 5 6);
+        self.load(cell);
+        self.nees(v, what)
+    }
+
+    /// The NIS of innovation `v` under `S = cell`, and `w = L^-1 v` left in `self.w`:
+    /// [`Factor::nis`] after [`Factor::load`], at a fixed size for dimensions 1 to 6.
+    fn nis_of(
+        &mut self,
+        cell: MatrixCell<'_>,
+        v: &[f64],
+        what: &'static str,
+    ) -> Result<f64, LinalgError> {
+        macro_rules! sizes {
+            ($($n:literal)*) => {
+                match self.dim {
+                    $($n => {
+                        let (q, w) = fixed::nis::<$n>(cell, v, what)?;
+                        if self.w.len() != $n {
+                            self.w = DVector::zeros($n);
+                        }
+                        self.w.copy_from_slice(w.as_slice());
+                        return Ok(q);
+                    })*
+                    _ => {}
+                }
+            };
+        }
+        sizes!(1 2 3 4 5 6);
+        self.load(cell);
+        self.nis(v, what)
+    }
+
     /// `v^T M^-1 v` as `kalibra_metrics::nees` computes it.
     fn nees(&mut self, v: &[f64], what: &'static str) -> Result<f64, LinalgError> {
         check_symmetric(&self.matrix, what)?;
@@ -555,6 +607,74 @@ impl Factor {
             return Err(LinalgError::NotPositiveDefinite { what });
         }
         Ok(self.solve(v))
+    }
+}
+
+/// [`Factor`]'s factorisations at a fixed size `N`, on nalgebra's stack matrices: no heap, no
+/// bounds check per entry, loops of known length. The `Dyn` path spent more in loading the
+/// matrix entry by entry and in `Dyn` loop overhead than in the arithmetic (a 4 x 4 NEES cost
+/// about 1,100 instructions). The operations are the same generic nalgebra and kalibra-linalg
+/// code as the `Dyn` path's, in the same order, so the values are the same to the bit (the
+/// property test `factor_equals_the_metrics_bit_for_bit` compares them at every size).
+mod fixed {
+    use kalibra_linalg::nalgebra::{Cholesky, SVector};
+    use kalibra_linalg::{LinalgError, SMatrix, check_symmetric, symmetrize};
+
+    use super::MatrixCell;
+
+    /// The cell's matrix (its length checked by `square`).
+    fn load<const N: usize>(cell: MatrixCell<'_>) -> SMatrix<f64, N, N> {
+        match cell {
+            MatrixCell::Full(v) => SMatrix::from_fn(|i, j| v[i * N + j]),
+            MatrixCell::Diagonal(v) => SMatrix::from_fn(|i, j| if i == j { v[i] } else { 0.0 }),
+        }
+    }
+
+    /// `w = L^-1 v` for the lower Cholesky factor `L` of `m`, or `None` if `m` is not
+    /// positive definite; with `|w|^2`.
+    fn solve<const N: usize>(
+        m: SMatrix<f64, N, N>,
+        v: &[f64],
+    ) -> Option<(SMatrix<f64, N, N>, SVector<f64, N>, f64)> {
+        let l = Cholesky::new(m)?.unpack_dirty();
+        let mut w = SVector::<f64, N>::from_fn(|i, _| v[i]);
+        l.solve_lower_triangular_unchecked_mut(&mut w);
+        // `|w|^2` summed in index order, as nalgebra's `norm_squared` sums a `Dyn` vector
+        // (its fixed-size 4-vector adds the squares pairwise, which differs in the last bit).
+        let q = w.iter().fold(0.0, |sum, x| sum + x * x);
+        Some((l, w, q))
+    }
+
+    /// [`super::Factor::nees`] at size `N`.
+    pub(super) fn nees<const N: usize>(
+        cell: MatrixCell<'_>,
+        v: &[f64],
+        what: &'static str,
+    ) -> Result<f64, LinalgError> {
+        let m = load::<N>(cell);
+        check_symmetric(&m, what)?;
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(LinalgError::NonFinite { what: "vector" });
+        }
+        match solve(m, v) {
+            Some((_, _, q)) if q.is_finite() => Ok(q),
+            _ => Err(LinalgError::NotPositiveDefinite { what }),
+        }
+    }
+
+    /// [`super::Factor::nis`] at size `N`: the NIS and the normalised innovation `w`.
+    pub(super) fn nis<const N: usize>(
+        cell: MatrixCell<'_>,
+        v: &[f64],
+        what: &'static str,
+    ) -> Result<(f64, SVector<f64, N>), LinalgError> {
+        let mut m = load::<N>(cell);
+        check_symmetric(&m, what)?;
+        symmetrize(&mut m);
+        match solve(m, v) {
+            Some((l, w, q)) if l.diagonal().iter().all(|d| d.is_finite()) => Ok((q, w)),
+            _ => Err(LinalgError::NotPositiveDefinite { what }),
+        }
     }
 }
 
@@ -616,9 +736,11 @@ struct Prepared {
 }
 
 /// The factorisation storage of one thread.
-struct Scratch {
+pub(crate) struct Scratch {
     p: Factor,
     s: Factor,
+    /// The cell's error `xhat - x`.
+    error: Vec<f64>,
 }
 
 /// The most runs an [`Evaluator`] takes (run indices `0 .. MAX_RUNS`): its per-run state is
@@ -647,7 +769,20 @@ impl Evaluator {
     /// an error.
     pub fn push(&mut self, run: usize, step: usize, cell: &Cell<'_>) -> Result<(), EvalError> {
         let mut scratch = self.scratch();
-        let prepared = self.prepare((run, step), cell, &mut scratch)?;
+        self.push_with(run, step, cell, &mut scratch)
+    }
+
+    /// [`Evaluator::push`] with the caller's factorisation storage, for a caller that feeds
+    /// many cells on one thread ([`Evaluation::evaluate`]'s blocks of steps, which run in
+    /// parallel with each other): no batch to build, nothing allocated per cell.
+    pub(crate) fn push_with(
+        &mut self,
+        run: usize,
+        step: usize,
+        cell: &Cell<'_>,
+        scratch: &mut Scratch,
+    ) -> Result<(), EvalError> {
+        let prepared = self.prepare((run, step), cell, scratch)?;
         self.accept((run, step), cell, prepared, None)
     }
 
@@ -742,10 +877,11 @@ impl Evaluator {
             .collect()
     }
 
-    fn scratch(&self) -> Scratch {
+    pub(crate) fn scratch(&self) -> Scratch {
         Scratch {
             p: Factor::new(self.contents.state_dim().unwrap_or(0)),
             s: Factor::new(self.contents.measurement_dim().unwrap_or(0)),
+            error: Vec::with_capacity(self.contents.state_dim().unwrap_or(0)),
         }
     }
 
@@ -790,19 +926,20 @@ impl Evaluator {
             && xhat.iter().all(|v| v.is_finite())
         {
             // RMSE and windows need no covariance: estimate minus truth (paper 002's sign).
-            let error: Vec<f64> = xhat.iter().zip(x).map(|(a, b)| a - b).collect();
-            scratch.p.load(p);
-            nees = Some(match scratch.p.nees(&error, "state covariance P") {
-                Ok(value) => Ok(value),
-                Err(err) => Err(reason(err.into())?),
-            });
+            scratch.error.clear();
+            scratch.error.extend(xhat.iter().zip(x).map(|(a, b)| a - b));
+            nees = Some(
+                match scratch.p.nees_of(p, &scratch.error, "state covariance P") {
+                    Ok(value) => Ok(value),
+                    Err(err) => Err(reason(err.into())?),
+                },
+            );
         }
         let mut nis = None;
         if let (Some(_), Some(nu), Some(s)) = (&self.innovation, nu, s)
             && nu.iter().all(|v| v.is_finite())
         {
-            scratch.s.load(s);
-            nis = Some(match scratch.s.nis(nu, "innovation covariance S") {
+            nis = Some(match scratch.s.nis_of(s, nu, "innovation covariance S") {
                 Ok(value) => Ok(value),
                 Err(err) => Err(reason(err.into())?),
             });
@@ -941,6 +1078,15 @@ impl Evaluator {
         Ok(())
     }
 
+    /// Extends the horizon to `steps.end` and reserves NCI's storage for `runs` runs at
+    /// `steps`: for a caller that knows the cells it will feed ([`Evaluation::evaluate`]).
+    pub(crate) fn reserve(&mut self, runs: usize, steps: std::ops::Range<usize>) {
+        self.grow_steps(steps.end);
+        if let Some(s) = &mut self.state {
+            s.cred.reserve_runs(runs, steps);
+        }
+    }
+
     /// Extends the horizon, and every per-step accumulator, to `steps` steps.
     fn grow_steps(&mut self, steps: usize) {
         self.steps = self.steps.max(steps);
@@ -1037,28 +1183,28 @@ impl Evaluator {
         };
         let mut bands = BandCache::new(self.options.confidence);
         let options = &self.options;
-        if let Some(mut side) = self.state {
-            side.per_run.resize(runs, (0.0, 0));
+        if let Some(side) = self.state {
+            let per_run = side.per_run.totals(runs);
             options.state_report(
                 side.n,
                 (runs, steps),
                 &side.means,
                 &side.cred,
                 &side.squared,
-                &side.per_run,
+                &per_run,
                 side.findings,
                 side.window_series,
                 &mut bands,
                 &mut report,
             )?;
         }
-        if let Some(mut side) = self.innovation {
-            side.per_run.resize(runs, (0.0, 0));
+        if let Some(side) = self.innovation {
+            let per_run = side.per_run.totals(runs);
             options.innovation_report(
                 side.m,
                 steps,
                 &side.means,
-                &side.per_run,
+                &per_run,
                 side.findings,
                 side.normalized,
                 &mut bands,
@@ -1085,9 +1231,6 @@ impl StateSide {
         xhat: &[f64],
         nees: Option<Result<f64, Reason>>,
     ) -> Result<bool, EvalError> {
-        if run >= self.per_run.len() {
-            self.per_run.resize(run + 1, (0.0, 0));
-        }
         if !xhat.iter().all(|v| v.is_finite()) {
             self.findings
                 .add("estimate", run, step, Reason::NonFiniteVector);
@@ -1107,8 +1250,7 @@ impl StateSide {
             Some(Ok(value)) => {
                 self.means.push(step, value / n)?;
                 self.cred.push_nees(step, &self.error, value)?;
-                self.per_run[run].0 += value / n;
-                self.per_run[run].1 += 1;
+                self.per_run.add(run, step, value / n);
                 Ok(true)
             }
             Some(Err(reason)) => {
@@ -1123,22 +1265,74 @@ impl StateSide {
     /// See [`Evaluator::merge`].
     fn merge(&mut self, other: StateSide) {
         self.means.merge(&other.means);
-        self.cred.merge(&other.cred);
+        self.cred.append(other.cred);
         self.squared.merge(&other.squared);
-        merge_per_run(&mut self.per_run, &other.per_run);
+        self.per_run.merge(other.per_run);
         self.findings.merge(other.findings);
         self.window_series.extend(other.window_series);
     }
 }
 
-/// Adds per-run sums and counts (each run's from whichever evaluator saw it).
-fn merge_per_run(mine: &mut Vec<(f64, usize)>, theirs: &[(f64, usize)]) {
-    if theirs.len() > mine.len() {
-        mine.resize(theirs.len(), (0.0, 0));
+/// Steps per block of the per-run sums ([`PerRun`]).
+pub(crate) const RUN_SUM_STEPS: usize = 128;
+
+/// Per run, the sum and count of a normalised statistic (NEES / n, NIS / m) over its steps,
+/// for the runs' time averages that the t-test takes. Kept per block of [`RUN_SUM_STEPS`]
+/// steps (`step / RUN_SUM_STEPS`) and added block after block by [`PerRun::totals`]: the sums
+/// then do not depend on how the steps were cut between evaluators, as long as each block of
+/// steps of a run went to one of them, so [`Evaluation::evaluate`] can evaluate blocks of
+/// steps in parallel and give the bits of one pass (and of `kalibra eval`'s streaming
+/// readers, which make one pass). Memory: one sum and count per run and block, an eighth of
+/// a byte per cell.
+#[derive(Default)]
+struct PerRun {
+    /// `[run][block]`: sum and count.
+    blocks: Vec<Vec<(f64, usize)>>,
+}
+
+impl PerRun {
+    fn add(&mut self, run: usize, step: usize, value: f64) {
+        if run >= self.blocks.len() {
+            self.blocks.resize_with(run + 1, Vec::new);
+        }
+        let blocks = &mut self.blocks[run];
+        let b = step / RUN_SUM_STEPS;
+        if b >= blocks.len() {
+            blocks.resize(b + 1, (0.0, 0));
+        }
+        blocks[b].0 += value;
+        blocks[b].1 += 1;
     }
-    for (a, b) in mine.iter_mut().zip(theirs) {
-        a.0 += b.0;
-        a.1 += b.1;
+
+    /// Adds `other`'s sums (each run and block from whichever evaluator saw it).
+    fn merge(&mut self, other: PerRun) {
+        if other.blocks.len() > self.blocks.len() {
+            self.blocks.resize_with(other.blocks.len(), Vec::new);
+        }
+        for (mine, theirs) in self.blocks.iter_mut().zip(other.blocks) {
+            if mine.is_empty() {
+                *mine = theirs;
+                continue;
+            }
+            if theirs.len() > mine.len() {
+                mine.resize(theirs.len(), (0.0, 0));
+            }
+            for (a, b) in mine.iter_mut().zip(theirs) {
+                a.0 += b.0;
+                a.1 += b.1;
+            }
+        }
+    }
+
+    /// Each of `runs` runs' sum and count over its blocks, in block order.
+    fn totals(&self, runs: usize) -> Vec<(f64, usize)> {
+        let mut totals: Vec<(f64, usize)> = self
+            .blocks
+            .iter()
+            .map(|b| b.iter().fold((0.0, 0), |(s, c), (bs, bc)| (s + bs, c + bc)))
+            .collect();
+        totals.resize(runs, (0.0, 0));
+        totals
     }
 }
 
@@ -1152,9 +1346,6 @@ impl InnovationSide {
         s: MatrixCell<'_>,
         nis: Option<Result<f64, Reason>>,
     ) -> Result<(), EvalError> {
-        if run >= self.per_run.len() {
-            self.per_run.resize(run + 1, (0.0, 0));
-        }
         let value = match nis {
             None => {
                 self.findings
@@ -1169,14 +1360,12 @@ impl InnovationSide {
         };
         let m = self.m as f64;
         self.means.push(step, value / m)?;
-        self.per_run[run].0 += value / m;
-        self.per_run[run].1 += 1;
+        self.per_run.add(run, step, value / m);
         if run == options.run {
             // The diagnostic run's normalised innovation: factor S again here, once per step
             // of one run, rather than carry every cell's factor from `prepare`.
-            self.factor.load(s);
             self.factor
-                .nis(nu, "innovation covariance S")
+                .nis_of(s, nu, "innovation covariance S")
                 .map_err(kalibra_metrics::MetricsError::from)?;
             self.normalized.push((step, self.factor.w.clone()));
         }
@@ -1188,7 +1377,7 @@ impl InnovationSide {
     /// See [`Evaluator::merge`].
     fn merge(&mut self, other: InnovationSide) {
         self.means.merge(&other.means);
-        merge_per_run(&mut self.per_run, &other.per_run);
+        self.per_run.merge(other.per_run);
         self.findings.merge(other.findings);
         self.normalized.extend(other.normalized);
     }
@@ -1278,25 +1467,67 @@ mod tests {
         #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
         /// A cell's NEES and NIS are `kalibra_metrics::nees` and `nis` to the bit at every
-        /// size, through the fixed-size factorisation (up to 6) and the `Dyn` one above it.
+        /// size, through the fixed-size factorisation (`nees_of`, `nis_of` up to 6) and the
+        /// `Dyn` one (every size), for full cells (slightly asymmetric ones too, which NIS
+        /// symmetrises), diagonal cells and indefinite ones (the same error).
         #[test]
         fn factor_equals_the_metrics_bit_for_bit(
             dim in 1usize..=8,
             v in proptest::collection::vec(-3.0f64..3.0, 64 + 8),
+            skew in proptest::collection::vec(-1e-13f64..1e-13, 64),
+            shift in prop_oneof![Just(0.0), -20.0f64..0.0],
         ) {
-            let p = spd(&v, dim);
+            let mut p = spd(&v, dim);
+            // Below the symmetry tolerance, so a finding only for NEES's exact check if
+            // ever; an indefinite matrix when shifted far enough.
+            for i in 0..dim {
+                p[(i, i)] += shift;
+                for j in 0..i {
+                    p[(i, j)] += skew[i * 8 + j] * p[(i, j)].abs();
+                }
+            }
             let x = DVector::from_column_slice(&v[64..64 + dim]);
-            let cell = rows(&p);
-            let mut factor = Factor::new(dim);
-            factor.load(MatrixCell::Full(&cell));
-            let got = factor.nees(x.as_slice(), "P").expect("positive definite");
-            let want = kalibra_metrics::nees(&x, &p).expect("positive definite");
-            prop_assert_eq!(got.to_bits(), want.to_bits());
-            factor.load(MatrixCell::Full(&cell));
-            let got = factor.nis(x.as_slice(), "S").expect("positive definite");
-            let s = kalibra_linalg::Covariance::new(p.clone()).expect("positive definite");
-            let want = kalibra_metrics::nis(&x, &s).expect("positive definite");
-            prop_assert_eq!(got.to_bits(), want.to_bits());
+            let diagonal = DMatrix::from_diagonal(&p.diagonal());
+            let (full, diag) = (rows(&p), p.diagonal().as_slice().to_vec());
+            let s_full = kalibra_linalg::Covariance::new(p.clone());
+            let s_diag = kalibra_linalg::Covariance::new(diagonal.clone());
+            let cases = [
+                (MatrixCell::Full(&full), &p, s_full),
+                (MatrixCell::Diagonal(&diag), &diagonal, s_diag),
+            ];
+            for (cell, matrix, s) in cases {
+                let mut fast = Factor::new(dim);
+                let mut slow = Factor::new(dim);
+                let want = kalibra_metrics::nees(&x, matrix).map(f64::to_bits);
+                let got = fast.nees_of(cell, x.as_slice(), "P").map(f64::to_bits);
+                slow.load(cell);
+                let dynamic = slow.nees(x.as_slice(), "P").map(f64::to_bits);
+                // Errors compare by kind (the metrics name the matrix differently).
+                let kind = |e: LinalgError| std::mem::discriminant(&e);
+                let want = want.map_err(|e| match e {
+                    MetricsError::Linalg(e) => Some(kind(e)),
+                    _ => None,
+                });
+                prop_assert_eq!(&got.map_err(|e| Some(kind(e))), &want);
+                prop_assert_eq!(&dynamic.map_err(|e| Some(kind(e))), &want);
+                let want = s
+                    .map_err(kalibra_metrics::MetricsError::from)
+                    .and_then(|s| kalibra_metrics::nis(&x, &s))
+                    .map(f64::to_bits);
+                let got = fast.nis_of(cell, x.as_slice(), "S").map(f64::to_bits);
+                slow.load(cell);
+                let dynamic = slow.nis(x.as_slice(), "S").map(f64::to_bits);
+                prop_assert_eq!(got.is_ok(), want.is_ok());
+                prop_assert_eq!(dynamic.is_ok(), want.is_ok());
+                if let (Ok(a), Ok(b), Ok(c)) = (got, dynamic, want) {
+                    prop_assert_eq!(a, c);
+                    prop_assert_eq!(b, c);
+                    // The normalised innovation, which whiteness takes, to the bit too.
+                    let wa: Vec<u64> = fast.w.iter().map(|v| v.to_bits()).collect();
+                    let wb: Vec<u64> = slow.w.iter().map(|v| v.to_bits()).collect();
+                    prop_assert_eq!(wa, wb);
+                }
+            }
         }
 
         /// The fixed-size `J1`/`J2` step gives the `Dyn` path's values to the bit, at every

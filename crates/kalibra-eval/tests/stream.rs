@@ -223,6 +223,34 @@ fn cell_by_cell_batched_and_whole_give_the_same_report_to_the_bit() {
     }
 }
 
+/// `Evaluation::evaluate` cuts a long log into blocks of steps evaluated in parallel: the
+/// report of a log of several blocks (300 steps, gaps and all) is the same to the bit on
+/// pools of 1, 2 and 3 threads, and equal to one evaluator fed run after run, cell by cell,
+/// which is how `kalibra eval` streams an NPZ or CSV log.
+#[test]
+fn blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count() {
+    let a = arrays(3, 12, 300);
+    let evaluation = Evaluation::new();
+    let mut one_pass = evaluation.evaluator(contents()).unwrap();
+    for run in 0..a.runs {
+        for step in 0..a.steps {
+            one_pass.push(run, step, &a.cell(run, step)).unwrap();
+        }
+    }
+    let one_pass = one_pass.finish(None).unwrap();
+    let bits = |r: &Report| serde_json::to_string(r).unwrap();
+    assert!(one_pass.summary.anees.is_some() && one_pass.summary.anis.is_some());
+    assert!(one_pass.nci_per_step.iter().all(Option::is_some));
+    for threads in [1, 2, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let report = pool.install(|| evaluation.evaluate(&a.log()).unwrap());
+        assert_eq!(bits(&report), bits(&one_pass), "{threads} threads");
+    }
+}
+
 /// With model matrices, `J1`/`J2` come from consecutive steps of a run: a large batch
 /// computes most of them on several threads, a run's first cell in a batch and single cells
 /// on the calling thread. Batches cut mid-run, a model that changes every few steps, and

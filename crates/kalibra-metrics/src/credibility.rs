@@ -362,6 +362,65 @@ impl Credibility {
         })
     }
 
+    /// The non-credibility index of `step` alone: [`Credibility::step_summary`]'s `nci`, to
+    /// the bit, without the median (a sort of the runs' NEES), the ANEES and the MSE matrix,
+    /// for a caller that reports NCI only (the evaluation's per-step NCI spent two fifths of
+    /// its time on those).
+    ///
+    /// # Errors
+    /// As [`Credibility::step_summary`].
+    pub fn step_nci(&self, step: usize) -> Result<f64, MetricsError> {
+        self.check_step(step)?;
+        let (errors, nees) = (&self.errors[step], &self.nees[step]);
+        if nees.is_empty() {
+            return Err(MetricsError::Empty {
+                what: "runs at this step",
+            });
+        }
+        Ok(nci_of_step(errors, nees, self.dim)?.value)
+    }
+
+    /// Reserves room for `runs` more runs at each of `steps` (those within the horizon), so
+    /// pushing them does not grow the per-step storage one reallocation at a time.
+    pub fn reserve_runs(&mut self, runs: usize, steps: Range<usize>) {
+        let steps = steps.start.min(self.steps())..steps.end.min(self.steps());
+        for (e, n) in self.errors[steps.clone()]
+            .iter_mut()
+            .zip(&mut self.nees[steps])
+        {
+            e.reserve(runs * self.dim);
+            n.reserve(runs);
+        }
+    }
+
+    /// [`Merge::merge`] of an accumulator given away: a step that `self` holds no run of
+    /// takes `other`'s storage as it is instead of a copy (an evaluation cut into blocks of
+    /// steps merges accumulators that share no step).
+    ///
+    /// # Panics
+    /// As [`Merge::merge`], for accumulators of different shapes.
+    pub fn append(&mut self, other: Credibility) {
+        assert_eq!(
+            (self.steps(), self.dim),
+            (other.steps(), other.dim),
+            "merging accumulators of different shapes"
+        );
+        for (a, b) in self.errors.iter_mut().zip(other.errors) {
+            if a.is_empty() {
+                *a = b;
+            } else {
+                a.extend_from_slice(&b);
+            }
+        }
+        for (a, b) in self.nees.iter_mut().zip(other.nees) {
+            if a.is_empty() {
+                *a = b;
+            } else {
+                a.extend_from_slice(&b);
+            }
+        }
+    }
+
     /// The statistics of every step.
     ///
     /// # Errors
@@ -545,29 +604,36 @@ fn pinv_quad_forms(errors: &[f64], dim: usize) -> Result<(Vec<f64>, usize), Metr
     if m == 0 {
         return Ok((vec![0.0; runs], 0));
     }
+    // The active components with their scales, side by side: the loops over the runs below
+    // run once per run and step of a study, and read them without an index through `active`.
+    let active_scale: Vec<(usize, f64)> = active.iter().map(|&j| (j, scale[j])).collect();
     let scaled = |e: &[f64], out: &mut [f64]| {
-        for (o, &j) in out.iter_mut().zip(&active) {
-            *o = e[j] / scale[j];
+        for (o, &(j, s)) in out.iter_mut().zip(&active_scale) {
+            *o = e.get(j).copied().unwrap_or(0.0) / s;
         }
     };
 
     // G = (1 / M) sum g g^T of the scaled errors; its diagonal is at least 1 / M, since one
-    // run reaches magnitude 1 in each active component.
-    let mut g = DMatrix::<f64>::zeros(m, m);
+    // run reaches magnitude 1 in each active component. Its lower triangle row by row, in a
+    // plain slice (`m (m + 1) / 2` sums per run).
+    let mut g = vec![0.0f64; m * (m + 1) / 2];
     let mut buf = vec![0.0; m];
     for e in errors.chunks_exact(dim) {
         scaled(e, &mut buf);
-        for a in 0..m {
-            for b in 0..=a {
-                g[(a, b)] += buf[a] * buf[b];
+        let mut at = g.iter_mut();
+        for (a, &ba) in buf.iter().enumerate() {
+            // `buf` first: `zip` stops on it without taking a sum of the next row.
+            for (&bb, sum) in buf[..=a].iter().zip(at.by_ref()) {
+                *sum += ba * bb;
             }
         }
     }
-    let d: Vec<f64> = (0..m).map(|a| (g[(a, a)] / runs as f64).sqrt()).collect();
+    let lower = |a: usize, b: usize| g[a * (a + 1) / 2 + b];
+    let d: Vec<f64> = (0..m).map(|a| (lower(a, a) / runs as f64).sqrt()).collect();
     let mut corr = DMatrix::zeros(m, m);
     for a in 0..m {
         for b in 0..=a {
-            let v = g[(a, b)] / runs as f64 / (d[a] * d[b]);
+            let v = lower(a, b) / runs as f64 / (d[a] * d[b]);
             corr[(a, b)] = v;
             corr[(b, a)] = v;
         }
@@ -585,6 +651,19 @@ fn pinv_quad_forms(errors: &[f64], dim: usize) -> Result<(Vec<f64>, usize), Metr
     // Eigenvalues at or below the tolerance (including rounding-negative ones) count as 0.
     let kept: Vec<usize> = (0..m).filter(|&j| eig.eigenvalues[j] > tol).collect();
 
+    // The kept eigenvectors one after the other, with their eigenvalues: plain slices for the
+    // loop over the runs (a column view of the matrix cost more than its arithmetic).
+    let vectors: Vec<f64> = kept
+        .iter()
+        .flat_map(|&j| {
+            eig.eigenvectors
+                .column(j)
+                .iter()
+                .copied()
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let values: Vec<f64> = kept.iter().map(|&j| eig.eigenvalues[j]).collect();
     let mut quad = Vec::with_capacity(runs);
     for e in errors.chunks_exact(dim) {
         scaled(e, &mut buf);
@@ -593,17 +672,12 @@ fn pinv_quad_forms(errors: &[f64], dim: usize) -> Result<(Vec<f64>, usize), Metr
         }
         // A sum of squares over positive eigenvalues: never negative, 0 only for a zero error
         // (or one entirely along directions counted as null).
-        let q: f64 = kept
-            .iter()
-            .map(|&j| {
-                let proj: f64 = eig
-                    .eigenvectors
-                    .column(j)
-                    .iter()
-                    .zip(&buf)
-                    .map(|(v, f)| v * f)
-                    .sum();
-                proj * proj / eig.eigenvalues[j]
+        let q: f64 = vectors
+            .chunks_exact(m)
+            .zip(&values)
+            .map(|(v, lambda)| {
+                let proj: f64 = v.iter().zip(&buf).map(|(v, f)| v * f).sum();
+                proj * proj / lambda
             })
             .sum();
         quad.push(q);
@@ -650,6 +724,31 @@ mod tests {
             sigma += e * e.transpose();
         }
         sigma / errors.len() as f64
+    }
+
+    #[test]
+    fn step_nci_is_the_summary_nci_to_the_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let errors = errors3(2, 40);
+        let mut cred = Credibility::new(3, 3);
+        cred.reserve_runs(40, 0..3);
+        for (i, e) in errors.iter().enumerate() {
+            // Step 0 takes every run, step 1 every other one, step 2 none.
+            for step in [0, 1].into_iter().filter(|&k| k == 0 || i % 2 == 0) {
+                cred.push(step, e, &random_cov3(&mut rng)).unwrap();
+            }
+        }
+        for step in 0..2 {
+            let nci = cred.step_nci(step).unwrap();
+            assert!(nci.is_finite() && nci != 0.0, "{nci}");
+            assert_eq!(
+                nci.to_bits(),
+                cred.step_summary(step).unwrap().nci.to_bits()
+            );
+        }
+        assert_eq!(cred.step_nci(2), cred.step_summary(2).map(|s| s.nci));
+        assert!(cred.step_nci(2).is_err());
+        assert!(cred.step_nci(3).is_err());
     }
 
     #[test]
