@@ -496,7 +496,8 @@ fn merged_evaluators_of_run_blocks_give_the_report_to_rounding() {
 /// contradict themselves, are refused.
 #[test]
 fn evaluator_states_resume_to_the_same_bits() {
-    let a = with_asymmetric_covariances(arrays(12, 19, 70), 13);
+    // 300 steps: the per-run sums span three blocks of steps.
+    let a = with_asymmetric_covariances(arrays(12, 19, 300), 13);
     let contents = model_contents();
     let evaluation = Evaluation::new().window(5).unwrap().diagnostic_run(7);
     let feed = |runs| a.feed_with_model(&evaluation, runs);
@@ -573,9 +574,9 @@ fn evaluator_states_resume_to_the_same_bits() {
         evaluation.resume(contents, ciborium::from_reader(bytes.as_slice()).unwrap())
     };
     assert!(resume_value(&value).is_ok());
-    set(&mut value, "steps", 71);
+    set(&mut value, "steps", 301);
     assert!(matches!(resume_value(&value), Err(EvalError::State(_))));
-    set(&mut value, "steps", 70);
+    set(&mut value, "steps", 300);
     set(&mut value, "runs", 11);
     assert!(matches!(resume_value(&value), Err(EvalError::State(_))));
     set(&mut value, "runs", 12);
@@ -589,7 +590,7 @@ fn evaluator_states_resume_to_the_same_bits() {
             .clone()
     };
     let mut side = j(&mut value);
-    set(&mut side, "failed", 12 * 70 + 1);
+    set(&mut side, "failed", 12 * 300 + 1);
     for (k, v) in value.as_map_mut().unwrap() {
         if k.as_text() == Some("j") {
             *v = side.clone();

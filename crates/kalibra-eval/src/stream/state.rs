@@ -46,10 +46,15 @@ pub struct EvaluatorState {
 #[serde(transparent)]
 struct Words(#[serde(with = "kalibra_metrics::packed")] Vec<u64>);
 
-/// Per-run sums and counts from the state's `first_run`.
+/// Per-run sums and counts from the state's `first_run`, per block of
+/// [`RUN_SUM_STEPS`](super::RUN_SUM_STEPS) steps (the evaluator keeps them so, for the bits of
+/// one pass): run `first_run + i` holds `blocks[i]` blocks, whose sums and counts follow one
+/// another in `sum` and `count`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct PerRun {
+    #[serde(with = "kalibra_metrics::packed")]
+    blocks: Vec<u64>,
     #[serde(with = "kalibra_metrics::packed")]
     sum: Vec<f64>,
     #[serde(with = "kalibra_metrics::packed")]
@@ -122,37 +127,55 @@ fn bad(message: impl Into<String>) -> EvalError {
 }
 
 impl PerRun {
-    /// `per_run[first..]`; the runs before `first` were never fed, so their entries are zero.
-    fn from_runs(per_run: &[(f64, usize)], first: usize) -> Self {
-        let tail = per_run.get(first..).unwrap_or(&[]);
+    /// The sums of runs `first..`; the runs before `first` were never fed, so they hold none.
+    fn from_runs(per_run: &super::PerRun, first: usize) -> Self {
+        let tail = per_run.blocks.get(first..).unwrap_or(&[]);
         Self {
-            sum: tail.iter().map(|p| p.0).collect(),
-            count: tail.iter().map(|p| p.1 as u64).collect(),
+            blocks: tail.iter().map(|b| b.len() as u64).collect(),
+            sum: tail.iter().flatten().map(|p| p.0).collect(),
+            count: tail.iter().flatten().map(|p| p.1 as u64).collect(),
         }
     }
 
-    /// The per-run vector again, zeros before `first`.
+    /// The evaluator's per-run sums again, empty before `first`; refused unless every count
+    /// fits its block and every run its steps.
     fn into_runs(
         self,
         first: usize,
         (runs, steps): (usize, usize),
-    ) -> Result<Vec<(f64, usize)>, EvalError> {
-        if self.sum.len() != self.count.len() || first + self.sum.len() > runs {
+    ) -> Result<super::PerRun, EvalError> {
+        let block = super::RUN_SUM_STEPS;
+        let total: Option<u64> = self.blocks.iter().try_fold(0u64, |a, b| a.checked_add(*b));
+        if self.sum.len() != self.count.len()
+            || total != Some(self.sum.len() as u64)
+            || first
+                .checked_add(self.blocks.len())
+                .is_none_or(|end| end > runs)
+        {
             return Err(bad(format!(
-                "{} per-run sums and {} counts from run {first} of {runs}",
+                "{} per-run sums, {} counts and {} runs of blocks from run {first} of {runs}",
                 self.sum.len(),
-                self.count.len()
+                self.count.len(),
+                self.blocks.len()
             )));
         }
-        let mut out = vec![(0.0, 0); first];
-        for (s, c) in self.sum.into_iter().zip(self.count) {
-            let c = usize::try_from(c)
-                .ok()
-                .filter(|&c| c <= steps)
-                .ok_or_else(|| bad(format!("a run counts {c} of {steps} steps")))?;
-            out.push((s, c));
+        let mut out = vec![Vec::new(); first];
+        let mut pairs = self.sum.into_iter().zip(self.count);
+        for n in self.blocks {
+            if n > steps.div_ceil(block) as u64 {
+                return Err(bad(format!("a run holds {n} blocks of {steps} steps")));
+            }
+            let mut run = Vec::with_capacity(n as usize);
+            for (s, c) in pairs.by_ref().take(n as usize) {
+                let c = usize::try_from(c)
+                    .ok()
+                    .filter(|&c| c <= block.min(steps))
+                    .ok_or_else(|| bad(format!("a block of steps counts {c} cells")))?;
+                run.push((s, c));
+            }
+            out.push(run);
         }
-        Ok(out)
+        Ok(super::PerRun { blocks: out })
     }
 }
 
