@@ -62,3 +62,32 @@ def test_stubs_match_the_module():
         if line.strip() and "disjoint base" not in line
     ]
     assert not problems, "\n".join(problems)
+
+
+def test_monte_carlo_s_return_type_follows_its_arguments(tmp_path):
+    """A typed caller gets a Report, a Partial for shard=(i, S), and a (Report, log) pair for
+    return_log=True, without narrowing the result itself (mypy --strict on a use of each)."""
+    pytest.importorskip("mypy")
+    import subprocess
+    import sys
+
+    program = tmp_path / "typed_use.py"
+    program.write_text(
+        "from typing import assert_type\n"
+        "import numpy as np\n"
+        "import kalibra\n"
+        "I = np.eye(2)\n"
+        "report = kalibra.monte_carlo(I, I, I, I, np.zeros(2), I, runs=8, steps=5)\n"
+        "assert_type(report, kalibra.Report)\n"
+        "part = kalibra.monte_carlo(I, I, I, I, np.zeros(2), I, runs=8, steps=5, shard=(0, 2))\n"
+        "assert_type(part, kalibra.Partial)\n"
+        "pair = kalibra.monte_carlo(I, I, I, I, np.zeros(2), I, runs=8, steps=5, return_log=True)\n"
+        "assert_type(pair[0], kalibra.Report)\n"
+        "merged: kalibra.Report = kalibra.merge([part])\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "mypy", "--strict", "--no-incremental", str(program)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr

@@ -1,7 +1,19 @@
 """Type stubs of the native module kalibra._kalibra (see kalibra's docstrings)."""
 
 import os
-from typing import Any, Callable, Iterable, Literal, Mapping, Optional, Sequence, Tuple, Union, final
+from typing import (
+    Any,
+    Callable,
+    Iterable,
+    Literal,
+    Mapping,
+    Optional,
+    Sequence,
+    Tuple,
+    Union,
+    final,
+    overload,
+)
 
 import numpy as np
 import numpy.typing as npt
@@ -189,6 +201,78 @@ def sweep_q(
     names: Tuple[str, str] = ...,  # ("model", "measurements")
 ) -> TuneReport: ...
 
+# The return type follows `shard` and `return_log`: a shard's partial, the report with the
+# simulated log, or the report (the last overload takes what is known only at run time).
+@overload
+def monte_carlo(
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    *,
+    runs: int = 100,
+    steps: int = 100,
+    seed: int = 0,
+    threads: int = 0,
+    filter_Q: Optional[_ArrayLike] = None,
+    filter_R: Optional[_ArrayLike] = None,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    return_log: Literal[False] = False,
+    shard: Tuple[int, int],
+) -> Partial: ...
+
+@overload
+def monte_carlo(
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    *,
+    runs: int = 100,
+    steps: int = 100,
+    seed: int = 0,
+    threads: int = 0,
+    filter_Q: Optional[_ArrayLike] = None,
+    filter_R: Optional[_ArrayLike] = None,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    return_log: Literal[True],
+    shard: None = None,
+) -> Tuple[Report, dict[str, _FloatArray]]: ...
+
+@overload
+def monte_carlo(
+    F: _ArrayLike,
+    H: _ArrayLike,
+    Q: _ArrayLike,
+    R: _ArrayLike,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    *,
+    runs: int = 100,
+    steps: int = 100,
+    seed: int = 0,
+    threads: int = 0,
+    filter_Q: Optional[_ArrayLike] = None,
+    filter_R: Optional[_ArrayLike] = None,
+    confidence: float = 0.95,
+    window: Optional[int] = None,
+    groups: Optional[Mapping[str, Sequence[int]]] = None,
+    lags: int = 10,
+    return_log: Literal[False] = False,
+    shard: None = None,
+) -> Report: ...
+
+@overload
 def monte_carlo(
     F: _ArrayLike,
     H: _ArrayLike,
