@@ -614,7 +614,7 @@ impl crate::lanes::LaneMeasurement<4, 3> for RadarRates {
             }
         }
         for d in nu[Self::ELEVATION].iter_mut() {
-            *d = crate::bearing::wrap_difference(*d);
+            *d = wrap_angle(*d);
         }
         broadcast(r, self.r.matrix());
     }

@@ -26,7 +26,13 @@ use crate::{Measurement, ModelError};
 /// assert!(wrap_angle(f64::NAN).is_nan() && wrap_angle(f64::INFINITY).is_nan());
 /// ```
 pub fn wrap_angle(a: f64) -> f64 {
-    let w = a.rem_euclid(2.0 * PI);
+    // Below 2 pi in size (every difference of two angles in (-pi, pi]) the remainder
+    // `a % 2 pi` is `a` itself: skip it (a software fmod, slow), keeping `rem_euclid`'s bits.
+    let w = if a.abs() < 2.0 * PI {
+        if a < 0.0 { a + 2.0 * PI } else { a }
+    } else {
+        a.rem_euclid(2.0 * PI)
+    };
     if w > PI { w - 2.0 * PI } else { w }
 }
 
@@ -390,9 +396,7 @@ fn check_variance(value: f64, name: &'static str) -> Result<(), ModelError> {
 
 /// Lane-wise: the relative positions, the arctangent ([`lanes::math::atan2`], within 3 ulp of
 /// glibc's), the gradient and the noise across the lanes, in the scalar model's order of
-/// operations; the residual wraps as [`wrap_angle`] does, to the bit (a difference of two
-/// angles in (-pi, pi] needs one add or subtract of `2 pi`; a larger one, from a measurement
-/// outside that range, takes the scalar function).
+/// operations; the residual wrapped by [`wrap_angle`], as the scalar residual is.
 ///
 /// [`lanes::math::atan2`]: crate::lanes::math::atan2
 impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
@@ -456,21 +460,8 @@ impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
             store::<S>(&mut r[0][0], c, rv);
         }
         for d in nu[0].iter_mut() {
-            *d = wrap_difference(*d);
+            *d = wrap_angle(*d);
         }
-    }
-}
-
-/// [`wrap_angle`] of `d`, without its floating-point remainder for `|d| < 2 pi` (the
-/// difference of two angles in (-pi, pi]), where `d % 2 pi` is `d` itself: the same additions
-/// it makes, so the same bits.
-#[inline(always)]
-pub(crate) fn wrap_difference(d: f64) -> f64 {
-    if d.abs() < 2.0 * PI {
-        let r = if d < 0.0 { d + 2.0 * PI } else { d };
-        if r > PI { r - 2.0 * PI } else { r }
-    } else {
-        wrap_angle(d)
     }
 }
 
@@ -558,6 +549,24 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn wrap_angle_skips_the_remainder_with_the_bits_of_rem_euclid() {
+        let reference = |a: f64| {
+            let w = a.rem_euclid(2.0 * PI);
+            if w > PI { w - 2.0 * PI } else { w }
+        };
+        let two_pi = 2.0 * PI;
+        let mut values = vec![
+            0.0, -0.0, PI, -PI, two_pi, -two_pi, 1e-300, -1e-300, 7.0, -7.0, 1e10, -1e10,
+        ];
+        values.extend([two_pi, -two_pi, PI, -PI].map(|v: f64| v.next_down()));
+        values.extend([two_pi, -two_pi, PI, -PI].map(|v: f64| v.next_up()));
+        values.extend((0..20_000).map(|i| -6.3 + 12.6 * i as f64 / 20_000.0));
+        for a in values {
+            assert_eq!(wrap_angle(a).to_bits(), reference(a).to_bits(), "{a:e}");
+        }
+    }
     use crate::{LinearGaussian, Simulator, check_measurement_jacobian};
     use kalibra_linalg::{Matrix2, U4, Vector4};
     use rand_chacha::ChaCha8Rng;
