@@ -53,6 +53,43 @@ where
         }
     }
 
+    /// The averages of sums accumulated elsewhere: `gain_sum` is the sum of `count` gains,
+    /// `jacobian_sum` of as many Jacobians (for instance over the lanes of a batched filter,
+    /// which adds its steps' entries in the order [`ErgodicAverage::push`] would).
+    ///
+    /// ```
+    /// use kalibra_bounds::ErgodicAverage;
+    /// use kalibra_linalg::nalgebra::SMatrix;
+    /// use kalibra_linalg::{Matrix2, U1, U2};
+    ///
+    /// let (k, j) = (SMatrix::<f64, 2, 1>::new(0.5, 0.1), Matrix2::identity());
+    /// let mut pushed = ErgodicAverage::new(U2, U1);
+    /// pushed.push(&k, &j)?;
+    /// pushed.push(&k, &j)?;
+    /// let summed = ErgodicAverage::from_sums(k + k, j + j, 2)?;
+    /// assert_eq!(summed, pushed);
+    /// # Ok::<(), kalibra_bounds::BoundsError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`BoundsError::Linalg`] if a sum is not finite (a step's gain or Jacobian was not, or
+    /// the sum overflowed).
+    pub fn from_sums(
+        gain_sum: OMatrix<f64, N, M>,
+        jacobian_sum: OMatrix<f64, N, N>,
+        count: usize,
+    ) -> Result<Self, BoundsError> {
+        check_dim(gain_sum.nrows(), jacobian_sum.nrows(), "Jacobian")?;
+        check_dim(jacobian_sum.nrows(), jacobian_sum.ncols(), "Jacobian")?;
+        check_finite(&gain_sum, "gain sum")?;
+        check_finite(&jacobian_sum, "Jacobian sum")?;
+        Ok(Self {
+            gain_sum,
+            jacobian_sum,
+            count,
+        })
+    }
+
     /// Adds one step's gain `K_k` and Jacobian `J_k`.
     ///
     /// # Errors

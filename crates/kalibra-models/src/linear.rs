@@ -206,6 +206,38 @@ where
     }
 }
 
+/// Lane-wise: `nu = z - H x` across the lanes (`H x` accumulated in column order with fused
+/// multiply-adds where the instruction set has them), `H` and `R` broadcast to every lane.
+impl<const N: usize, const M: usize> crate::lanes::LaneMeasurement<N, M>
+    for LinearObservation<kalibra_linalg::Const<N>, kalibra_linalg::Const<M>>
+{
+    #[inline(always)]
+    fn innovate_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        _k: usize,
+        x: &[crate::lanes::Lanes; N],
+        z: &[crate::lanes::Lanes; M],
+        nu: &mut [crate::lanes::Lanes; M],
+        h: &mut [[crate::lanes::Lanes; N]; M],
+        r: &mut [[crate::lanes::Lanes; M]; M],
+    ) {
+        use crate::lanes::{BATCH, broadcast, load, store};
+        let hm = &self.h;
+        for c in 0..BATCH / S::F64_LANES {
+            for (i, nu_i) in nu.iter_mut().enumerate() {
+                let mut s = simd.mul_f64s(simd.splat_f64s(hm[(i, 0)]), load::<S>(&x[0], c));
+                for (j, xj) in x.iter().enumerate().skip(1) {
+                    s = simd.mul_add_e_f64s(simd.splat_f64s(hm[(i, j)]), load::<S>(xj, c), s);
+                }
+                store::<S>(nu_i, c, simd.sub_f64s(load::<S>(&z[i], c), s));
+            }
+        }
+        broadcast(h, hm);
+        broadcast(r, self.r.matrix());
+    }
+}
+
 impl<N: Dim, M: Dim> LinearMeasurement<N, M> for LinearObservation<N, M>
 where
     DefaultAllocator: Alloc<N, M>,

@@ -160,32 +160,35 @@ impl AccelAxis {
     }
 }
 
-/// Lane-wise: `f(x)` and `F` at `x` across the lanes in the scalar model's order of
-/// operations, with one [`sin_cos_lanes`](crate::lanes::math::sin_cos_lanes) per step for both
-/// `g(a)` and `g'(a)` (within 2 ulp of glibc's), and the constant `Q` broadcast.
-impl crate::lanes::LaneDynamics<3> for AccelAxis {
+impl AccelAxis {
+    /// `g(a)` and `g'(a)` of every lane of `a` (sine on x and z, cosine on y), from one
+    /// [`sin_cos_lanes`](crate::lanes::math::sin_cos_lanes) (within 2 ulp of glibc's).
     #[inline(always)]
-    fn predict_lanes<S: pulp::Simd>(
+    fn g_lanes<S: pulp::Simd>(
         &self,
         simd: S,
-        k: usize,
-        x: &mut [crate::lanes::Lanes; 3],
-        f: &mut [[crate::lanes::Lanes; 3]; 3],
-        q: &mut [[crate::lanes::Lanes; 3]; 3],
-    ) {
-        use crate::lanes::{BATCH, broadcast, load, math, store};
-        let p = &self.params;
-        let (dt, d) = (p.dt, p.damping[self.axis]);
-        let (sin, cos) = math::sin_cos_lanes(simd, &x[2]);
-        // g = sin, g' = cos on x and z; g = cos, g' = -sin on y.
-        let (g, dg) = if self.axis == 1 {
+        a: &crate::lanes::Lanes,
+    ) -> (crate::lanes::Lanes, crate::lanes::Lanes) {
+        let (sin, cos) = crate::lanes::math::sin_cos_lanes(simd, a);
+        if self.axis == 1 {
             (cos, sin.map(|v| -v))
         } else {
             (sin, cos)
-        };
-        let jac = self.jacobian(k, &Vector3::zeros());
-        broadcast(f, &jac);
-        broadcast(q, &self.noise_cov(k));
+        }
+    }
+
+    /// Replaces every lane of `x` by `f(x)` given `g(a)` of its lanes, in the scalar
+    /// [`Dynamics::transition`]'s order of operations.
+    #[inline(always)]
+    fn advance_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        x: &mut [crate::lanes::Lanes; 3],
+        g: &crate::lanes::Lanes,
+    ) {
+        use crate::lanes::{BATCH, load, store};
+        let p = &self.params;
+        let (dt, d) = (p.dt, p.damping[self.axis]);
         let sp = |v: f64| simd.splat_f64s(v);
         let (a_p, a_v, a_a) = (sp(1.0 + d), sp(dt), sp(0.5 * dt * dt));
         let b_v = sp(p.velocity_diagonal + d);
@@ -199,13 +202,76 @@ impl crate::lanes::LaneDynamics<3> for AccelAxis {
             let (mul, add) = (|a, b| simd.mul_f64s(a, b), |a, b| simd.add_f64s(a, b));
             let np = add(add(mul(a_p, xp), mul(a_v, xv)), mul(a_a, xa));
             let nv = add(mul(b_v, xv), mul(a_v, xa));
-            let na = add(mul(c_a, xa), mul(amp, load::<S>(&g, c)));
+            let na = add(mul(c_a, xa), mul(amp, load::<S>(g, c)));
             store::<S>(&mut x[0], c, np);
             store::<S>(&mut x[1], c, nv);
             store::<S>(&mut x[2], c, na);
-            // F[2][2] = (1 + c_a) + amp g'(a), at the old a.
-            store::<S>(&mut f[2][2], c, add(c_a, mul(amp, load::<S>(&dg, c))));
         }
+    }
+
+    /// Writes `F` at every lane of `x` into `f` given `g'(a)` of its lanes: the constant
+    /// entries broadcast, `F[2][2] = (1 + c_a) + amp g'(a)`.
+    #[inline(always)]
+    fn jacobian_into_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        dg: &crate::lanes::Lanes,
+        f: &mut [[crate::lanes::Lanes; 3]; 3],
+    ) {
+        use crate::lanes::{BATCH, broadcast, load, store};
+        let p = &self.params;
+        broadcast(f, &self.jacobian(0, &Vector3::zeros()));
+        let (c_a, amp) = (
+            simd.splat_f64s(1.0 + p.accel_coefficient),
+            simd.splat_f64s(p.accel_amplitude),
+        );
+        for c in 0..BATCH / S::F64_LANES {
+            let v = simd.add_f64s(c_a, simd.mul_f64s(amp, load::<S>(dg, c)));
+            store::<S>(&mut f[2][2], c, v);
+        }
+    }
+
+    /// Lane-wise [`Dynamics::transition`]: replaces every lane of `x` by `f(x)` (the scalar
+    /// model's order of operations, `g` within 2 ulp of glibc's), on the instruction set of
+    /// `simd`. For simulating [`BATCH`](crate::lanes::BATCH) truths together.
+    #[inline(always)]
+    pub fn transition_lanes<S: pulp::Simd>(&self, simd: S, x: &mut [crate::lanes::Lanes; 3]) {
+        let (g, _) = self.g_lanes(simd, &x[2]);
+        self.advance_lanes(simd, x, &g);
+    }
+
+    /// Lane-wise [`Dynamics::jacobian`]: `F` at every lane of `x` into `f`, on the
+    /// instruction set of `simd`.
+    #[inline(always)]
+    pub fn jacobian_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        x: &[crate::lanes::Lanes; 3],
+        f: &mut [[crate::lanes::Lanes; 3]; 3],
+    ) {
+        let (_, dg) = self.g_lanes(simd, &x[2]);
+        self.jacobian_into_lanes(simd, &dg, f);
+    }
+}
+
+/// Lane-wise: `f(x)` and `F` at `x` across the lanes in the scalar model's order of
+/// operations, with one [`sin_cos_lanes`](crate::lanes::math::sin_cos_lanes) per step for both
+/// `g(a)` and `g'(a)` (within 2 ulp of glibc's), and the constant `Q` broadcast.
+impl crate::lanes::LaneDynamics<3> for AccelAxis {
+    #[inline(always)]
+    fn predict_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &mut [crate::lanes::Lanes; 3],
+        f: &mut [[crate::lanes::Lanes; 3]; 3],
+        q: &mut [[crate::lanes::Lanes; 3]; 3],
+    ) {
+        let (g, dg) = self.g_lanes(simd, &x[2]);
+        // F at the old a, before the mean moves.
+        self.jacobian_into_lanes(simd, &dg, f);
+        crate::lanes::broadcast(q, &self.noise_cov(k));
+        self.advance_lanes(simd, x, &g);
     }
 }
 

@@ -299,6 +299,52 @@ mod models {
         }
     }
 
+    /// The linear observation: `z - H x` lane-wise against `PerLane`, `H` and `R` broadcast.
+    fn check_linear<S: Simd>(simd: S, isa: &str) {
+        use kalibra_linalg::nalgebra::SMatrix;
+        use kalibra_models::LinearObservation;
+        let sensor = LinearObservation::new(
+            SMatrix::<f64, 1, 2>::new(0.7, -1.3),
+            kalibra_linalg::Matrix1::new(0.04),
+        )
+        .unwrap();
+        let dynamics = LinearGaussian::new(Matrix2::identity(), Matrix2::identity()).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let mut worst = 0.0f64;
+        for _ in 0..2000 {
+            let mut x = [[0.0; BATCH]; 2];
+            let mut z = [[0.0; BATCH]; 1];
+            for l in 0..BATCH {
+                x[0][l] = rng.random_range(-30.0..30.0);
+                x[1][l] = rng.random_range(-30.0..30.0);
+                z[0][l] = rng.random_range(-60.0..60.0);
+            }
+            let a = eval(simd, &dynamics, &sensor, &x, &z);
+            let b = eval(simd, &dynamics, &PerLane(&sensor), &x, &z);
+            assert_eq!((a.4, a.5), (b.4, b.5), "{isa}: H and R");
+            for l in 0..BATCH {
+                // A fused multiply-add is the one difference: within an ulp of the terms.
+                let size = z[0][l].abs() + 0.7 * x[0][l].abs() + 1.3 * x[1][l].abs();
+                worst = worst.max((a.3[0][l] - b.3[0][l]).abs() / size);
+            }
+        }
+        assert!(worst <= 2.0 * f64::EPSILON, "{isa}: {worst:e}");
+    }
+
+    #[test]
+    fn the_lane_wise_linear_observation_agrees_with_the_scalar_one_on_every_isa() {
+        check_linear(pulp::Scalar::new(), "scalar");
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                check_linear(simd, "avx2");
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                check_linear(simd, "avx512");
+            }
+        }
+    }
+
     #[test]
     fn lane_wise_models_agree_with_their_scalar_selves_on_every_isa() {
         check(pulp::Scalar::new(), "scalar");
@@ -557,6 +603,14 @@ mod accel_axis {
                     },
                 );
                 assert_eq!(a.2, b.2, "{isa}: Q");
+                // The separate lane-wise transition and Jacobian are the prediction's parts,
+                // to the bit.
+                let mut t = x;
+                model.transition_lanes(simd, &mut t);
+                assert_eq!(t, a.0, "{isa}: transition_lanes");
+                let mut f = [[[0.0; BATCH]; 3]; 3];
+                model.jacobian_lanes(simd, &x, &mut f);
+                assert_eq!(f, a.1, "{isa}: jacobian_lanes");
                 for l in 0..BATCH {
                     // Relative to the state's size: sin and cos within 2 ulp of glibc's enter
                     // a sum with the other terms.

@@ -255,6 +255,12 @@ where
         &self.x
     }
 
+    /// Every lane's gain `K` of the last update, entry by entry (`gains()[i][j][lane]`;
+    /// meaningful for the lanes whose [`BatchStep::nis`] is `Ok`).
+    pub fn gains(&self) -> &[[Lanes; M]; N] {
+        &self.gain
+    }
+
     /// Predicts every lane from step `k` to `k + 1` (`f_k`, `F_k` and `Q_k` at the lane's
     /// estimate), then updates it with its measurement `z[i][lane]` (the innovation, `H` and
     /// `R` at the lane's prediction) and computes its NIS, and its NEES against

@@ -165,9 +165,31 @@ impl Isa {
     }
 
     /// Runs `op` with this instruction set's pulp token (the scalar fallback if the CPU does
-    /// not have it; constructors check with [`Isa::checked`] first).
+    /// not have it; constructors check with [`Isa::checked`] first). Studies use it to run
+    /// lane-wise model code (truth simulation, Jacobians at the estimates) on the batch's
+    /// instruction set, so that every lane-wise result depends on the `Isa` alone.
+    ///
+    /// ```
+    /// use kalibra_filters::batch::{BATCH, Isa};
+    /// use pulp::{Simd, WithSimd};
+    ///
+    /// struct Double<'a>(&'a mut [f64; BATCH]);
+    /// impl WithSimd for Double<'_> {
+    ///     type Output = ();
+    ///     #[inline(always)]
+    ///     fn with_simd<S: Simd>(self, simd: S) {
+    ///         let (chunks, _) = S::as_mut_simd_f64s(self.0);
+    ///         for c in chunks {
+    ///             *c = simd.add_f64s(*c, *c);
+    ///         }
+    ///     }
+    /// }
+    /// let mut x = [1.5; BATCH];
+    /// Isa::detect().dispatch(Double(&mut x));
+    /// assert_eq!(x, [3.0; BATCH]);
+    /// ```
     #[inline]
-    pub(crate) fn dispatch<Op: WithSimd>(self, op: Op) -> Op::Output {
+    pub fn dispatch<Op: WithSimd>(self, op: Op) -> Op::Output {
         match self {
             #[cfg(target_arch = "x86_64")]
             Isa::Avx512 => {

@@ -2,14 +2,16 @@
 //! and the Table 2 quantiles from independent replicates.
 
 use kalibra_bounds::{ErgodicAverage, Surrogate, gaussian_half_widths};
-use kalibra_filters::batch::{BATCH, EkfBatch, Isa, PerLane};
+use kalibra_filters::batch::{BATCH, EkfBatch, Isa, Lanes};
 use kalibra_linalg::nalgebra::SMatrix;
 use kalibra_linalg::{Alloc, Const, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
 use kalibra_metrics::hypothesis::{
     TestResult, batch_means, ks_two_sample, paired_t_test, runs_test,
 };
+use kalibra_models::lanes::lane;
 use kalibra_models::{AccelAxis, Dynamics, LinearObservation, Measurement, Target3d};
 use kalibra_sim::{ChaCha8Rng, MonteCarlo, RunFailure};
+use pulp::{Simd, WithSimd};
 use serde::Serialize;
 
 use super::claims::claims;
@@ -173,61 +175,101 @@ struct AxisTrajectory<const M: usize> {
     errors: [Vec<f64>; 3],
 }
 
-/// The batched EKF of one axis, on borrowed models: the axis's dynamics evaluate their lanes
-/// together (SIMD sine and cosine), the linear observation lane by lane.
+/// The batched EKF of one axis, on borrowed models: the axis's dynamics and its linear
+/// observation evaluate their lanes together (SIMD sine and cosine for the dynamics).
 type AxisEkf<'a, const M: usize> =
-    EkfBatch<3, M, &'a AccelAxis, PerLane<&'a LinearObservation<U3, Const<M>>>>;
+    EkfBatch<3, M, &'a AccelAxis, &'a LinearObservation<U3, Const<M>>>;
+
+/// The truths of a batch one step on, `x = f(x)` lane-wise (the noise is added per lane
+/// after), as a pulp operation on the batch's instruction set.
+struct Advance<'a> {
+    dynamics: &'a AccelAxis,
+    x: &'a mut [Lanes; 3],
+}
+
+impl WithSimd for Advance<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        self.dynamics.transition_lanes(simd, self.x);
+    }
+}
+
+/// The Jacobian `J = df/dx` at every lane's estimate, as a pulp operation.
+struct JacobianAt<'a> {
+    dynamics: &'a AccelAxis,
+    x: &'a [Lanes; 3],
+    f: &'a mut [[Lanes; 3]; 3],
+}
+
+impl WithSimd for JacobianAt<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        self.dynamics.jacobian_lanes(simd, self.x, self.f);
+    }
+}
 
 /// Runs one axis for `steps` steps from fresh truths, for the runs of `rngs` together (lane
 /// `l` is run `first + l`, drawing from `rngs[l]` exactly what the one-run study drew: its
 /// initial state, then per step its process noise and its measurement noise), calling
 /// `visit(k, truths, ekf)` after each update. Lanes beyond `rngs` carry zeros and are ignored.
+///
+/// The truths step lane-wise (`f(x)` on the batch's instruction set, its sine within 2 ulp of
+/// glibc's), then each lane adds its own draws: run `i`'s truth is the one-run study's to
+/// rounding, whatever the batch it falls in.
 fn run_axis<const M: usize>(
     axis: &AxisSetup<M>,
     steps: usize,
     isa: Isa,
     first: usize,
     rngs: &mut [ChaCha8Rng],
-    mut visit: impl FnMut(usize, &[Vector3<f64>; BATCH], &AxisEkf<'_, M>),
+    mut visit: impl FnMut(usize, &[Lanes; 3], &AxisEkf<'_, M>),
 ) -> Result<(), RunFailure<StudyError>> {
     let fail = |l: usize, source: StudyError| RunFailure {
         run: first + l,
         source,
     };
-    let mut x = [Vector3::zeros(); BATCH];
+    let mut x = [[0.0; BATCH]; 3];
     for (l, rng) in rngs.iter_mut().enumerate() {
-        x[l] = kalibra_models::standard_normal(U3, rng);
+        let x0 = kalibra_models::standard_normal(U3, rng);
+        for (xi, v) in x.iter_mut().zip(x0.iter()) {
+            xi[l] = *v;
+        }
     }
     let mut ekf = EkfBatch::new(
         isa,
         &axis.dynamics,
-        PerLane(&axis.measurement),
+        &axis.measurement,
         Vector3::zeros(),
         Matrix3::identity(),
     )
     .map_err(|e| fail(0, e.into()))?;
     let mut z = [[0.0; BATCH]; M];
-    let mut truth = [[0.0; BATCH]; 3];
     for k in 1..=steps {
+        isa.dispatch(Advance {
+            dynamics: &axis.dynamics,
+            x: &mut x,
+        });
         for (l, rng) in rngs.iter_mut().enumerate() {
             let w = axis
                 .dynamics
                 .sample_noise(k - 1, rng)
                 .map_err(|e| fail(l, e.into()))?;
-            x[l] = axis.dynamics.transition(k - 1, &x[l]) + w;
+            for (xi, wi) in x.iter_mut().zip(w.iter()) {
+                xi[l] += wi;
+            }
+            let xl = lane(&x, l);
             let v = axis
                 .measurement
-                .sample_noise(k, &x[l], rng)
+                .sample_noise(k, &xl, rng)
                 .map_err(|e| fail(l, e.into()))?;
-            let zl = axis.measurement.measure(k, &x[l]) + v;
+            let zl = axis.measurement.measure(k, &xl) + v;
             for i in 0..M {
                 z[i][l] = zl[i];
             }
-            for i in 0..3 {
-                truth[i][l] = x[l][i];
-            }
         }
-        let step = ekf.predict_update(&z, &truth);
+        let step = ekf.predict_update(&z, &x);
         for l in 0..rngs.len() {
             step.nis(l).map_err(|e| fail(l, e.into()))?;
         }
@@ -236,6 +278,9 @@ fn run_axis<const M: usize>(
     Ok(())
 }
 
+/// One axis of the trajectories of `rngs`: per lane the errors of every step, and the sums
+/// of the gains and of the Jacobians at the estimates after the burn-in, added lane-wise in
+/// the order [`ErgodicAverage::push`] adds them.
 fn trajectory_axis<const M: usize>(
     axis: &AxisSetup<M>,
     config: &Config,
@@ -243,35 +288,55 @@ fn trajectory_axis<const M: usize>(
     first: usize,
     rngs: &mut [ChaCha8Rng],
 ) -> Result<Vec<AxisTrajectory<M>>, RunFailure<StudyError>> {
-    let mut out: Vec<AxisTrajectory<M>> = rngs
+    let mut errors: Vec<[Vec<f64>; 3]> = rngs
         .iter()
-        .map(|_| AxisTrajectory {
-            averages: ErgodicAverage::new(U3, Const::<M>),
-            errors: std::array::from_fn(|_| Vec::with_capacity(config.trajectory)),
-        })
+        .map(|_| std::array::from_fn(|_| Vec::with_capacity(config.trajectory)))
         .collect();
-    let mut failure = None;
+    let mut gain_sum = [[[0.0; BATCH]; M]; 3];
+    let mut jacobian_sum = [[[0.0; BATCH]; 3]; 3];
+    let mut jacobian = [[[0.0; BATCH]; 3]; 3];
+    let mut count = 0;
     run_axis(axis, config.trajectory, isa, first, rngs, |k, x, ekf| {
-        for (l, run) in out.iter_mut().enumerate() {
-            let post = ekf.mean(l);
-            for (i, e) in run.errors.iter_mut().enumerate() {
-                e.push(x[l][i] - post[i]);
-            }
-            if k > config.burn_in {
-                let j = axis.dynamics.jacobian(k, &post);
-                if let Err(e) = run.averages.push(&ekf.gain(l), &j) {
-                    failure.get_or_insert((l, e));
-                }
+        let post = ekf.means();
+        for (l, run) in errors.iter_mut().enumerate() {
+            for (i, e) in run.iter_mut().enumerate() {
+                e.push(x[i][l] - post[i][l]);
             }
         }
+        if k > config.burn_in {
+            isa.dispatch(JacobianAt {
+                dynamics: &axis.dynamics,
+                x: post,
+                f: &mut jacobian,
+            });
+            add_lanes(&mut gain_sum, ekf.gains());
+            add_lanes(&mut jacobian_sum, &jacobian);
+            count += 1;
+        }
     })?;
-    if let Some((l, e)) = failure {
-        return Err(RunFailure {
-            run: first + l,
-            source: e.into(),
-        });
+    errors
+        .into_iter()
+        .enumerate()
+        .map(|(l, errors)| {
+            let gains = SMatrix::<f64, 3, M>::from_fn(|i, j| gain_sum[i][j][l]);
+            let jacobians = SMatrix::<f64, 3, 3>::from_fn(|i, j| jacobian_sum[i][j][l]);
+            let averages =
+                ErgodicAverage::from_sums(gains, jacobians, count).map_err(|e| RunFailure {
+                    run: first + l,
+                    source: e.into(),
+                })?;
+            Ok(AxisTrajectory { averages, errors })
+        })
+        .collect()
+}
+
+/// `sum += add`, lane by lane.
+fn add_lanes<const R: usize, const C: usize>(sum: &mut [[Lanes; C]; R], add: &[[Lanes; C]; R]) {
+    for (sum, add) in sum.iter_mut().flatten().zip(add.iter().flatten()) {
+        for (s, a) in sum.iter_mut().zip(add) {
+            *s += a;
+        }
     }
-    Ok(out)
 }
 
 /// The 9-state block-diagonal matrix from three per-axis `3 x c` blocks.
@@ -415,7 +480,7 @@ fn replicates<const M: usize>(
                 for (l, (e, var)) in out.iter_mut().enumerate() {
                     let (mean, cov) = (ekf.mean(l), ekf.cov(l));
                     for i in 0..3 {
-                        e[3 * a + i] = x[l][i] - mean[i];
+                        e[3 * a + i] = x[i][l] - mean[i];
                         var[3 * a + i] = cov[(i, i)];
                     }
                 }
@@ -689,16 +754,17 @@ mod tests {
                 let mut batched: Vec<Trace<M>> = vec![Vec::new(); runs];
                 run_axis(axis, steps, isa, 0, &mut rngs, |_, x, ekf| {
                     for (l, trace) in batched.iter_mut().enumerate() {
-                        trace.push((x[l], ekf.mean(l), ekf.cov(l), ekf.gain(l)));
+                        trace.push((lane(x, l), ekf.mean(l), ekf.cov(l), ekf.gain(l)));
                     }
                 })
                 .unwrap();
                 for (rng, trace) in scalar_rngs.iter_mut().zip(&batched) {
                     let scalar = scalar_axis(axis, steps, rng);
                     for (a, b) in trace.iter().zip(&scalar) {
-                        // The same draws: the truths are equal to the bit.
-                        assert_eq!(a.0, b.0, "{isa}");
+                        // The same draws; the truths agree to rounding (the batch steps f
+                        // lane-wise, its sine within 2 ulp of glibc's).
                         worst = worst
+                            .max((a.0 - b.0).amax() / b.0.amax().max(1e-300))
                             .max((a.1 - b.1).amax() / b.1.amax().max(1e-300))
                             .max((a.2 - b.2).amax() / b.2.amax())
                             .max((a.3 - b.3).amax() / b.3.amax());
