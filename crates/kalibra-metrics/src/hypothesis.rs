@@ -78,36 +78,135 @@ fn check_finite(what: &'static str, x: &[f64]) -> Result<(), MetricsError> {
 /// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
 pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f64>, MetricsError> {
-    const WHAT: &str = "batch_means";
-    if batch == 0 {
-        return Err(MetricsError::InvalidParameter {
-            name: "batch",
-            value: 0.0,
-        });
+    let mut means = BatchMeans::new(batch, burn_in)?;
+    for &x in series {
+        means.push(x);
     }
-    let needed = burn_in.saturating_add(batch);
-    if series.len() < needed {
-        return Err(MetricsError::TooFewSamples {
-            what: WHAT,
-            needed,
-            got: series.len(),
-        });
+    means.finish()
+}
+
+/// [`batch_means`] of a series that arrives one sample at a time: the means of the batches
+/// completed so far are kept, the samples are not (a trajectory of 10^5 steps needs a few
+/// hundred numbers, not 10^5).
+///
+/// Each batch's sum is formed in the order of its samples and multiplied by `1 / batch`, so
+/// the result is [`batch_means`]'s to the bit (which is this accumulator fed the whole
+/// series). A batch whose largest magnitude is extreme (beyond `2^480` or below `2^-480`) is
+/// summed scaled by a power of two and scaled back, which is exact wherever the plain sum
+/// neither overflows nor underflows and keeps the mean finite and accurate where it would.
+///
+/// ```
+/// use kalibra_metrics::{BatchMeans, batch_means};
+/// let series: Vec<f64> = (0..10).map(|i| f64::from(i).sin()).collect();
+/// let mut streamed = BatchMeans::new(3, 1)?;
+/// for &x in &series {
+///     streamed.push(x);
+/// }
+/// assert_eq!(streamed.finish()?, batch_means(&series, 3, 1)?);
+/// # Ok::<(), kalibra_metrics::MetricsError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct BatchMeans {
+    batch: usize,
+    burn_in: usize,
+    seen: usize,
+    first_non_finite: Option<usize>,
+    // The current batch: its running sum (from -0.0, as `Iterator::sum` starts), its largest
+    // magnitude, and its samples (kept for the scaled sum of an extreme batch).
+    sum: f64,
+    largest: f64,
+    current: Vec<f64>,
+    means: Vec<f64>,
+}
+
+impl BatchMeans {
+    /// An empty accumulator: batches of `batch` samples after the first `burn_in`.
+    ///
+    /// # Errors
+    /// [`MetricsError::InvalidParameter`] named `"batch"` if `batch` is zero.
+    pub fn new(batch: usize, burn_in: usize) -> Result<Self, MetricsError> {
+        if batch == 0 {
+            return Err(MetricsError::InvalidParameter {
+                name: "batch",
+                value: 0.0,
+            });
+        }
+        Ok(Self {
+            batch,
+            burn_in,
+            seen: 0,
+            first_non_finite: None,
+            sum: -0.0,
+            largest: 0.0,
+            current: Vec::with_capacity(batch),
+            means: Vec::new(),
+        })
     }
-    check_finite(WHAT, series)?;
-    // Values near the ends of f64's range: the means of the series scaled by a power of two
-    // (exact), scaled back, so a sum of values near 1e308 does not overflow.
-    if let Some(k) = crate::scale::extreme_exponent(series) {
-        let means = batch_means(&crate::scale::scaled(series, k), batch, burn_in)?;
-        return Ok(means
-            .into_iter()
-            .map(|m| crate::scale::ldexp(m, k))
-            .collect());
+
+    /// Adds the next sample of the series.
+    #[inline]
+    pub fn push(&mut self, x: f64) {
+        let index = self.seen;
+        self.seen += 1;
+        if !x.is_finite() && self.first_non_finite.is_none() {
+            self.first_non_finite = Some(index);
+        }
+        if index < self.burn_in {
+            return;
+        }
+        self.sum += x;
+        self.largest = self.largest.max(x.abs());
+        self.current.push(x);
+        if self.current.len() == self.batch {
+            self.close_batch();
+        }
     }
-    let scale = 1.0 / batch as f64;
-    Ok(series[burn_in..]
-        .chunks_exact(batch)
-        .map(|chunk| chunk.iter().sum::<f64>() * scale)
-        .collect())
+
+    fn close_batch(&mut self) {
+        let scale = 1.0 / self.batch as f64;
+        let mean = match crate::scale::extreme_exponent_of(self.largest) {
+            None => self.sum * scale,
+            Some(k) => {
+                let sum: f64 = self
+                    .current
+                    .iter()
+                    .map(|&v| crate::scale::ldexp(v, -k))
+                    .sum();
+                crate::scale::ldexp(sum * scale, k)
+            }
+        };
+        self.means.push(mean);
+        self.sum = -0.0;
+        self.largest = 0.0;
+        self.current.clear();
+    }
+
+    /// Samples pushed so far, burn-in included.
+    pub fn samples(&self) -> usize {
+        self.seen
+    }
+
+    /// The means of the completed batches (a trailing partial batch is dropped).
+    ///
+    /// # Errors
+    /// As [`batch_means`]: [`MetricsError::TooFewSamples`] (`needed = burn_in + batch`) if no
+    /// batch was completed, [`MetricsError::NonFiniteSample`] with the index of the first NaN
+    /// or infinite sample, burn-in included.
+    pub fn finish(self) -> Result<Vec<f64>, MetricsError> {
+        const WHAT: &str = "batch_means";
+        let needed = self.burn_in.saturating_add(self.batch);
+        if self.seen < needed {
+            return Err(MetricsError::TooFewSamples {
+                what: WHAT,
+                needed,
+                got: self.seen,
+            });
+        }
+        if let Some(index) = self.first_non_finite {
+            return Err(MetricsError::NonFiniteSample { what: WHAT, index });
+        }
+        Ok(self.means)
+    }
 }
 
 /// Wald-Wolfowitz runs test for randomness about the median, two-sided.

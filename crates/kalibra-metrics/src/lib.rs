@@ -28,7 +28,7 @@
 //!   the sample autocorrelation at lags `1..=L` with its band (Bar-Shalom's test) and the
 //!   Box-Pierce statistic over all lags ([`Whiteness`], [`LagCorrelation`]).
 //! * Hypothesis tests on a series ([`hypothesis`], re-exported here): [`batch_means`] after a
-//!   burn-in, the Wald-Wolfowitz [`runs_test`] about the median, the matched-pair
+//!   burn-in (streamed by [`BatchMeans`]), the Wald-Wolfowitz [`runs_test`] about the median, the matched-pair
 //!   [`paired_t_test`] and the two-sample Kolmogorov-Smirnov test [`ks_two_sample`] (exact
 //!   p-value, [`ks_two_sample_exact_p`], or the Kolmogorov limit [`ks_asymptotic_p`] beyond
 //!   [`KS_EXACT_MAX_CELLS`]), each giving a [`TestResult`]. Paper 004 applies them to the batch
@@ -84,7 +84,7 @@ pub use credibility::{
 };
 pub use error::MetricsError;
 pub use hypothesis::{
-    KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
+    BatchMeans, KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
     ks_two_sample_exact_p, paired_t_test, runs_test,
 };
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};

@@ -17,7 +17,11 @@ pub(crate) use kalibra_linalg::ldexp;
 /// The exponent of the largest magnitude in `values` if it is extreme (beyond `2^480` or
 /// below `2^-480`, zero excepted), `None` for ordinary data (and for all-zero or empty).
 pub(crate) fn extreme_exponent(values: &[f64]) -> Option<i32> {
-    let largest = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    extreme_exponent_of(values.iter().fold(0.0f64, |m, v| m.max(v.abs())))
+}
+
+/// [`extreme_exponent`] of values whose largest magnitude is `largest`.
+pub(crate) fn extreme_exponent_of(largest: f64) -> Option<i32> {
     if largest == 0.0 || !largest.is_finite() {
         return None;
     }

@@ -9,11 +9,11 @@
 //! function and arguments it was checked against.
 
 use approx::assert_relative_eq;
-use kalibra_metrics::MetricsError;
 use kalibra_metrics::hypothesis::{
     KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
     ks_two_sample_exact_p, paired_t_test, runs_test,
 };
+use kalibra_metrics::{BatchMeans, MetricsError};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -49,6 +49,55 @@ fn batch_means_of_a_long_series_after_a_burn_in() {
     // 250 = 35 * 7 + 5, so batches do not all see the same residues: check the first by hand.
     let first: f64 = (10_000..10_250).map(|k| f64::from(k % 7)).sum::<f64>() / 250.0;
     assert_relative_eq!(means[0], first, max_relative = 1e-15);
+}
+
+/// The definition on ordinary data: each batch's samples summed in order, times `1 / batch`.
+fn batch_means_by_definition(series: &[f64], batch: usize, burn_in: usize) -> Vec<f64> {
+    series[burn_in..]
+        .chunks_exact(batch)
+        .map(|c| c.iter().sum::<f64>() * (1.0 / batch as f64))
+        .collect()
+}
+
+#[test]
+fn streamed_batch_means_are_the_definition_to_the_bit() {
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    for (len, batch, burn_in) in [
+        (1000, 7, 0),
+        (1000, 250, 13),
+        (5000, 1, 4999),
+        (999, 333, 0),
+    ] {
+        let series: Vec<f64> = (0..len).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let mut streamed = BatchMeans::new(batch, burn_in).unwrap();
+        for &x in &series {
+            streamed.push(x);
+        }
+        assert_eq!(streamed.samples(), len);
+        let expected = batch_means_by_definition(&series, batch, burn_in);
+        let got = streamed.finish().unwrap();
+        // To the bit, signs of zero included.
+        assert_eq!(
+            got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            expected.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(batch_means(&series, batch, burn_in).unwrap(), got);
+    }
+    // A batch of negative zeros has mean -0.0, as the sum of its samples does.
+    let zeros = batch_means(&[-0.0, -0.0, 1.0, 1.0], 2, 0).unwrap();
+    assert_eq!(zeros[0].to_bits(), (-0.0f64).to_bits());
+}
+
+#[test]
+fn an_extreme_batch_is_summed_scaled_and_stays_finite() {
+    // 1e307 four times overflows a plain sum; the scaled one gives the mean exactly.
+    let series = [1e307, 1e307, 1e307, 1e307, 1.0, 2.0, 3.0, 4.0];
+    let means = batch_means(&series, 4, 0).unwrap();
+    assert_eq!(means, vec![1e307, 2.5]);
+    // Near the bottom of the range: subnormal partial sums would lose digits.
+    let tiny = [3e-310, 5e-310, 7e-310];
+    let m = batch_means(&tiny, 3, 0).unwrap()[0];
+    assert_relative_eq!(m, 5e-310, max_relative = 1e-3);
 }
 
 #[test]

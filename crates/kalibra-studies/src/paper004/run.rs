@@ -5,8 +5,9 @@ use kalibra_bounds::{ErgodicAverage, Surrogate, gaussian_half_widths};
 use kalibra_filters::batch::{BATCH, EkfBatch, Isa, Lanes};
 use kalibra_linalg::nalgebra::SMatrix;
 use kalibra_linalg::{Alloc, Const, DefaultAllocator, DimName, Matrix3, OMatrix, U3, U9, Vector3};
+use kalibra_metrics::MetricsError;
 use kalibra_metrics::hypothesis::{
-    TestResult, batch_means, ks_two_sample, paired_t_test, runs_test,
+    BatchMeans, TestResult, ks_two_sample, paired_t_test, runs_test,
 };
 use kalibra_models::lanes::lane;
 use kalibra_models::{AccelAxis, Dynamics, LinearObservation, Measurement, Target3d};
@@ -172,7 +173,7 @@ struct AxisSetup<const M: usize> {
 struct AxisTrajectory<const M: usize> {
     averages: ErgodicAverage<U3, Const<M>>,
     /// Errors `x - x_hat` of steps `1 ..= n` per component of the axis.
-    errors: [Vec<f64>; 3],
+    errors: [BatchMeans; 3],
 }
 
 /// The batched EKF of one axis, on borrowed models: the axis's dynamics and its linear
@@ -278,7 +279,7 @@ fn run_axis<const M: usize>(
     Ok(())
 }
 
-/// One axis of the trajectories of `rngs`: per lane the errors of every step, and the sums
+/// One axis of the trajectories of `rngs`: per lane the batch means of its errors, and the sums
 /// of the gains and of the Jacobians at the estimates after the burn-in, added lane-wise in
 /// the order [`ErgodicAverage::push`] adds them.
 fn trajectory_axis<const M: usize>(
@@ -288,10 +289,15 @@ fn trajectory_axis<const M: usize>(
     first: usize,
     rngs: &mut [ChaCha8Rng],
 ) -> Result<Vec<AxisTrajectory<M>>, RunFailure<StudyError>> {
-    let mut errors: Vec<[Vec<f64>; 3]> = rngs
+    let batches = || BatchMeans::new(config.batch, config.burn_in);
+    let mut errors: Vec<[BatchMeans; 3]> = rngs
         .iter()
-        .map(|_| std::array::from_fn(|_| Vec::with_capacity(config.trajectory)))
-        .collect();
+        .map(|_| Ok([batches()?, batches()?, batches()?]))
+        .collect::<Result<_, MetricsError>>()
+        .map_err(|e| RunFailure {
+            run: first,
+            source: e.into(),
+        })?;
     let mut gain_sum = [[[0.0; BATCH]; M]; 3];
     let mut jacobian_sum = [[[0.0; BATCH]; 3]; 3];
     let mut jacobian = [[[0.0; BATCH]; 3]; 3];
@@ -359,8 +365,8 @@ where
 }
 
 /// The three tests on the batch means of one error series, and the number of batch means.
-fn tests(series: &[f64], config: &Config) -> Result<([TestResult; 3], usize), StudyError> {
-    let means = batch_means(series, config.batch, config.burn_in)?;
+fn tests(means: BatchMeans) -> Result<([TestResult; 3], usize), StudyError> {
+    let means = means.finish()?;
     let half = means.len() / 2;
     Ok((
         [
@@ -403,7 +409,7 @@ where
         .zip(zs)
         .enumerate()
         .map(|(l, ((x, y), z))| {
-            trajectory(&[x, y, z], full, target, config).map_err(|source| RunFailure {
+            trajectory([x, y, z], full, target).map_err(|source| RunFailure {
                 run: first + l,
                 source,
             })
@@ -413,10 +419,9 @@ where
 
 /// The surrogate and the tests of one trajectory from its three axes.
 fn trajectory<const M: usize, M9: DimName>(
-    runs: &[AxisTrajectory<M>; 3],
+    runs: [AxisTrajectory<M>; 3],
     full: &LinearObservation<U9, M9>,
     target: &Target3d,
-    config: &Config,
 ) -> Result<TrajectoryOutcome, StudyError>
 where
     DefaultAllocator: Alloc<U9, M9>,
@@ -446,9 +451,9 @@ where
     let hw = surrogate.half_widths(CONFIDENCE)?;
     let mut p = [[0.0; 3]; 9];
     let mut count = 0;
-    for (a, run) in runs.iter().enumerate() {
-        for i in 0..3 {
-            let (t, means) = tests(&run.errors[i], config)?;
+    for (a, run) in runs.into_iter().enumerate() {
+        for (i, errors) in run.errors.into_iter().enumerate() {
+            let (t, means) = tests(errors)?;
             p[3 * a + i] = [t[0].p_value, t[1].p_value, t[2].p_value];
             count = means;
         }
