@@ -309,6 +309,94 @@ impl Dynamics<U4> for Ballistic {
     }
 }
 
+/// Lane-wise: `f(x) = F1 x + G fkk(x) + G u` and `F = F1 + G dfkk/dx` for every lane, in the
+/// scalar model's order of operations, with one [`exp_lanes`](crate::lanes::math::exp_lanes)
+/// per step for the density and its derivative (within 1 ulp of glibc's `exp`), and `Q`
+/// broadcast.
+impl crate::lanes::LaneDynamics<4> for Ballistic {
+    #[inline(always)]
+    fn predict_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &mut [crate::lanes::Lanes; 4],
+        f: &mut [[crate::lanes::Lanes; 4]; 4],
+        q: &mut [[crate::lanes::Lanes; 4]; 4],
+    ) {
+        use crate::lanes::{BATCH, Lanes, broadcast, load, math, store};
+        let chunks = BATCH / S::F64_LANES;
+        let sp = |v: f64| simd.splat_f64s(v);
+        let d = &self.density;
+        // The piece of the density each lane's altitude is on, and the exponent -C2 h.
+        let mut c1: Lanes = [0.0; BATCH];
+        let mut c2: Lanes = [0.0; BATCH];
+        let mut arg: Lanes = [0.0; BATCH];
+        for c in 0..chunks {
+            let h = load::<S>(&x[2], c);
+            let above = simd.greater_than_or_equal_f64s(h, sp(d.threshold));
+            let c1v = simd.select_f64s(above, sp(d.above.0), sp(d.below.0));
+            let c2v = simd.select_f64s(above, sp(d.above.1), sp(d.below.1));
+            store::<S>(&mut c1, c, c1v);
+            store::<S>(&mut c2, c, c2v);
+            store::<S>(&mut arg, c, simd.mul_f64s(simd.neg_f64s(c2v), h));
+        }
+        let e = math::exp_lanes(simd, &arg);
+        let p = &self.params;
+        let (f1, gm) = (&p.f1, &p.gm);
+        let (g, beta) = (p.g, self.beta);
+        let (mul, add) = (|a, b| simd.mul_f64s(a, b), |a, b| simd.add_f64s(a, b));
+        for c in 0..chunks {
+            let xc: [S::f64s; 4] = std::array::from_fn(|i| load::<S>(&x[i], c));
+            let (v1, v2) = (xc[1], xc[3]);
+            let (c1v, c2v, ev) = (load::<S>(&c1, c), load::<S>(&c2, c), load::<S>(&e, c));
+            let rho = mul(c1v, ev);
+            let drho = mul(mul(simd.neg_f64s(c2v), c1v), ev);
+            let v = simd.sqrt_f64s(add(mul(v1, v1), mul(v2, v2)));
+            // fkk = vel (-rho g v / (2 beta)).
+            let s = simd.div_f64s(mul(mul(simd.neg_f64s(rho), sp(g)), v), sp(2.0 * beta));
+            let drag = [mul(v1, s), mul(v2, s)];
+            // d fkk / dx (2 x 4), as `Ballistic::drag_jacobian` forms it.
+            let cr = mul(sp(-g / (2.0 * beta)), rho);
+            let outer = simd.select_f64s(
+                simd.greater_than_f64s(v, sp(0.0)),
+                simd.div_f64s(sp(1.0), v),
+                sp(0.0),
+            );
+            let dvh = mul(mul(sp(-g / (2.0 * beta)), v), drho);
+            let cross = mul(mul(mul(v1, v2), outer), cr);
+            let zero = sp(0.0);
+            let dj = [
+                [
+                    zero,
+                    mul(add(v, mul(mul(v1, v1), outer)), cr),
+                    mul(v1, dvh),
+                    cross,
+                ],
+                [
+                    zero,
+                    cross,
+                    mul(v2, dvh),
+                    mul(add(v, mul(mul(v2, v2), outer)), cr),
+                ],
+            ];
+            for i in 0..4 {
+                // F1 x, column by column as nalgebra's product adds them.
+                let mut fx = mul(sp(f1[(i, 0)]), xc[0]);
+                for (j, xj) in xc.iter().enumerate().skip(1) {
+                    fx = add(fx, mul(sp(f1[(i, j)]), *xj));
+                }
+                let gd = add(mul(sp(gm[(i, 0)]), drag[0]), mul(sp(gm[(i, 1)]), drag[1]));
+                store::<S>(&mut x[i], c, add(add(fx, gd), sp(p.input[i])));
+                for (j, fij) in f[i].iter_mut().enumerate() {
+                    let gdj = add(mul(sp(gm[(i, 0)]), dj[0][j]), mul(sp(gm[(i, 1)]), dj[1][j]));
+                    store::<S>(fij, c, add(sp(f1[(i, j)]), gdj));
+                }
+            }
+        }
+        broadcast(q, &self.noise_cov(k));
+    }
+}
+
 /// The ballistic model without drag: `x_{k+1} = F1 x_k + G u + w_k`, the linear model a
 /// Kalman filter can run on when it ignores drag.
 #[derive(Clone, Debug)]

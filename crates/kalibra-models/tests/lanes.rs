@@ -641,3 +641,211 @@ mod accel_axis {
         }
     }
 }
+
+mod exp {
+    use super::*;
+    use kalibra_models::lanes::math::{EXP_LIMIT, exp_lanes};
+    use kalibra_models::lanes::{BATCH, Lanes};
+
+    struct Exp<'a> {
+        x: &'a Lanes,
+        out: &'a mut Lanes,
+    }
+
+    impl WithSimd for Exp<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            *self.out = exp_lanes(simd, self.x);
+        }
+    }
+
+    /// Uniform over the SIMD range, ordinary arguments, the neighbourhoods of the reduction's
+    /// switch points (odd multiples of ln2 / 2), beyond the limit, and the special values.
+    fn samples() -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(29);
+        let mut out = Vec::new();
+        for i in 0..1_000_000 {
+            out.push(match i % 4 {
+                0 => rng.random_range(-EXP_LIMIT..EXP_LIMIT),
+                1 => rng.random_range(-20.0..20.0),
+                2 => {
+                    let k = rng.random_range(-1021i64..1021) as f64 + 0.5;
+                    k * std::f64::consts::LN_2 * (1.0 + rng.random_range(-1e-14..1e-14))
+                }
+                _ => {
+                    let v = 10f64.powf(rng.random_range(-300.0..3.2));
+                    if rng.random::<bool>() { v } else { -v }
+                }
+            });
+        }
+        out.extend([
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            5e-324,
+            f64::MAX,
+            -f64::MAX,
+            EXP_LIMIT,
+            -EXP_LIMIT,
+            709.7,
+            -745.0,
+            -746.0,
+        ]);
+        out
+    }
+
+    fn check<S: Simd>(simd: S, isa: &str, points: &[f64]) -> Option<String> {
+        let mut worst = (0u64, 0.0);
+        for chunk in points.chunks(BATCH) {
+            let mut x = [0.0; BATCH];
+            x[..chunk.len()].copy_from_slice(chunk);
+            let mut out = [0.0; BATCH];
+            Simd::vectorize(
+                simd,
+                Exp {
+                    x: &x,
+                    out: &mut out,
+                },
+            );
+            for (l, v) in chunk.iter().enumerate() {
+                let d = ulps(out[l], v.exp());
+                if (v.abs() > EXP_LIMIT || v.is_nan()) && d != 0 {
+                    return Some(format!("{isa}: libm's own beyond the limit, not at {v:e}"));
+                }
+                if d > worst.0 {
+                    worst = (d, *v);
+                }
+            }
+        }
+        (worst.0 > 1).then(|| format!("{isa}: {} ulp at {:e}", worst.0, worst.1))
+    }
+
+    #[test]
+    fn exp_is_within_1_ulp_of_glibc_on_every_isa() {
+        let points = samples();
+        let mut failures = Vec::new();
+        failures.extend(check(pulp::Scalar::new(), "scalar", &points));
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                failures.extend(check(simd, "avx2", &points));
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                failures.extend(check(simd, "avx512", &points));
+            }
+        }
+        assert!(failures.is_empty(), "{failures:?}");
+    }
+}
+
+mod ballistic {
+    use super::*;
+    use kalibra_linalg::Matrix4;
+    use kalibra_models::lanes::{BATCH, LaneDynamics, Lanes, PerLane};
+    use kalibra_models::{Ballistic, BallisticParams, ballistic_f1};
+
+    type Out = ([Lanes; 4], [[Lanes; 4]; 4], [[Lanes; 4]; 4]);
+
+    struct Predict<'a, D> {
+        d: &'a D,
+        out: &'a mut Out,
+    }
+
+    impl<D: LaneDynamics<4>> WithSimd for Predict<'_, D> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, simd: S) {
+            let (x, f, q) = self.out;
+            self.d.predict_lanes(simd, 2, x, f, q);
+        }
+    }
+
+    fn check<S: Simd>(simd: S, isa: &str) {
+        let params = BallisticParams {
+            period: 2.0,
+            beta: 40_000.0,
+            gravity: 9.81,
+        };
+        let q = Matrix4::new(
+            2.0, 0.5, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.5, 0.0, 0.0, 0.5, 1.0,
+        );
+        let model = Ballistic::new(params, q).unwrap();
+        let f1 = ballistic_f1(params.period);
+        let mut rng = ChaCha8Rng::seed_from_u64(37);
+        let mut worst = 0.0f64;
+        for round in 0..5000 {
+            let mut x = [[0.0; BATCH]; 4];
+            for l in 0..BATCH {
+                // Altitudes either side of the density's switch at 9144 m, and on it.
+                let h = match l {
+                    0 => 9144.0,
+                    1 => rng.random_range(9000.0..9300.0),
+                    _ => rng.random_range(-100.0..1.2e5),
+                };
+                let state = [
+                    rng.random_range(0.0..3e5),
+                    rng.random_range(-3000.0..3000.0),
+                    h,
+                    rng.random_range(-3000.0..3000.0),
+                ];
+                for (xi, v) in x.iter_mut().zip(state) {
+                    xi[l] = v;
+                }
+            }
+            if round % 7 == 0 {
+                // At rest: the Jacobian's limit without the outer-product term.
+                x[1][3] = 0.0;
+                x[3][3] = 0.0;
+            }
+            let mut a: Out = (x, [[[0.0; BATCH]; 4]; 4], [[[0.0; BATCH]; 4]; 4]);
+            let mut b = a;
+            Simd::vectorize(
+                simd,
+                Predict {
+                    d: &model,
+                    out: &mut a,
+                },
+            );
+            Simd::vectorize(
+                simd,
+                Predict {
+                    d: &PerLane(&model),
+                    out: &mut b,
+                },
+            );
+            assert_eq!(a.2, b.2, "{isa}: Q");
+            for l in 0..BATCH {
+                // The exponential within 1 ulp of glibc's enters the drag, a small part of
+                // each entry: the state relative to its size (a sum that cancels keeps the
+                // absolute error of its terms), the Jacobian relative to each entry.
+                let size = x.iter().map(|xi| xi[l].abs()).fold(1.0, f64::max);
+                for i in 0..4 {
+                    worst = worst.max((a.0[i][l] - b.0[i][l]).abs() / size);
+                    for j in 0..4 {
+                        // F = F1 + G dfkk/dx: relative to the size of its two terms.
+                        let scale = b.1[i][j][l].abs() + f1[(i, j)].abs() + 1e-300;
+                        worst = worst.max((a.1[i][j][l] - b.1[i][j][l]).abs() / scale);
+                    }
+                }
+            }
+        }
+        assert!(worst <= 4.0 * f64::EPSILON, "{isa}: {worst:e}");
+    }
+
+    #[test]
+    fn the_lane_wise_ballistic_model_agrees_with_the_scalar_one_on_every_isa() {
+        check(pulp::Scalar::new(), "scalar");
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                check(simd, "avx2");
+            }
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                check(simd, "avx512");
+            }
+        }
+    }
+}

@@ -8,8 +8,12 @@
 //! model implements the traits itself to evaluate its lanes together in SIMD (the methods are
 //! generic over [`pulp::Simd`] and called inside the filter's dispatched kernel, so they
 //! compile for its instruction set; implementations should be `#[inline(always)]`). The
-//! models of this crate that do: [`LinearGaussian`](crate::LinearGaussian) (its `F` and `Q`
-//! broadcast) and [`Bearing`](crate::Bearing) (the arctangent of [`math::atan2`]).
+//! models of this crate that do: [`LinearGaussian`](crate::LinearGaussian) and
+//! [`LinearObservation`](crate::LinearObservation) (their matrices broadcast),
+//! [`Bearing`](crate::Bearing) and [`RadarRates`](crate::RadarRates) (the arctangent of
+//! [`math::atan2`]), [`AccelAxis`](crate::AccelAxis) (the sine and cosine of
+//! [`math::sin_cos_lanes`]) and [`Ballistic`](crate::Ballistic) (the exponential of
+//! [`math::exp_lanes`]).
 //!
 //! A lane-wise implementation must give each lane what the scalar calls give, to rounding:
 //! the batched filters are checked against the scalar ones run by run.
