@@ -9,42 +9,63 @@ use super::kernel::Kernel;
 use super::{BATCH, BatchStep, Isa, Lanes};
 use crate::FilterError;
 
-/// The model's part of a prediction, as a pulp operation: a lane-wise model's SIMD code runs
-/// on the batch's instruction set.
-struct Predict<'a, const N: usize, D> {
+/// One step of the batch as a single pulp operation: the model's prediction (`f(x)`, `F`, `Q`;
+/// with `PREDICT`), its innovation, `H` and `R`, then the kernel's covariance algebra, all
+/// compiled inside one dispatched function for the batch's instruction set (callgrind counted
+/// 9% fewer instructions in W2's batched EKF than with one dispatch for each of the three).
+struct Step<'a, const N: usize, const M: usize, const PREDICT: bool, D, H> {
     dynamics: &'a D,
+    measurement: &'a H,
+    /// The step the prediction leaves (`k`); the update is at `k + 1` with `PREDICT`, at `k`
+    /// without.
     k: usize,
     x: &'a mut [Lanes; N],
+    p: &'a mut [[Lanes; N]; N],
+    gain: &'a mut [[Lanes; M]; N],
     f: &'a mut [[Lanes; N]; N],
     q: &'a mut [[Lanes; N]; N],
-}
-
-impl<const N: usize, D: LaneDynamics<N>> WithSimd for Predict<'_, N, D> {
-    type Output = ();
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        self.dynamics
-            .predict_lanes(simd, self.k, self.x, self.f, self.q);
-    }
-}
-
-/// The model's part of an update (innovation, `H`, `R`), as a pulp operation.
-struct Innovate<'a, const N: usize, const M: usize, H> {
-    measurement: &'a H,
-    k: usize,
-    x: &'a [Lanes; N],
-    z: &'a [Lanes; M],
-    nu: &'a mut [Lanes; M],
     h: &'a mut [[Lanes; N]; M],
     r: &'a mut [[Lanes; M]; M],
+    nu: &'a mut [Lanes; M],
+    z: &'a [Lanes; M],
+    truth: &'a [Lanes; N],
+    out: &'a mut BatchStep<N>,
+    terms: Option<&'a mut JLanes<M>>,
 }
 
-impl<const N: usize, const M: usize, H: LaneMeasurement<N, M>> WithSimd for Innovate<'_, N, M, H> {
+impl<const N: usize, const M: usize, const PREDICT: bool, D, H> WithSimd
+    for Step<'_, N, M, PREDICT, D, H>
+where
+    D: LaneDynamics<N>,
+    H: LaneMeasurement<N, M>,
+{
     type Output = ();
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
+        let k = if PREDICT {
+            self.dynamics
+                .predict_lanes(simd, self.k, self.x, self.f, self.q);
+            self.k + 1
+        } else {
+            self.k
+        };
         self.measurement
-            .innovate_lanes(simd, self.k, self.x, self.z, self.nu, self.h, self.r);
+            .innovate_lanes(simd, k, self.x, self.z, self.nu, self.h, self.r);
+        Kernel::<N, M, PREDICT, _, _, _, _> {
+            f: &*self.f,
+            q: &*self.q,
+            h: &*self.h,
+            r: &*self.r,
+            innovation: Some(&*self.nu),
+            x: self.x,
+            p: self.p,
+            z: self.z,
+            truth: self.truth,
+            gain: self.gain,
+            out: self.out,
+            terms: self.terms,
+        }
+        .with_simd(simd);
     }
 }
 
@@ -267,7 +288,6 @@ where
     /// `truth[i][lane]` (pass zeros where there is no truth and ignore the NEES). A lane whose
     /// update fails keeps its prediction, as the scalar filter does.
     pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
-        self.predict_lanes();
         self.run::<true>(z, truth, false)
     }
 
@@ -278,22 +298,8 @@ where
         z: &[Lanes; M],
         truth: &[Lanes; N],
     ) -> (&BatchStep<N>, &JLanes<M>) {
-        self.predict_lanes();
         self.run::<true>(z, truth, true);
         (&self.out, &self.terms)
-    }
-
-    /// Each lane's `f(x)`, `F` and `Q` from the model, and the step index advanced: the part
-    /// of a prediction outside the kernel (which propagates `P`).
-    fn predict_lanes(&mut self) {
-        self.isa.dispatch(Predict {
-            dynamics: &self.dynamics,
-            k: self.k,
-            x: &mut self.x,
-            f: &mut self.f,
-            q: &mut self.q,
-        });
-        self.k += 1;
     }
 
     /// Updates every lane at the current step without a prediction (a filter whose first
@@ -308,30 +314,26 @@ where
         truth: &[Lanes; N],
         terms: bool,
     ) -> &BatchStep<N> {
-        self.isa.dispatch(Innovate {
+        self.isa.dispatch(Step::<N, M, PREDICT, _, _> {
+            dynamics: &self.dynamics,
             measurement: &self.measurement,
             k: self.k,
-            x: &self.x,
-            z,
-            nu: &mut self.nu,
-            h: &mut self.h,
-            r: &mut self.r,
-        });
-        let isa = self.isa;
-        isa.dispatch(Kernel::<N, M, PREDICT, _, _, _, _> {
-            f: &self.f,
-            q: &self.q,
-            h: &self.h,
-            r: &self.r,
-            innovation: Some(&self.nu),
             x: &mut self.x,
             p: &mut self.p,
+            gain: &mut self.gain,
+            f: &mut self.f,
+            q: &mut self.q,
+            h: &mut self.h,
+            r: &mut self.r,
+            nu: &mut self.nu,
             z,
             truth,
-            gain: &mut self.gain,
             out: &mut self.out,
             terms: terms.then_some(&mut self.terms),
         });
+        if PREDICT {
+            self.k += 1;
+        }
         self.out.finish(self.k, z, &self.x, &self.p);
         &self.out
     }
