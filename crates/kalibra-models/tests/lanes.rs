@@ -27,6 +27,33 @@ fn ulps(a: f64, b: f64) -> u64 {
     key(a).abs_diff(key(b))
 }
 
+/// Runs `$body` with `$simd` the token and `$isa` the name of every instruction set this CPU
+/// has (the scalar fallback always).
+macro_rules! each_isa {
+    ($simd:ident, $isa:ident => $body:expr) => {{
+        {
+            let ($simd, $isa) = (pulp::Scalar::new(), "scalar");
+            $body;
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            if let Some($simd) = pulp::x86::V3::try_new() {
+                let $isa = "avx2";
+                $body;
+            }
+            if let Some($simd) = pulp::x86::V4::try_new() {
+                let $isa = "avx512";
+                $body;
+            }
+        }
+        #[cfg(target_arch = "aarch64")]
+        if let Some($simd) = pulp::aarch64::Neon::try_new() {
+            let $isa = "neon";
+            $body;
+        }
+    }};
+}
+
 /// `atan2` of 8 lanes on one instruction set.
 struct Atan2<'a> {
     y: &'a [f64; 8],
@@ -333,30 +360,12 @@ mod models {
 
     #[test]
     fn the_lane_wise_linear_observation_agrees_with_the_scalar_one_on_every_isa() {
-        check_linear(pulp::Scalar::new(), "scalar");
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                check_linear(simd, "avx2");
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                check_linear(simd, "avx512");
-            }
-        }
+        each_isa!(simd, isa => check_linear(simd, isa));
     }
 
     #[test]
     fn lane_wise_models_agree_with_their_scalar_selves_on_every_isa() {
-        check(pulp::Scalar::new(), "scalar");
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                check(simd, "avx2");
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                check(simd, "avx512");
-            }
-        }
+        each_isa!(simd, isa => check(simd, isa));
     }
 }
 
@@ -442,16 +451,7 @@ mod radar {
 
     #[test]
     fn the_lane_wise_radar_agrees_with_the_scalar_one_on_every_isa() {
-        check(pulp::Scalar::new(), "scalar");
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                check(simd, "avx2");
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                check(simd, "avx512");
-            }
-        }
+        each_isa!(simd, isa => check(simd, isa));
     }
 }
 
@@ -539,16 +539,7 @@ mod trig {
     fn sin_cos_is_within_2_ulp_of_glibc_on_every_isa() {
         let points = samples();
         let mut failures = Vec::new();
-        failures.extend(check(pulp::Scalar::new(), "scalar", &points));
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                failures.extend(check(simd, "avx2", &points));
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                failures.extend(check(simd, "avx512", &points));
-            }
-        }
+        each_isa!(simd, isa => failures.extend(check(simd, isa, &points)));
         assert!(failures.is_empty(), "{failures:?}");
     }
 }
@@ -629,16 +620,7 @@ mod accel_axis {
 
     #[test]
     fn the_lane_wise_axis_agrees_with_the_scalar_one_on_every_isa() {
-        check(pulp::Scalar::new(), "scalar");
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                check(simd, "avx2");
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                check(simd, "avx512");
-            }
-        }
+        each_isa!(simd, isa => check(simd, isa));
     }
 }
 
@@ -727,16 +709,7 @@ mod exp {
     fn exp_is_within_1_ulp_of_glibc_on_every_isa() {
         let points = samples();
         let mut failures = Vec::new();
-        failures.extend(check(pulp::Scalar::new(), "scalar", &points));
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                failures.extend(check(simd, "avx2", &points));
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                failures.extend(check(simd, "avx512", &points));
-            }
-        }
+        each_isa!(simd, isa => failures.extend(check(simd, isa, &points)));
         assert!(failures.is_empty(), "{failures:?}");
     }
 }
@@ -837,15 +810,6 @@ mod ballistic {
 
     #[test]
     fn the_lane_wise_ballistic_model_agrees_with_the_scalar_one_on_every_isa() {
-        check(pulp::Scalar::new(), "scalar");
-        #[cfg(target_arch = "x86_64")]
-        {
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                check(simd, "avx2");
-            }
-            if let Some(simd) = pulp::x86::V4::try_new() {
-                check(simd, "avx512");
-            }
-        }
+        each_isa!(simd, isa => check(simd, isa));
     }
 }

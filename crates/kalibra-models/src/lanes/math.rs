@@ -147,6 +147,14 @@ const COS_C: [f64; 7] = [
     0.041666666666666664,
 ];
 
+/// `v` rounded to the nearest integer (ties to even) for `|v| < 2^51`, by adding and
+/// subtracting [`ROUND`].
+#[inline(always)]
+fn nearest_integer<S: Simd>(simd: S, v: S::f64s) -> S::f64s {
+    let round = simd.splat_f64s(ROUND);
+    simd.sub_f64s(simd.add_f64s(v, round), round)
+}
+
 #[inline(always)]
 fn horner<S: Simd>(simd: S, c: &[f64], z: S::f64s) -> S::f64s {
     let mut p = simd.splat_f64s(c[0]);
@@ -162,13 +170,9 @@ fn horner<S: Simd>(simd: S, c: &[f64], z: S::f64s) -> S::f64s {
 /// to libm.
 #[inline(always)]
 pub fn sin_cos<S: Simd>(simd: S, x: S::f64s) -> (S::f64s, S::f64s) {
-    let round = simd.splat_f64s(ROUND);
-    let n = simd.sub_f64s(
-        simd.add_f64s(
-            simd.mul_f64s(x, simd.splat_f64s(std::f64::consts::FRAC_2_PI)),
-            round,
-        ),
-        round,
+    let n = nearest_integer(
+        simd,
+        simd.mul_f64s(x, simd.splat_f64s(std::f64::consts::FRAC_2_PI)),
     );
     let mut r = x;
     for part in PIO2 {
@@ -181,15 +185,12 @@ pub fn sin_cos<S: Simd>(simd: S, x: S::f64s) -> (S::f64s, S::f64s) {
     let cos_r = simd.mul_add_e_f64s(simd.mul_f64s(z, z), horner(simd, &COS_C, z), one_minus);
     // n mod 4 (n is an integer in a double): n - 4 floor(n/4), the floor by rounding
     // n/4 - 3/8, whose fraction is never a half.
-    let quarter = simd.sub_f64s(
-        simd.add_f64s(
-            simd.sub_f64s(
-                simd.mul_f64s(n, simd.splat_f64s(0.25)),
-                simd.splat_f64s(0.375),
-            ),
-            round,
+    let quarter = nearest_integer(
+        simd,
+        simd.sub_f64s(
+            simd.mul_f64s(n, simd.splat_f64s(0.25)),
+            simd.splat_f64s(0.375),
         ),
-        round,
     );
     let q = simd.sub_f64s(n, simd.mul_f64s(quarter, simd.splat_f64s(4.0)));
     let is = |v: f64| simd.equal_f64s(q, simd.splat_f64s(v));
@@ -251,13 +252,9 @@ const EXP_E: [f64; 11] = [
 /// for every lane with `|x| <= EXP_LIMIT`; the power of two is applied by [`exp_lanes`].
 #[inline(always)]
 fn exp_reduced<S: Simd>(simd: S, x: S::f64s) -> (S::f64s, S::f64s) {
-    let round = simd.splat_f64s(ROUND);
-    let n = simd.sub_f64s(
-        simd.add_f64s(
-            simd.mul_f64s(x, simd.splat_f64s(std::f64::consts::LOG2_E)),
-            round,
-        ),
-        round,
+    let n = nearest_integer(
+        simd,
+        simd.mul_f64s(x, simd.splat_f64s(std::f64::consts::LOG2_E)),
     );
     let r = simd.sub_f64s(
         simd.sub_f64s(x, simd.mul_f64s(n, simd.splat_f64s(LN2.0))),
