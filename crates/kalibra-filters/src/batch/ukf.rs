@@ -336,13 +336,17 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
         for &(kappa, w) in candidates {
             candidate(simd, h, st, z, w, posterior);
             choose(st, kappa, criterion);
+            if candidates.len() == 1 {
+                // A fixed kappa: the candidate is the update (no copy into `best`).
+                break;
+            }
             // Move the lanes that chose this candidate into the best one.
             for c in 0..chunks {
                 let take = simd.equal_f64s(load::<S>(&st.take, c), simd.splat_f64s(1.0));
                 select_candidate::<S, N, M>(simd, take, &st.cand, &mut st.best, c);
             }
         }
-        commit(simd, st, truth);
+        commit(simd, st, truth, candidates.len() == 1);
     }
 }
 
@@ -678,8 +682,13 @@ fn commit<S: Simd, const N: usize, const M: usize>(
     simd: S,
     st: &mut State<N, M>,
     truth: &[Lanes; N],
+    fixed: bool,
 ) {
     let k = st.k;
+    if fixed {
+        // The one candidate is the best: swap it in rather than copy it lane by lane.
+        std::mem::swap(&mut st.cand, &mut st.best);
+    }
     let chunks = BATCH / S::F64_LANES;
     for lane in 0..BATCH {
         if st.failure[lane].is_none() && !st.has_best[lane] {
