@@ -9,13 +9,17 @@
 //!
 //! The truths are simulated once, outside the timed region; every timed pass filters the same
 //! stored bearings and sums, per step, the NEES `e^T P+^-1 e` (`e` = truth - posterior mean)
-//! over the runs, which both sides compute and the check compares.
+//! over the runs, which both sides compute and the check compares. Each filter is also run
+//! batched (`EkfBatch`, `UkfBatch`: eight runs per group) on the scenario's lane-wise models
+//! and on the scalar models called per lane, timed against the hand loop beside it.
 
 use std::f64::consts::PI;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use kalibra_filters::batch::{BATCH, EkfBatch, Isa, LaneDynamics, LaneMeasurement, PerLane};
+use kalibra_filters::batch::{
+    BATCH, EkfBatch, Isa, LaneDynamics, LaneMeasurement, LaneSigmaMeasurement, PerLane, UkfBatch,
+};
 use kalibra_filters::{Ekf, Filter, SigmaSet, Ukf, UkfPrediction};
 use kalibra_linalg::{U1, U2};
 use kalibra_sim::{MAX_BLOCKS, MonteCarlo};
@@ -141,14 +145,20 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
                 par_rate / lib_rate
             );
         }
-        if kind == Kind::Ekf {
-            // The batched EKF (eight runs per group), with the scenario's lane-wise models
+        {
+            // The batched filter (eight runs per group), with the scenario's lane-wise models
             // (the bearing's arctangent in SIMD) and with the scalar models called per lane,
             // interleaved with the hand loop again so that noise hits all alike.
             let isa = crate::simd_from_env()?.unwrap_or_else(Isa::detect);
             let (d, m) = (&scenario.dynamics, &scenario.measurement);
-            let lane_wise = || batched_ekf(d, m, &runs, steps, isa);
-            let per_lane = || batched_ekf(PerLane(d), PerLane(m), &runs, steps, isa);
+            let lane_wise = || match kind {
+                Kind::Ekf => batched_ekf(d, m, &runs, steps, isa),
+                Kind::Ukf => batched_ukf(d, m, &runs, steps, isa),
+            };
+            let per_lane = || match kind {
+                Kind::Ekf => batched_ekf(PerLane(d), PerLane(m), &runs, steps, isa),
+                Kind::Ukf => batched_ukf(PerLane(d), PerLane(m), &runs, steps, isa),
+            };
             lane_wise()?;
             per_lane()?;
             let mut best = [f64::INFINITY; 3];
@@ -176,7 +186,7 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
                 );
                 if diff.is_nan() || diff > TOLERANCE {
                     bail!(
-                        "W2 batched EKF ({what}): disagrees with the hand-written loop ({diff:.2e})"
+                        "W2 batched {name} ({what}): disagrees with the hand-written loop ({diff:.2e})"
                     );
                 }
             }
@@ -375,6 +385,52 @@ fn batched_ekf<D: LaneDynamics<2> + Clone, H: LaneMeasurement<2, 1> + Clone>(
                 ekf.update(&z, &truth)
             } else {
                 ekf.predict_update(&z, &truth)
+            };
+            for lane in 0..group.len() {
+                *sum += step.nees(lane)?;
+            }
+        }
+    }
+    let n = runs.len() as f64;
+    Ok(sums.into_iter().map(|s| s / n).collect())
+}
+
+/// The UKF of [`lib_ukf`] through [`UkfBatch`] on the models `dynamics` and `measurement`
+/// (the scenario's, lane-wise, or [`PerLane`] of them), as [`batched_ekf`] runs the EKF.
+fn batched_ukf<D: LaneDynamics<2> + Clone, H: LaneSigmaMeasurement<2, 1> + Clone>(
+    dynamics: D,
+    measurement: H,
+    runs: &[BotRun<U2>],
+    steps: usize,
+    isa: Isa,
+) -> Result<Vec<f64>> {
+    let mut sums = vec![0.0; steps];
+    for group in runs.chunks(BATCH) {
+        let first = &group[0];
+        let mut ukf = UkfBatch::new(
+            isa,
+            dynamics.clone(),
+            measurement.clone(),
+            first.init_mean,
+            first.init_cov,
+            SigmaSet::recommended(2),
+            UkfPrediction::Linearised,
+        )?;
+        for (lane, run) in group.iter().enumerate() {
+            ukf.set_lane(lane, run.init_mean, run.init_cov)?;
+        }
+        let mut z = [[0.0; BATCH]; 1];
+        let mut truth = [[0.0; BATCH]; 2];
+        for (k, sum) in sums.iter_mut().enumerate() {
+            for (lane, run) in group.iter().enumerate() {
+                z[0][lane] = run.measurements[k][0];
+                truth[0][lane] = run.states[k][0];
+                truth[1][lane] = run.states[k][1];
+            }
+            let step = if k == 0 {
+                ukf.update(&z, &truth)
+            } else {
+                ukf.predict_update(&z, &truth)
             };
             for lane in 0..group.len() {
                 *sum += step.nees(lane)?;

@@ -465,6 +465,110 @@ impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
     }
 }
 
+/// Lane-wise sigma-point evaluation for the batched UKF: the arctangent of
+/// [`lanes::math::atan2`] at every lane's point, residuals and normalisation wrapped by
+/// [`wrap_angle`] lane by lane, and the noise in the scalar model's order of operations.
+///
+/// [`lanes::math::atan2`]: crate::lanes::math::atan2
+impl<const N: usize, P: Platform<2>> crate::lanes::LaneSigmaMeasurement<N, 1>
+    for Bearing<kalibra_linalg::Const<N>, P>
+{
+    #[inline(always)]
+    fn measure_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[crate::lanes::Lanes; N],
+        z: &mut [crate::lanes::Lanes; 1],
+    ) {
+        use crate::lanes::{BATCH, math, store};
+        let p = self.platform.position(k);
+        for c in 0..BATCH / S::F64_LANES {
+            let (dx, dy) = self.relative_lanes(simd, &p, x, c);
+            let zhat = match self.reference {
+                BearingReference::XAxis => math::atan2(simd, dy, dx),
+                BearingReference::North => math::atan2(simd, dx, dy),
+            };
+            store::<S>(&mut z[0], c, zhat);
+        }
+    }
+
+    #[inline(always)]
+    fn residual_lanes<S: pulp::Simd>(
+        &self,
+        _simd: S,
+        a: &[crate::lanes::Lanes; 1],
+        b: &[crate::lanes::Lanes; 1],
+        out: &mut [crate::lanes::Lanes; 1],
+    ) {
+        for l in 0..crate::lanes::BATCH {
+            out[0][l] = wrap_angle(a[0][l] - b[0][l]);
+        }
+    }
+
+    #[inline(always)]
+    fn normalize_lanes<S: pulp::Simd>(&self, _simd: S, z: &mut [crate::lanes::Lanes; 1]) {
+        for v in z[0].iter_mut() {
+            *v = wrap_angle(*v);
+        }
+    }
+
+    #[inline(always)]
+    fn noise_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[crate::lanes::Lanes; N],
+        r: &mut [[crate::lanes::Lanes; 1]; 1],
+    ) {
+        use crate::lanes::{BATCH, store};
+        let (vx, vy) = self.translational;
+        if vx == 0.0 && vy == 0.0 {
+            // As the scalar model: no gradient (infinite on the platform) is formed.
+            r[0][0] = [self.variance; BATCH];
+            return;
+        }
+        let p = self.platform.position(k);
+        for c in 0..BATCH / S::F64_LANES {
+            let (dx, dy) = self.relative_lanes(simd, &p, x, c);
+            let r2 = simd.add_f64s(simd.mul_f64s(dx, dx), simd.mul_f64s(dy, dy));
+            let (gx, gy) = match self.reference {
+                BearingReference::XAxis => {
+                    (simd.div_f64s(simd.neg_f64s(dy), r2), simd.div_f64s(dx, r2))
+                }
+                BearingReference::North => {
+                    (simd.div_f64s(dy, r2), simd.div_f64s(simd.neg_f64s(dx), r2))
+                }
+            };
+            let gx2 = simd.mul_f64s(simd.mul_f64s(gx, gx), simd.splat_f64s(vx));
+            let gy2 = simd.mul_f64s(simd.mul_f64s(gy, gy), simd.splat_f64s(vy));
+            let rv = simd.add_f64s(simd.add_f64s(simd.splat_f64s(self.variance), gx2), gy2);
+            store::<S>(&mut r[0][0], c, rv);
+        }
+    }
+}
+
+impl<const N: usize, P: Platform<2>> Bearing<kalibra_linalg::Const<N>, P> {
+    /// The relative position `(dx, dy)` of the lanes of chunk `c` from the platform at `p`.
+    #[inline(always)]
+    fn relative_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        p: &SVector<f64, 2>,
+        x: &[crate::lanes::Lanes; N],
+        c: usize,
+    ) -> (S::f64s, S::f64s) {
+        let coordinate = |a: usize| match self.coordinates[a] {
+            Coordinate::State(i) => crate::lanes::load::<S>(&x[i], c),
+            Coordinate::Constant(v) => simd.splat_f64s(v),
+        };
+        (
+            simd.sub_f64s(coordinate(0), simd.splat_f64s(p[0])),
+            simd.sub_f64s(coordinate(1), simd.splat_f64s(p[1])),
+        )
+    }
+}
+
 impl<N: Dim, P: Platform<2>> Measurement<N, U1> for Bearing<N, P>
 where
     DefaultAllocator: Alloc<N, U1>,

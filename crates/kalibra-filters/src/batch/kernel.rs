@@ -90,7 +90,7 @@ fn splat<S: Simd, const R: usize, const C: usize>(simd: S, m: &[[f64; C]; R]) ->
 /// `sum_k a[i][k] b[k][j]`, accumulated in `k` order like nalgebra's small products, with a
 /// fused multiply-add where the instruction set has one.
 #[inline(always)]
-fn mul<S: Simd, const R: usize, const K: usize, const C: usize>(
+pub(super) fn mul<S: Simd, const R: usize, const K: usize, const C: usize>(
     simd: S,
     a: &[[S::f64s; K]; R],
     b: &[[S::f64s; C]; K],
@@ -128,7 +128,7 @@ fn mul_vec<S: Simd, const R: usize, const K: usize>(
 
 /// `a b^T`.
 #[inline(always)]
-fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
+pub(super) fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
     simd: S,
     a: &[[S::f64s; K]; R],
     b: &[[S::f64s; K]; C],
@@ -147,7 +147,7 @@ fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
 }
 
 #[inline(always)]
-fn add<S: Simd, const R: usize, const C: usize>(
+pub(super) fn add<S: Simd, const R: usize, const C: usize>(
     simd: S,
     a: &[[S::f64s; C]; R],
     b: &[[S::f64s; C]; R],
@@ -163,7 +163,7 @@ fn add<S: Simd, const R: usize, const C: usize>(
 
 /// `(m + m^T) / 2` on the off-diagonal, as `kalibra_linalg::symmetrize`.
 #[inline(always)]
-fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]; D]) {
+pub(super) fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]; D]) {
     let half = simd.splat_f64s(0.5);
     for j in 0..D {
         for i in (j + 1)..D {
@@ -181,7 +181,7 @@ fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]; D]) {
 /// panic, for a matrix that is not positive definite: `sqrt` of a negative pivot is NaN, of
 /// zero 0, and its reciprocal infinite.
 #[inline(always)]
-fn cholesky<S: Simd, const D: usize>(
+pub(super) fn cholesky<S: Simd, const D: usize>(
     simd: S,
     a: &[[S::f64s; D]; D],
 ) -> ([[S::f64s; D]; D], [S::f64s; D]) {
@@ -209,7 +209,7 @@ fn cholesky<S: Simd, const D: usize>(
 
 /// Solves `L w = b` by forward substitution (`inv`: the reciprocals of `L`'s diagonal).
 #[inline(always)]
-fn forward<S: Simd, const D: usize>(
+pub(super) fn forward<S: Simd, const D: usize>(
     simd: S,
     (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
     b: &[S::f64s; D],
@@ -244,7 +244,7 @@ fn backward<S: Simd, const D: usize>(
 }
 
 #[inline(always)]
-fn norm_squared<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -> S::f64s {
+pub(super) fn norm_squared<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -> S::f64s {
     let mut s = simd.mul_f64s(w[0], w[0]);
     for v in &w[1..] {
         s = simd.mul_add_e_f64s(*v, *v, s);

@@ -62,10 +62,12 @@ use std::str::FromStr;
 
 mod ekf;
 mod kernel;
+mod ukf;
 
 pub use ekf::{EkfBatch, JLanes};
-pub use kalibra_models::lanes::{LaneDynamics, LaneMeasurement, PerLane};
+pub use kalibra_models::lanes::{LaneDynamics, LaneMeasurement, LaneSigmaMeasurement, PerLane};
 use kernel::Kernel;
+pub use ukf::UkfBatch;
 
 use kalibra_linalg::{Definiteness, SMatrix, SVector, check_covariance, check_finite};
 use pulp::{Simd, WithSimd};

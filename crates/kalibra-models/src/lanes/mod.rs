@@ -65,6 +65,95 @@ pub trait LaneMeasurement<const N: usize, const M: usize> {
     );
 }
 
+/// A measurement a batched unscented filter evaluates at sigma points, for all lanes at once:
+/// `h_k(x)` at any lane points, the model's residual `a (-) b` (angles wrap), the
+/// normalisation of a predicted measurement, and `R_k(x)`.
+///
+/// The batched UKF calls them in the scalar UKF's order: `R_k` and `z0 = h_k(x-)` at the
+/// prior mean, the residual `h_k(X_i) (-) z0` of every sigma point ([`sigma_residual_lanes`]),
+/// the normalisation of `zhat = z0 + dbar`, the innovation `z (-) zhat`, and for the posterior
+/// criteria of an adaptive kappa `z (-) h_k(x+)`.
+///
+/// [`sigma_residual_lanes`]: LaneSigmaMeasurement::sigma_residual_lanes
+pub trait LaneSigmaMeasurement<const N: usize, const M: usize> {
+    /// Writes each lane's `h_k(x)` into `z`, on the instruction set of `simd`.
+    fn measure_lanes<S: Simd>(&self, simd: S, k: usize, x: &[Lanes; N], z: &mut [Lanes; M]);
+
+    /// Writes each lane's residual `a (-) b` (the scalar model's `residual(a, b)`) into `out`.
+    fn residual_lanes<S: Simd>(
+        &self,
+        simd: S,
+        a: &[Lanes; M],
+        b: &[Lanes; M],
+        out: &mut [Lanes; M],
+    );
+
+    /// Brings each lane's `z` into its canonical range (the scalar model's `normalize`).
+    fn normalize_lanes<S: Simd>(&self, simd: S, z: &mut [Lanes; M]);
+
+    /// Writes each lane's `R_k(x)` into `r`.
+    fn noise_lanes<S: Simd>(&self, simd: S, k: usize, x: &[Lanes; N], r: &mut [[Lanes; M]; M]);
+
+    /// Writes each lane's `h_k(x) (-) z0` into `out`: a sigma point's measurement as a
+    /// residual from the central one (so bearings are unwrapped around it). By default
+    /// [`measure_lanes`](Self::measure_lanes) then [`residual_lanes`](Self::residual_lanes).
+    #[inline(always)]
+    fn sigma_residual_lanes<S: Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[Lanes; N],
+        z0: &[Lanes; M],
+        out: &mut [Lanes; M],
+    ) {
+        let mut hx = [[0.0; BATCH]; M];
+        self.measure_lanes(simd, k, x, &mut hx);
+        self.residual_lanes(simd, &hx, z0, out);
+    }
+}
+
+impl<const N: usize, const M: usize, T: LaneSigmaMeasurement<N, M>> LaneSigmaMeasurement<N, M>
+    for &T
+{
+    #[inline(always)]
+    fn measure_lanes<S: Simd>(&self, simd: S, k: usize, x: &[Lanes; N], z: &mut [Lanes; M]) {
+        (**self).measure_lanes(simd, k, x, z);
+    }
+
+    #[inline(always)]
+    fn residual_lanes<S: Simd>(
+        &self,
+        simd: S,
+        a: &[Lanes; M],
+        b: &[Lanes; M],
+        out: &mut [Lanes; M],
+    ) {
+        (**self).residual_lanes(simd, a, b, out);
+    }
+
+    #[inline(always)]
+    fn normalize_lanes<S: Simd>(&self, simd: S, z: &mut [Lanes; M]) {
+        (**self).normalize_lanes(simd, z);
+    }
+
+    #[inline(always)]
+    fn noise_lanes<S: Simd>(&self, simd: S, k: usize, x: &[Lanes; N], r: &mut [[Lanes; M]; M]) {
+        (**self).noise_lanes(simd, k, x, r);
+    }
+
+    #[inline(always)]
+    fn sigma_residual_lanes<S: Simd>(
+        &self,
+        simd: S,
+        k: usize,
+        x: &[Lanes; N],
+        z0: &[Lanes; M],
+        out: &mut [Lanes; M],
+    ) {
+        (**self).sigma_residual_lanes(simd, k, x, z0, out);
+    }
+}
+
 impl<const N: usize, T: LaneDynamics<N>> LaneDynamics<N> for &T {
     #[inline(always)]
     fn predict_lanes<S: Simd>(
@@ -95,8 +184,9 @@ impl<const N: usize, const M: usize, T: LaneMeasurement<N, M>> LaneMeasurement<N
     }
 }
 
-/// A scalar model evaluated lane by lane: the [`LaneDynamics`] of a [`Dynamics`] and the
-/// [`LaneMeasurement`] of a [`Measurement`], through exactly the calls the scalar EKF makes.
+/// A scalar model evaluated lane by lane: the [`LaneDynamics`] of a [`Dynamics`], and the
+/// [`LaneMeasurement`] and [`LaneSigmaMeasurement`] of a [`Measurement`], through exactly the
+/// calls the scalar EKF and UKF make.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PerLane<T>(pub T);
 
@@ -186,6 +276,70 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneMea
             }
             set_lane(h, l, &self.0.jacobian(k, &xl));
             set_lane(r, l, &self.0.noise_cov(k, &xl));
+        }
+    }
+}
+
+impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneSigmaMeasurement<N, M>
+    for PerLane<T>
+{
+    fn measure_lanes<S: Simd>(&self, _simd: S, k: usize, x: &[Lanes; N], z: &mut [Lanes; M]) {
+        for l in 0..BATCH {
+            let zl = self.0.measure(k, &lane(x, l));
+            for (i, v) in z.iter_mut().enumerate() {
+                v[l] = zl[i];
+            }
+        }
+    }
+
+    fn residual_lanes<S: Simd>(
+        &self,
+        _simd: S,
+        a: &[Lanes; M],
+        b: &[Lanes; M],
+        out: &mut [Lanes; M],
+    ) {
+        for l in 0..BATCH {
+            let e = self.0.residual(&lane(a, l), &lane(b, l));
+            for (i, v) in out.iter_mut().enumerate() {
+                v[l] = e[i];
+            }
+        }
+    }
+
+    fn normalize_lanes<S: Simd>(&self, _simd: S, z: &mut [Lanes; M]) {
+        for l in 0..BATCH {
+            let mut zl = lane(z, l);
+            self.0.normalize(&mut zl);
+            for (i, v) in z.iter_mut().enumerate() {
+                v[l] = zl[i];
+            }
+        }
+    }
+
+    fn noise_lanes<S: Simd>(&self, _simd: S, k: usize, x: &[Lanes; N], r: &mut [[Lanes; M]; M]) {
+        for l in 0..BATCH {
+            set_lane(r, l, &self.0.noise_cov(k, &lane(x, l)));
+        }
+    }
+
+    // One scalar pass per lane: `measure` then `residual`, as the scalar UKF calls them,
+    // without the round trip through lane arrays.
+    fn sigma_residual_lanes<S: Simd>(
+        &self,
+        _simd: S,
+        k: usize,
+        x: &[Lanes; N],
+        z0: &[Lanes; M],
+        out: &mut [Lanes; M],
+    ) {
+        for l in 0..BATCH {
+            let e = self
+                .0
+                .residual(&self.0.measure(k, &lane(x, l)), &lane(z0, l));
+            for (i, v) in out.iter_mut().enumerate() {
+                v[l] = e[i];
+            }
         }
     }
 }

@@ -67,7 +67,7 @@ const TEMPLATE: &str = include_str!("report.md");
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Paper001;
 
-crate::study_config!(Config, seed);
+crate::study_config!(Config, seed, simd);
 
 impl Study for Paper001 {
     type Config = Config;

@@ -1,0 +1,999 @@
+//! The batched unscented Kalman filter: [`BATCH`] runs of one model, the sigma-point
+//! measurements evaluated for all lanes at once and the unscented update stepped together,
+//! with a fixed kappa or one chosen per lane from a grid (paper 001's adaptive UKFs).
+
+// The kernels index matrices as the formulas do (`a[i][k] b[k][j]`); iterator chains would
+// hide the algebra and add closures, which must not leave the dispatched function.
+#![allow(clippy::needless_range_loop)]
+
+use kalibra_linalg::{LinalgError, SMatrix, SVector, SqrtMethod, check_finite, sigma_sqrt};
+use kalibra_models::lanes::{LaneDynamics, LaneSigmaMeasurement};
+use pulp::{Simd, WithSimd};
+
+use super::kernel::{add, cholesky, forward, load, mul, mul_t, norm_squared, store, symmetrize};
+use super::{BATCH, BatchStep, Isa, Lanes};
+use crate::{FilterError, KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, UkfPrediction};
+
+/// The per-lane state of a [`UkfBatch`] and its scratch, apart from the models so that a
+/// pulp operation can borrow both.
+#[derive(Clone, Debug)]
+struct State<const N: usize, const M: usize> {
+    k: usize,
+    x: [Lanes; N],
+    p: [[Lanes; N]; N],
+    gain: [[Lanes; M]; N],
+    /// The kappa of each lane's last successful update.
+    kappa: [Option<f64>; BATCH],
+    // The prediction's per-lane model evaluations.
+    f: [[Lanes; N]; N],
+    q: [[Lanes; N]; N],
+    /// The prior's square root `L` (`L L^T = P-`) and whether it is the Cholesky factor (the
+    /// semi-definite fallback of `sigma_sqrt` leaves the posterior criteria undefined).
+    l: [[Lanes; N]; N],
+    cholesky_prior: [bool; BATCH],
+    r: [[Lanes; M]; M],
+    /// `R`'s Cholesky factor (lower triangle) and whether it exists (positive pivots).
+    lr: [[Lanes; M]; M],
+    r_ok: [bool; BATCH],
+    z0: [Lanes; M],
+    /// The sigma points `x + spread L_j` and `x - spread L_j` of one column `j`.
+    plus: [Lanes; N],
+    minus: [Lanes; N],
+    /// Their measurements as residuals from `z0`.
+    dplus: [[Lanes; M]; N],
+    dminus: [[Lanes; M]; N],
+    /// One candidate's statistics.
+    cand: Candidate<N, M>,
+    /// The best candidate so far, per lane.
+    best: Candidate<N, M>,
+    best_value: Lanes,
+    best_kappa: Lanes,
+    has_best: [bool; BATCH],
+    take: Lanes,
+    /// The lane's error so far, and its first candidate error (what the scalar filter
+    /// returns when every kappa fails).
+    failure: [Option<FilterError>; BATCH],
+    first_error: [Option<FilterError>; BATCH],
+    out: BatchStep<N>,
+}
+
+/// The update at one kappa, lane by lane (the scalar `candidate`'s outputs).
+#[derive(Clone, Copy, Debug)]
+struct Candidate<const N: usize, const M: usize> {
+    zhat: [Lanes; M],
+    nu: [Lanes; M],
+    pz: [[Lanes; M]; M],
+    /// The diagonal of `Pz`'s Cholesky factor (positive and finite where it exists).
+    pz_diag: [Lanes; M],
+    pxz: [[Lanes; M]; N],
+    gain: [[Lanes; M]; N],
+    mean: [Lanes; N],
+    cov: [[Lanes; N]; N],
+    nis: Lanes,
+    /// `|L^-1 K nu|^2` (the prior's term of the posterior criteria).
+    prior_term: Lanes,
+    /// `e^T R^-1 e`, `e = z (-) h(x+)`.
+    meas_term: Lanes,
+}
+
+impl<const N: usize, const M: usize> Candidate<N, M> {
+    fn new() -> Self {
+        Self {
+            zhat: [[0.0; BATCH]; M],
+            nu: [[0.0; BATCH]; M],
+            pz: [[[0.0; BATCH]; M]; M],
+            pz_diag: [[0.0; BATCH]; M],
+            pxz: [[[0.0; BATCH]; M]; N],
+            gain: [[[0.0; BATCH]; M]; N],
+            mean: [[0.0; BATCH]; N],
+            cov: [[[0.0; BATCH]; N]; N],
+            nis: [0.0; BATCH],
+            prior_term: [0.0; BATCH],
+            meas_term: [0.0; BATCH],
+        }
+    }
+}
+
+// The factorisations below divide by each pivot, as nalgebra's Cholesky and triangular solves
+// do (the batch kernel multiplies by reciprocals): with the order of operations of the scalar
+// UKF, a lane then reproduces the scalar filter's numbers to the last bit where no fused
+// multiply-add intervenes, which keeps an adaptive kappa's choice the scalar's even between
+// close candidates.
+
+/// The lower Cholesky factor of a symmetric `a` in nalgebra's order of operations (pivots
+/// `a_jj - sum_k l_jk^2`, entries divided by the pivot). NaN or infinite entries, never a panic,
+/// where `a` is not positive definite.
+#[inline(always)]
+fn cholesky_div<S: Simd, const D: usize>(simd: S, a: &[[S::f64s; D]; D]) -> [[S::f64s; D]; D] {
+    let mut l = [[simd.splat_f64s(0.0); D]; D];
+    for j in 0..D {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d = simd.sub_f64s(d, simd.mul_f64s(l[j][k], l[j][k]));
+        }
+        let ljj = simd.sqrt_f64s(d);
+        l[j][j] = ljj;
+        for i in (j + 1)..D {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
+            }
+            l[i][j] = simd.div_f64s(s, ljj);
+        }
+    }
+    l
+}
+
+/// Solves `L w = b` by forward substitution, dividing by the pivots.
+#[inline(always)]
+fn forward_div<S: Simd, const D: usize>(
+    simd: S,
+    l: &[[S::f64s; D]; D],
+    b: &[S::f64s; D],
+) -> [S::f64s; D] {
+    let mut w = *b;
+    for i in 0..D {
+        let mut s = w[i];
+        for k in 0..i {
+            s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
+        }
+        w[i] = simd.div_f64s(s, l[i][i]);
+    }
+    w
+}
+
+/// Solves `L^T y = w` by backward substitution, dividing by the pivots.
+#[inline(always)]
+fn backward_div<S: Simd, const D: usize>(
+    simd: S,
+    l: &[[S::f64s; D]; D],
+    w: &[S::f64s; D],
+) -> [S::f64s; D] {
+    let mut y = *w;
+    for i in (0..D).rev() {
+        let mut s = y[i];
+        for k in (i + 1)..D {
+            s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
+        }
+        y[i] = simd.div_f64s(s, l[i][i]);
+    }
+    y
+}
+
+/// `sum w_i^2` in index order, without fused multiply-adds (nalgebra's `norm_squared`).
+#[inline(always)]
+fn sum_squares<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -> S::f64s {
+    let mut s = simd.mul_f64s(w[0], w[0]);
+    for v in &w[1..] {
+        s = simd.add_f64s(s, simd.mul_f64s(*v, *v));
+    }
+    s
+}
+
+#[inline(always)]
+fn load_vec<S: Simd, const D: usize>(simd: S, a: &[Lanes; D], c: usize) -> [S::f64s; D] {
+    let mut out = [simd.splat_f64s(0.0); D];
+    for i in 0..D {
+        out[i] = load::<S>(&a[i], c);
+    }
+    out
+}
+
+#[inline(always)]
+fn load_mat<S: Simd, const R: usize, const C: usize>(
+    simd: S,
+    a: &[[Lanes; C]; R],
+    c: usize,
+) -> [[S::f64s; C]; R] {
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            out[i][j] = load::<S>(&a[i][j], c);
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn store_vec<S: Simd, const D: usize>(a: &mut [Lanes; D], c: usize, v: &[S::f64s; D]) {
+    for i in 0..D {
+        store::<S>(&mut a[i], c, v[i]);
+    }
+}
+
+#[inline(always)]
+fn store_mat<S: Simd, const R: usize, const C: usize>(
+    a: &mut [[Lanes; C]; R],
+    c: usize,
+    v: &[[S::f64s; C]; R],
+) {
+    for i in 0..R {
+        for j in 0..C {
+            store::<S>(&mut a[i][j], c, v[i][j]);
+        }
+    }
+}
+
+/// The linearised prediction as a pulp operation: the model's `f(x)`, `F`, `Q` per lane, then
+/// `F P F^T + Q` symmetrised (`KalmanCore::predict`'s order, the batch kernel's products).
+struct Predict<'a, const N: usize, D> {
+    dynamics: &'a D,
+    k: usize,
+    x: &'a mut [Lanes; N],
+    p: &'a mut [[Lanes; N]; N],
+    f: &'a mut [[Lanes; N]; N],
+    q: &'a mut [[Lanes; N]; N],
+}
+
+impl<const N: usize, D: LaneDynamics<N>> WithSimd for Predict<'_, N, D> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        self.dynamics
+            .predict_lanes(simd, self.k, self.x, self.f, self.q);
+        for c in 0..BATCH / S::F64_LANES {
+            let f = load_mat(simd, self.f, c);
+            let q = load_mat(simd, self.q, c);
+            let p = load_mat(simd, self.p, c);
+            let fp = mul(simd, &f, &p);
+            let mut pp = add(simd, &mul_t(simd, &fp, &f), &q);
+            symmetrize(simd, &mut pp);
+            store_mat::<S, N, N>(self.p, c, &pp);
+        }
+    }
+}
+
+/// The unscented update of every lane as a pulp operation.
+struct Update<'a, const N: usize, const M: usize, H> {
+    measurement: &'a H,
+    state: &'a mut State<N, M>,
+    candidates: &'a [(f64, SigmaWeights)],
+    criterion: Option<KappaCriterion>,
+    z: &'a [Lanes; M],
+    truth: &'a [Lanes; N],
+}
+
+impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
+    for Update<'_, N, M, H>
+{
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Update {
+            measurement: h,
+            state: st,
+            candidates,
+            criterion,
+            z,
+            truth,
+        } = self;
+        let k = st.k;
+        let chunks = BATCH / S::F64_LANES;
+        let at = |e| FilterError::at(k, e);
+        for lane in 0..BATCH {
+            st.failure[lane] = None;
+            st.first_error[lane] = None;
+            st.has_best[lane] = false;
+            st.best_value[lane] = f64::INFINITY;
+            // A non-finite prediction is the scalar's prediction error (the scalar filter
+            // stops there); the update then checks the measurement first.
+            let prior_finite = (0..N)
+                .all(|i| st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite()));
+            if !prior_finite {
+                st.failure[lane] = Some(FilterError::NonFinite {
+                    what: "predicted covariance (process noise Q?)",
+                    step: k,
+                });
+            } else if (0..M).any(|i| !z[i][lane].is_finite()) {
+                st.failure[lane] = Some(at(LinalgError::NonFinite {
+                    what: "measurement",
+                }));
+            }
+        }
+        // The prior's square root: Cholesky across the lanes; a lane where it is not finite
+        // takes the scalar `sigma_sqrt` (its semi-definite fallback, or its error).
+        for c in 0..chunks {
+            let p = load_mat(simd, &st.p, c);
+            store_mat::<S, N, N>(&mut st.l, c, &cholesky_div(simd, &p));
+        }
+        for lane in 0..BATCH {
+            let finite = (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
+            st.cholesky_prior[lane] = finite;
+            if !finite {
+                prior_fallback(st, lane);
+            }
+        }
+        // R and the central measurement at the prior mean.
+        h.noise_lanes(simd, k, &st.x, &mut st.r);
+        h.measure_lanes(simd, k, &st.x, &mut st.z0);
+        for lane in 0..BATCH {
+            if st.failure[lane].is_none()
+                && (0..M).any(|i| (0..M).any(|j| !st.r[i][j][lane].is_finite()))
+            {
+                st.failure[lane] = Some(at(LinalgError::NonFinite {
+                    what: "measurement noise covariance R",
+                }));
+            }
+        }
+        let posterior = matches!(
+            criterion,
+            Some(KappaCriterion::MaximumPosterior | KappaCriterion::PureMap)
+        );
+        if posterior {
+            // R's factor, for e^T R^-1 e (the scalar's `Covariance::from_symmetric(R)`).
+            for c in 0..chunks {
+                let r = load_mat(simd, &st.r, c);
+                store_mat::<S, M, M>(&mut st.lr, c, &cholesky_div(simd, &r));
+            }
+            for lane in 0..BATCH {
+                st.r_ok[lane] = (0..M).all(|i| {
+                    let d = st.lr[i][i][lane];
+                    d > 0.0 && d.is_finite()
+                });
+            }
+        }
+        for &(kappa, w) in candidates {
+            candidate(simd, h, st, z, w, posterior);
+            choose(st, kappa, criterion);
+            if candidates.len() == 1 {
+                // A fixed kappa: the candidate is the update (no copy into `best`).
+                break;
+            }
+            // Move the lanes that chose this candidate into the best one.
+            for c in 0..chunks {
+                let take = simd.equal_f64s(load::<S>(&st.take, c), simd.splat_f64s(1.0));
+                select_candidate::<S, N, M>(simd, take, &st.cand, &mut st.best, c);
+            }
+        }
+        commit(simd, st, truth, candidates.len() == 1);
+    }
+}
+
+/// The scalar `sigma_sqrt` for lane `lane`'s prior (off the hot path): its factor, or the
+/// lane's error.
+#[cold]
+#[inline(never)]
+fn prior_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: usize) {
+    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.p[i][j][lane]);
+    match sigma_sqrt(&p, "prior covariance for sigma points") {
+        Ok((l, method)) => {
+            st.cholesky_prior[lane] = method == SqrtMethod::Cholesky;
+            for i in 0..N {
+                for j in 0..N {
+                    st.l[i][j][lane] = l[(i, j)];
+                }
+            }
+        }
+        Err(e) => {
+            if st.failure[lane].is_none() {
+                st.failure[lane] = Some(FilterError::at(st.k, e));
+            }
+            // Finite values keep the other lanes' arithmetic free of NaN traps; the lane's
+            // result is discarded.
+            for i in 0..N {
+                for j in 0..N {
+                    st.l[i][j][lane] = 0.0;
+                }
+            }
+        }
+    }
+}
+
+/// The unscented measurement statistics and update at weights `w`, for every lane, in the
+/// scalar `candidate`'s order of operations.
+#[inline(always)]
+fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>>(
+    simd: S,
+    h: &H,
+    st: &mut State<N, M>,
+    z: &[Lanes; M],
+    w: SigmaWeights,
+    posterior: bool,
+) {
+    let k = st.k;
+    let chunks = BATCH / S::F64_LANES;
+    let spread = simd.splat_f64s(w.spread);
+    // Sigma measurements as residuals from the central one: unwrapped around it.
+    for j in 0..N {
+        for c in 0..chunks {
+            for i in 0..N {
+                let x = load::<S>(&st.x[i], c);
+                let d = simd.mul_f64s(load::<S>(&st.l[i][j], c), spread);
+                store::<S>(&mut st.plus[i], c, simd.add_f64s(x, d));
+                store::<S>(&mut st.minus[i], c, simd.sub_f64s(x, d));
+            }
+        }
+        h.sigma_residual_lanes(simd, k, &st.plus, &st.z0, &mut st.dplus[j]);
+        h.sigma_residual_lanes(simd, k, &st.minus, &st.z0, &mut st.dminus[j]);
+    }
+    let other = simd.splat_f64s(w.other);
+    let cov_center = simd.splat_f64s(w.cov_center);
+    let cross = simd.splat_f64s(w.spread * w.other);
+    let zero = simd.splat_f64s(0.0);
+    for c in 0..chunks {
+        let dp = load_mat(simd, &st.dplus, c);
+        let dm = load_mat(simd, &st.dminus, c);
+        // dbar = sum W (Z_i - z0) over the points + then -, as the scalar's scratch order.
+        let mut dbar = [zero; M];
+        for d in dp.iter().chain(dm.iter()) {
+            for a in 0..M {
+                dbar[a] = simd.add_f64s(dbar[a], simd.mul_f64s(d[a], other));
+            }
+        }
+        // Pz = dbar dbar^T W0c + sum W (d - dbar)(d - dbar)^T + R, symmetrised.
+        let mut pz = [[zero; M]; M];
+        for a in 0..M {
+            for b in 0..M {
+                pz[a][b] = simd.mul_f64s(simd.mul_f64s(dbar[a], dbar[b]), cov_center);
+            }
+        }
+        for d in dp.iter().chain(dm.iter()) {
+            let mut dd = [zero; M];
+            for a in 0..M {
+                dd[a] = simd.sub_f64s(d[a], dbar[a]);
+            }
+            for a in 0..M {
+                for b in 0..M {
+                    let t = simd.mul_f64s(simd.mul_f64s(dd[a], dd[b]), other);
+                    pz[a][b] = simd.add_f64s(pz[a][b], t);
+                }
+            }
+        }
+        let r = load_mat(simd, &st.r, c);
+        let mut pz = add(simd, &pz, &r);
+        symmetrize(simd, &mut pz);
+        // Pxz = sum_j L_j (Z_j+ - Z_j-)^T W spread: the central point has no deviation and
+        // dbar cancels in each pair.
+        let mut pxz = [[zero; M]; N];
+        for j in 0..N {
+            let mut dz = [zero; M];
+            for a in 0..M {
+                dz[a] = simd.sub_f64s(dp[j][a], dm[j][a]);
+            }
+            for i in 0..N {
+                let lij = load::<S>(&st.l[i][j], c);
+                for a in 0..M {
+                    let t = simd.mul_f64s(simd.mul_f64s(lij, dz[a]), cross);
+                    pxz[i][a] = simd.add_f64s(pxz[i][a], t);
+                }
+            }
+        }
+        let mut zhat = [zero; M];
+        for a in 0..M {
+            zhat[a] = simd.add_f64s(load::<S>(&st.z0[a], c), dbar[a]);
+        }
+        store_vec::<S, M>(&mut st.cand.zhat, c, &zhat);
+        store_mat::<S, M, M>(&mut st.cand.pz, c, &pz);
+        store_mat::<S, N, M>(&mut st.cand.pxz, c, &pxz);
+    }
+    h.normalize_lanes(simd, &mut st.cand.zhat);
+    h.residual_lanes(simd, z, &st.cand.zhat, &mut st.cand.nu);
+    for c in 0..chunks {
+        let pz = load_mat(simd, &st.cand.pz, c);
+        let pxz = load_mat(simd, &st.cand.pxz, c);
+        let nu = load_vec(simd, &st.cand.nu, c);
+        let ls = cholesky_div(simd, &pz);
+        // K = (Pz^-1 Pxz^T)^T, a row of Pxz at a time (nalgebra's `solve` of the transpose).
+        let mut gain = [[zero; M]; N];
+        for i in 0..N {
+            gain[i] = backward_div(simd, &ls, &forward_div(simd, &ls, &pxz[i]));
+        }
+        // K nu, in nalgebra's column order without fused multiply-adds.
+        let mut knu = [zero; N];
+        for i in 0..N {
+            let mut s = simd.mul_f64s(gain[i][0], nu[0]);
+            for a in 1..M {
+                s = simd.add_f64s(s, simd.mul_f64s(gain[i][a], nu[a]));
+            }
+            knu[i] = s;
+        }
+        let mut mean = [zero; N];
+        for i in 0..N {
+            mean[i] = simd.add_f64s(load::<S>(&st.x[i], c), knu[i]);
+        }
+        // P+ = P- - (K Pz) K^T, symmetrised (as the scalar's commit does).
+        let mut kpz = [[zero; M]; N];
+        for i in 0..N {
+            for b in 0..M {
+                let mut s = simd.mul_f64s(gain[i][0], pz[0][b]);
+                for a in 1..M {
+                    s = simd.add_f64s(s, simd.mul_f64s(gain[i][a], pz[a][b]));
+                }
+                kpz[i][b] = s;
+            }
+        }
+        let mut cov = [[zero; N]; N];
+        for i in 0..N {
+            for j in 0..N {
+                let mut s = simd.mul_f64s(kpz[i][0], gain[j][0]);
+                for a in 1..M {
+                    s = simd.add_f64s(s, simd.mul_f64s(kpz[i][a], gain[j][a]));
+                }
+                cov[i][j] = simd.sub_f64s(load::<S>(&st.p[i][j], c), s);
+            }
+        }
+        symmetrize(simd, &mut cov);
+        let nis = sum_squares(simd, &forward_div(simd, &ls, &nu));
+        let mut diag = [zero; M];
+        for a in 0..M {
+            diag[a] = ls[a][a];
+        }
+        store_vec::<S, M>(&mut st.cand.pz_diag, c, &diag);
+        store_mat::<S, N, M>(&mut st.cand.gain, c, &gain);
+        store_vec::<S, N>(&mut st.cand.mean, c, &mean);
+        store_mat::<S, N, N>(&mut st.cand.cov, c, &cov);
+        store::<S>(&mut st.cand.nis, c, nis);
+        if posterior {
+            // nu^T U nu = |L^-1 K nu|^2: the prior's density at x+.
+            let l = load_mat(simd, &st.l, c);
+            let prior = sum_squares(simd, &forward_div(simd, &l, &knu));
+            store::<S>(&mut st.cand.prior_term, c, prior);
+        }
+    }
+    if posterior {
+        // e = z (-) h(x+), and e^T R^-1 e through R's factor.
+        let mut zc = [[0.0; BATCH]; M];
+        h.measure_lanes(simd, k, &st.cand.mean, &mut zc);
+        let mut e = [[0.0; BATCH]; M];
+        h.residual_lanes(simd, z, &zc, &mut e);
+        for c in 0..chunks {
+            let lr = load_mat(simd, &st.lr, c);
+            let ev = load_vec(simd, &e, c);
+            let q = sum_squares(simd, &forward_div(simd, &lr, &ev));
+            store::<S>(&mut st.cand.meas_term, c, q);
+        }
+    }
+}
+
+/// Per lane: whether the candidate at `kappa` is valid (the scalar `candidate`'s errors) and,
+/// with an adaptive kappa, whether its criterion beats the best so far; writes 1 into `take`
+/// for the lanes that take it.
+fn choose<const N: usize, const M: usize>(
+    st: &mut State<N, M>,
+    kappa: f64,
+    criterion: Option<KappaCriterion>,
+) {
+    let k = st.k;
+    for lane in 0..BATCH {
+        st.take[lane] = 0.0;
+        if st.failure[lane].is_some() {
+            continue;
+        }
+        let c = &st.cand;
+        // Pz's factor: nalgebra's Cholesky fails on a pivot that is not positive (NaN
+        // included), `Covariance::from_symmetric` on a non-finite diagonal.
+        let pz_ok = (0..M).all(|a| {
+            let d = c.pz_diag[a][lane];
+            d > 0.0 && d.is_finite()
+        });
+        let error = if !pz_ok {
+            let zhat_finite = (0..M).all(|a| c.zhat[a][lane].is_finite());
+            Some(FilterError::at(
+                k,
+                if zhat_finite {
+                    LinalgError::NotPositiveDefinite {
+                        what: "innovation covariance Pz",
+                    }
+                } else {
+                    LinalgError::NonFinite {
+                        what: "sigma-point measurements",
+                    }
+                },
+            ))
+        } else if (0..N).any(|i| (0..M).any(|a| !c.gain[i][a][lane].is_finite())) {
+            let rhs = (0..N).all(|i| (0..M).all(|a| c.pxz[i][a][lane].is_finite()));
+            Some(FilterError::at(
+                k,
+                LinalgError::NonFinite {
+                    what: if rhs { "solution" } else { "right-hand side" },
+                },
+            ))
+        } else {
+            None
+        };
+        if let Some(e) = error {
+            st.first_error[lane].get_or_insert(e);
+            continue;
+        }
+        let Some(criterion) = criterion else {
+            st.take[lane] = 1.0;
+            st.best_kappa[lane] = kappa;
+            st.has_best[lane] = true;
+            continue;
+        };
+        // ln |Pz| = sum ln(l_ii^2) (nalgebra's `ln_determinant`), per lane: no SIMD logarithm.
+        let mut log_det = 0.0;
+        for a in 0..M {
+            let d = c.pz_diag[a][lane];
+            log_det += (d * d).ln();
+        }
+        let nis = c.nis[lane];
+        // A non-finite term makes the value non-finite, so the scalar's distinction between
+        // an infinite and a NaN quadratic form cannot change the choice.
+        let value = if criterion == KappaCriterion::MaximumLikelihood {
+            log_det + nis
+        } else {
+            let prior = if st.cholesky_prior[lane] {
+                c.prior_term[lane]
+            } else {
+                f64::NAN
+            };
+            let meas = if st.r_ok[lane] {
+                c.meas_term[lane]
+            } else {
+                f64::NAN
+            };
+            match criterion {
+                KappaCriterion::PureMap => prior + meas,
+                _ => prior + meas - nis - 0.5 * log_det,
+            }
+        };
+        // Strictly smaller: ties keep the smaller kappa; NaN never wins.
+        if value.is_finite() && (!st.has_best[lane] || value < st.best_value[lane]) {
+            st.take[lane] = 1.0;
+            st.best_value[lane] = value;
+            st.best_kappa[lane] = kappa;
+            st.has_best[lane] = true;
+        }
+    }
+}
+
+#[inline(always)]
+fn select_vec<S: Simd, const D: usize>(
+    simd: S,
+    take: S::m64s,
+    from: &[Lanes; D],
+    to: &mut [Lanes; D],
+    c: usize,
+) {
+    for i in 0..D {
+        let v = simd.select_f64s(take, load::<S>(&from[i], c), load::<S>(&to[i], c));
+        store::<S>(&mut to[i], c, v);
+    }
+}
+
+/// Copies the lanes of chunk `c` where `take` is set from `from` to `to`.
+#[inline(always)]
+fn select_candidate<S: Simd, const N: usize, const M: usize>(
+    simd: S,
+    take: S::m64s,
+    from: &Candidate<N, M>,
+    to: &mut Candidate<N, M>,
+    c: usize,
+) {
+    select_vec(simd, take, &from.zhat, &mut to.zhat, c);
+    select_vec(simd, take, &from.nu, &mut to.nu, c);
+    select_vec(simd, take, &from.mean, &mut to.mean, c);
+    select_vec(simd, take, &from.pz_diag, &mut to.pz_diag, c);
+    for i in 0..N {
+        select_vec(simd, take, &from.gain[i], &mut to.gain[i], c);
+        select_vec(simd, take, &from.cov[i], &mut to.cov[i], c);
+    }
+    let mut nis = [to.nis];
+    select_vec(simd, take, &[from.nis], &mut nis, c);
+    to.nis = nis[0];
+}
+
+/// Writes each lane's chosen update into the state (or its error into the step), then the
+/// NEES of every lane against `truth` through `P+`'s factor, as the batch kernel forms it.
+#[inline(always)]
+fn commit<S: Simd, const N: usize, const M: usize>(
+    simd: S,
+    st: &mut State<N, M>,
+    truth: &[Lanes; N],
+    fixed: bool,
+) {
+    let k = st.k;
+    if fixed {
+        // The one candidate is the best: swap it in rather than copy it lane by lane.
+        std::mem::swap(&mut st.cand, &mut st.best);
+    }
+    let chunks = BATCH / S::F64_LANES;
+    for lane in 0..BATCH {
+        if st.failure[lane].is_none() && !st.has_best[lane] {
+            st.failure[lane] = Some(st.first_error[lane].take().unwrap_or(
+                FilterError::NonFinite {
+                    what: "adaptive kappa criterion (every grid value)",
+                    step: k,
+                },
+            ));
+        }
+        if st.failure[lane].is_none() {
+            // `KalmanCore::check_and_store`: a non-finite posterior is an error, blamed on
+            // the innovation if that is not finite.
+            let b = &st.best;
+            let finite = (0..N).all(|i| {
+                b.mean[i][lane].is_finite() && (0..N).all(|j| b.cov[i][j][lane].is_finite())
+            });
+            if !finite {
+                let nu_finite = (0..M).all(|a| b.nu[a][lane].is_finite());
+                st.failure[lane] = Some(FilterError::NonFinite {
+                    what: if nu_finite {
+                        "posterior estimate"
+                    } else {
+                        "innovation"
+                    },
+                    step: k,
+                });
+            }
+        }
+        st.take[lane] = if st.failure[lane].is_none() {
+            st.kappa[lane] = Some(st.best_kappa[lane]);
+            1.0
+        } else {
+            0.0
+        };
+    }
+    for c in 0..chunks {
+        let take = simd.equal_f64s(load::<S>(&st.take, c), simd.splat_f64s(1.0));
+        select_vec(simd, take, &st.best.mean, &mut st.x, c);
+        for i in 0..N {
+            select_vec(simd, take, &st.best.cov[i], &mut st.p[i], c);
+            select_vec(simd, take, &st.best.gain[i], &mut st.gain[i], c);
+        }
+        // NEES of the truth against the lane's state (its posterior where it succeeded).
+        let x = load_vec(simd, &st.x, c);
+        let p = load_mat(simd, &st.p, c);
+        let mut e = [simd.splat_f64s(0.0); N];
+        for i in 0..N {
+            e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x[i]);
+        }
+        let lp = cholesky(simd, &p);
+        let nees = norm_squared(simd, &forward(simd, &lp, &e));
+        store::<S>(&mut st.out.nees, c, nees);
+        store_vec::<S, N>(&mut st.out.error, c, &e);
+    }
+    st.out.k = k;
+    st.out.nis = st.best.nis;
+    for lane in 0..BATCH {
+        st.out.health[lane] = if st.failure[lane].is_none() {
+            0.0
+        } else {
+            f64::NAN
+        };
+        st.out.failure[lane] = st.failure[lane].clone();
+        st.out.nees_failure[lane] =
+            (!st.out.nees[lane].is_finite()).then_some(FilterError::NotPositiveDefinite {
+                what: "posterior covariance P+",
+                step: k,
+            });
+    }
+}
+
+/// [`BATCH`] unscented Kalman filters on one model, stepped together: the scalar
+/// [`Ukf`](crate::Ukf)'s update (sigma measurements as residuals from the central one,
+/// `Pz`, `Pxz`, `K` by Cholesky solve, `P+ = P- - K Pz K^T` symmetrised), with a fixed sigma
+/// set or kappa chosen per lane from a grid ([`UkfBatch::with_adaptive_kappa`], paper 001's
+/// UKF-ML and UKF-MPP), and the linearised prediction `x- = f(x+)`, `P- = F P+ F^T + Q` of
+/// [`UkfPrediction::Linearised`] (the batch kernel's products).
+///
+/// The measurement is evaluated for all lanes at once through [`LaneSigmaMeasurement`]
+/// ([`PerLane`](super::PerLane) of any scalar model, or a lane-wise model such as
+/// [`Bearing`](kalibra_models::Bearing)); the dynamics through [`LaneDynamics`]. The update's
+/// factorisations divide by their pivots and its sums follow the scalar's order without fused
+/// multiply-adds, so a lane reproduces the scalar filter of its run to rounding, and an
+/// adaptive lane chooses the kappa the scalar chooses. Per-lane errors as in the
+/// [module docs](super): a failed lane keeps its prior and reports the scalar's error.
+///
+/// ```
+/// use kalibra_filters::batch::{BATCH, Isa, PerLane, UkfBatch};
+/// use kalibra_filters::{SigmaSet, UkfPrediction};
+/// use kalibra_linalg::{Matrix2, Vector2};
+/// use kalibra_models::{Bearing, BearingReference, LinearGaussian, Stationary};
+/// use nalgebra::U2;
+///
+/// let dynamics = LinearGaussian::new(Matrix2::new(0.9, 0.0, 0.0, 1.0), Matrix2::identity() * 0.1)?;
+/// let sensor = Bearing::new(U2, [0, 1], BearingReference::XAxis, 0.025, Stationary(Vector2::zeros()))?;
+/// let mut ukf = UkfBatch::new(
+///     Isa::detect(), dynamics, sensor, Vector2::new(20.0, 5.0), Matrix2::identity() * 0.1,
+///     SigmaSet::recommended(2), UkfPrediction::Linearised,
+/// )?;
+/// let z = [[0.25; BATCH]; 1];
+/// let step = ukf.predict_update(&z, &[[0.0; BATCH]; 2]);
+/// assert!(step.all_ok());
+/// assert_eq!(ukf.kappa(0), Some(1.0));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct UkfBatch<const N: usize, const M: usize, D, H> {
+    isa: Isa,
+    dynamics: D,
+    measurement: H,
+    set: SigmaSet,
+    /// The kappas an update tries and their weights: the set's own, or the grid's.
+    candidates: Vec<(f64, SigmaWeights)>,
+    criterion: Option<KappaCriterion>,
+    state: Box<State<N, M>>,
+}
+
+impl<const N: usize, const M: usize, D, H> UkfBatch<N, M, D, H>
+where
+    D: LaneDynamics<N>,
+    H: LaneSigmaMeasurement<N, M>,
+{
+    /// [`BATCH`] filters at step 0, each from the estimate `(x0, P0)`, with sigma set `set`,
+    /// predicting as `prediction` says, on instruction set `isa`.
+    ///
+    /// # Errors
+    /// [`FilterError::Unsupported`] if the CPU does not run `isa`, or for
+    /// [`UkfPrediction::Unscented`] (not batched yet); [`FilterError::Initial`] if `x0` is not
+    /// finite or `P0` not symmetric positive semi-definite (the scalar check);
+    /// [`FilterError::InvalidParameter`] for a sigma set invalid at dimension `N`.
+    pub fn new(
+        isa: Isa,
+        dynamics: D,
+        measurement: H,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        set: SigmaSet,
+        prediction: UkfPrediction,
+    ) -> Result<Self, FilterError> {
+        let isa = isa.checked()?;
+        if prediction != UkfPrediction::Linearised {
+            return Err(FilterError::Unsupported {
+                what: "the batched UKF with the unscented prediction",
+            });
+        }
+        let w = set.weights(N)?;
+        let (x, p) = super::initial_lanes(&x0, p0)?;
+        let zn = [[[0.0; BATCH]; N]; N];
+        let state = State {
+            k: 0,
+            x,
+            p,
+            gain: [[[0.0; BATCH]; M]; N],
+            kappa: [None; BATCH],
+            f: zn,
+            q: zn,
+            l: zn,
+            cholesky_prior: [true; BATCH],
+            r: [[[0.0; BATCH]; M]; M],
+            lr: [[[0.0; BATCH]; M]; M],
+            r_ok: [true; BATCH],
+            z0: [[0.0; BATCH]; M],
+            plus: [[0.0; BATCH]; N],
+            minus: [[0.0; BATCH]; N],
+            dplus: [[[0.0; BATCH]; M]; N],
+            dminus: [[[0.0; BATCH]; M]; N],
+            cand: Candidate::new(),
+            best: Candidate::new(),
+            best_value: [0.0; BATCH],
+            best_kappa: [0.0; BATCH],
+            has_best: [false; BATCH],
+            take: [0.0; BATCH],
+            failure: std::array::from_fn(|_| None),
+            first_error: std::array::from_fn(|_| None),
+            out: BatchStep::new(),
+        };
+        Ok(Self {
+            isa,
+            dynamics,
+            measurement,
+            set,
+            candidates: vec![(set.kappa(), w)],
+            criterion: None,
+            state: Box::new(state),
+        })
+    }
+
+    /// The same filters choosing kappa at every update, per lane: the value of `grid`
+    /// minimising `criterion`, with the scalar [`Ukf`](crate::Ukf)'s rules (strictly smaller
+    /// wins, so ties go to the smaller kappa; a non-finite value never wins; a lane where
+    /// every kappa fails fails with the first kappa's error). The prediction keeps the set's
+    /// own kappa.
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] if a grid value gives an invalid sigma set.
+    pub fn with_adaptive_kappa(
+        mut self,
+        criterion: KappaCriterion,
+        grid: &KappaGrid,
+    ) -> Result<Self, FilterError> {
+        self.candidates = grid
+            .values()
+            .iter()
+            .map(|&kappa| Ok((kappa, self.set.with_kappa(kappa).weights(N)?)))
+            .collect::<Result<_, FilterError>>()?;
+        self.criterion = Some(criterion);
+        Ok(self)
+    }
+
+    /// Restarts lane `lane` from its own estimate `(x, P)`, checked as [`UkfBatch::new`]
+    /// checks the shared one.
+    ///
+    /// # Errors
+    /// [`FilterError::Initial`] as [`UkfBatch::new`]; the lane is then unchanged.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn set_lane(
+        &mut self,
+        lane: usize,
+        x: SVector<f64, N>,
+        p: SMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
+        super::set_lane_estimate(&mut self.state.x, &mut self.state.p, lane, &x, p)
+    }
+
+    /// The instruction set the batch runs on.
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    /// The current step index.
+    pub fn step_index(&self) -> usize {
+        self.state.k
+    }
+
+    /// Lane `lane`'s current mean.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn mean(&self, lane: usize) -> SVector<f64, N> {
+        SVector::from_fn(|i, _| self.state.x[i][lane])
+    }
+
+    /// Lane `lane`'s current covariance.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn cov(&self, lane: usize) -> SMatrix<f64, N, N> {
+        SMatrix::from_fn(|i, j| self.state.p[i][j][lane])
+    }
+
+    /// Lane `lane`'s gain `K` of its last successful update.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
+        SMatrix::from_fn(|i, j| self.state.gain[i][j][lane])
+    }
+
+    /// The kappa of lane `lane`'s last successful update (the chosen one when adapting), as
+    /// the scalar filter's `last_kappa`; `None` before the first.
+    ///
+    /// # Panics
+    /// If `lane >= BATCH`.
+    pub fn kappa(&self, lane: usize) -> Option<f64> {
+        self.state.kappa[lane]
+    }
+
+    /// Every lane's current mean, entry by entry (`means()[i][lane]`).
+    pub fn means(&self) -> &[Lanes; N] {
+        &self.state.x
+    }
+
+    /// Predicts every lane from step `k` to `k + 1`, then updates it with its measurement
+    /// `z[i][lane]` and computes its NIS `nu^T Pz^-1 nu`, and its NEES against
+    /// `truth[i][lane]` (pass zeros where there is no truth and ignore the NEES). A lane whose
+    /// update fails keeps its prediction, as the scalar filter does.
+    pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        let st = &mut *self.state;
+        self.isa.dispatch(Predict {
+            dynamics: &self.dynamics,
+            k: st.k,
+            x: &mut st.x,
+            p: &mut st.p,
+            f: &mut st.f,
+            q: &mut st.q,
+        });
+        st.k += 1;
+        self.update(z, truth)
+    }
+
+    /// Updates every lane at the current step without a prediction (a filter whose first
+    /// measurement is at its initial step), as [`UkfBatch::predict_update`] updates.
+    pub fn update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        self.isa.dispatch(Update {
+            measurement: &self.measurement,
+            state: &mut self.state,
+            candidates: &self.candidates,
+            criterion: self.criterion,
+            z,
+            truth,
+        });
+        &self.state.out
+    }
+}
