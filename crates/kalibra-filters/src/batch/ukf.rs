@@ -398,6 +398,24 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
         let k = st.k;
         let chunks = BATCH / S::F64_LANES;
         let at = |e| FilterError::at(k, e);
+        // The prior's square root: Cholesky across the lanes, and a health sum (`sum v * 0`:
+        // 0 when the prior and its factor are finite, NaN otherwise) so that the lanes check
+        // them one by one only when something is not finite.
+        let zero = simd.splat_f64s(0.0);
+        for c in 0..chunks {
+            let p = load_mat(simd, &st.p, c);
+            let l = cholesky_div(simd, &p);
+            let mut health = zero;
+            for i in 0..N {
+                health = simd.mul_add_e_f64s(load::<S>(&st.x[i], c), zero, health);
+                for j in 0..N {
+                    health = simd.mul_add_e_f64s(p[i][j], zero, health);
+                    health = simd.mul_add_e_f64s(l[i][j], zero, health);
+                }
+            }
+            store_mat::<S, N, N>(&mut st.l, c, &l);
+            store::<S>(&mut st.take, c, health);
+        }
         for lane in 0..BATCH {
             st.failure[lane] = None;
             st.first_error[lane] = None;
@@ -405,8 +423,11 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             st.best_value[lane] = f64::INFINITY;
             // A non-finite prediction is the scalar's prediction error (the scalar filter
             // stops there); the update then checks the measurement first.
-            let prior_finite = (0..N)
-                .all(|i| st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite()));
+            let healthy = st.take[lane] == 0.0;
+            let prior_finite = healthy
+                || (0..N).all(|i| {
+                    st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite())
+                });
             if let Some(e) = st.predict_failure[lane].take() {
                 st.failure[lane] = Some(e);
             } else if !prior_finite {
@@ -420,14 +441,11 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
                 }));
             }
         }
-        // The prior's square root: Cholesky across the lanes; a lane where it is not finite
-        // takes the scalar `sigma_sqrt` (its semi-definite fallback, or its error).
-        for c in 0..chunks {
-            let p = load_mat(simd, &st.p, c);
-            store_mat::<S, N, N>(&mut st.l, c, &cholesky_div(simd, &p));
-        }
+        // A lane whose factor is not finite takes the scalar `sigma_sqrt` (its semi-definite
+        // fallback, or its error).
         for lane in 0..BATCH {
-            let finite = (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
+            let finite = st.take[lane] == 0.0
+                || (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
             st.cholesky_prior[lane] = finite;
             if !finite {
                 prior_fallback(st, lane);
