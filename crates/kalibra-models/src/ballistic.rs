@@ -701,9 +701,7 @@ impl crate::lanes::LaneMeasurement<4, 3> for RadarRates {
                 }
             }
         }
-        for d in nu[Self::ELEVATION].iter_mut() {
-            *d = wrap_angle(*d);
-        }
+        crate::lanes::math::wrap_angle_lanes(simd, &mut nu[Self::ELEVATION]);
         broadcast(r, self.r.matrix());
     }
 }

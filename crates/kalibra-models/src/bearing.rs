@@ -396,7 +396,8 @@ fn check_variance(value: f64, name: &'static str) -> Result<(), ModelError> {
 
 /// Lane-wise: the relative positions, the arctangent ([`lanes::math::atan2`], within 3 ulp of
 /// glibc's), the gradient and the noise across the lanes, in the scalar model's order of
-/// operations; the residual wrapped by [`wrap_angle`], as the scalar residual is.
+/// operations; the residual wrapped as [`wrap_angle`] wraps the scalar residual, to the bit
+/// ([`lanes::math::wrap_angle_lanes`](crate::lanes::math::wrap_angle_lanes)).
 ///
 /// [`lanes::math::atan2`]: crate::lanes::math::atan2
 impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
@@ -459,15 +460,16 @@ impl<const N: usize, P: Platform<2>> crate::lanes::LaneMeasurement<N, 1>
             };
             store::<S>(&mut r[0][0], c, rv);
         }
-        for d in nu[0].iter_mut() {
-            *d = wrap_angle(*d);
-        }
+        crate::lanes::math::wrap_angle_lanes(simd, &mut nu[0]);
     }
 }
 
 /// Lane-wise sigma-point evaluation for the batched UKF: the arctangent of
-/// [`lanes::math::atan2`] at every lane's point, residuals and normalisation wrapped by
-/// [`wrap_angle`] lane by lane, and the noise in the scalar model's order of operations.
+/// [`lanes::math::atan2`] at every lane's point, residuals and normalisation wrapped as
+/// [`wrap_angle`] wraps them ([`lanes::math::wrap_angle_lanes`]), and the noise in the scalar
+/// model's order of operations.
+///
+/// [`lanes::math::wrap_angle_lanes`]: crate::lanes::math::wrap_angle_lanes
 ///
 /// [`lanes::math::atan2`]: crate::lanes::math::atan2
 impl<const N: usize, P: Platform<2>> crate::lanes::LaneSigmaMeasurement<N, 1>
@@ -496,21 +498,22 @@ impl<const N: usize, P: Platform<2>> crate::lanes::LaneSigmaMeasurement<N, 1>
     #[inline(always)]
     fn residual_lanes<S: pulp::Simd>(
         &self,
-        _simd: S,
+        simd: S,
         a: &[crate::lanes::Lanes; 1],
         b: &[crate::lanes::Lanes; 1],
         out: &mut [crate::lanes::Lanes; 1],
     ) {
-        for l in 0..crate::lanes::BATCH {
-            out[0][l] = wrap_angle(a[0][l] - b[0][l]);
+        use crate::lanes::{BATCH, load, store};
+        for c in 0..BATCH / S::F64_LANES {
+            let d = simd.sub_f64s(load::<S>(&a[0], c), load::<S>(&b[0], c));
+            store::<S>(&mut out[0], c, d);
         }
+        crate::lanes::math::wrap_angle_lanes(simd, &mut out[0]);
     }
 
     #[inline(always)]
-    fn normalize_lanes<S: pulp::Simd>(&self, _simd: S, z: &mut [crate::lanes::Lanes; 1]) {
-        for v in z[0].iter_mut() {
-            *v = wrap_angle(*v);
-        }
+    fn normalize_lanes<S: pulp::Simd>(&self, simd: S, z: &mut [crate::lanes::Lanes; 1]) {
+        crate::lanes::math::wrap_angle_lanes(simd, &mut z[0]);
     }
 
     #[inline(always)]

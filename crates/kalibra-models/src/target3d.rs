@@ -231,15 +231,6 @@ impl AccelAxis {
         }
     }
 
-    /// Lane-wise [`Dynamics::transition`]: replaces every lane of `x` by `f(x)` (the scalar
-    /// model's order of operations, `g` within 2 ulp of glibc's), on the instruction set of
-    /// `simd`. For simulating [`BATCH`](crate::lanes::BATCH) truths together.
-    #[inline(always)]
-    pub fn transition_lanes<S: pulp::Simd>(&self, simd: S, x: &mut [crate::lanes::Lanes; 3]) {
-        let (g, _) = self.g_lanes(simd, &x[2]);
-        self.advance_lanes(simd, x, &g);
-    }
-
     /// Lane-wise [`Dynamics::jacobian`]: `F` at every lane of `x` into `f`, on the
     /// instruction set of `simd`.
     #[inline(always)]
@@ -271,6 +262,19 @@ impl crate::lanes::LaneDynamics<3> for AccelAxis {
         // F at the old a, before the mean moves.
         self.jacobian_into_lanes(simd, &dg, f);
         crate::lanes::broadcast(q, &self.noise_cov(k));
+        self.advance_lanes(simd, x, &g);
+    }
+
+    /// `f(x)` alone (the prediction's mean, to the bit): for simulating truths together, and
+    /// for the batched UKF's sigma points.
+    #[inline(always)]
+    fn transition_lanes<S: pulp::Simd>(
+        &self,
+        simd: S,
+        _k: usize,
+        x: &mut [crate::lanes::Lanes; 3],
+    ) {
+        let (g, _) = self.g_lanes(simd, &x[2]);
         self.advance_lanes(simd, x, &g);
     }
 }

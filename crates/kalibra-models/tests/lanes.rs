@@ -597,7 +597,7 @@ mod accel_axis {
                 // The separate lane-wise transition and Jacobian are the prediction's parts,
                 // to the bit.
                 let mut t = x;
-                model.transition_lanes(simd, &mut t);
+                model.transition_lanes(simd, 5, &mut t);
                 assert_eq!(t, a.0, "{isa}: transition_lanes");
                 let mut f = [[[0.0; BATCH]; 3]; 3];
                 model.jacobian_lanes(simd, &x, &mut f);
@@ -812,4 +812,76 @@ mod ballistic {
     fn the_lane_wise_ballistic_model_agrees_with_the_scalar_one_on_every_isa() {
         each_isa!(simd, isa => check(simd, isa));
     }
+}
+
+/// `wrap_angle_lanes` of 8 lanes on one instruction set.
+struct Wrap<'a>(&'a mut [f64; 8]);
+
+impl WithSimd for Wrap<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        math::wrap_angle_lanes(simd, self.0);
+    }
+}
+
+#[test]
+fn wrap_angle_lanes_is_wrap_angle_to_the_bit_on_every_instruction_set() {
+    use std::f64::consts::PI;
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    // The boundaries (+-pi, +-2 pi and their neighbours, signed zeros), the specials, then
+    // differences of angles and larger angles.
+    let mut values = vec![
+        0.0,
+        -0.0,
+        PI,
+        -PI,
+        2.0 * PI,
+        -2.0 * PI,
+        PI.next_up(),
+        PI.next_down(),
+        (-PI).next_up(),
+        (-PI).next_down(),
+        (2.0 * PI).next_down(),
+        (-2.0 * PI).next_up(),
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e300,
+        -1e-300,
+    ];
+    values.extend((0..20_000).map(|i| {
+        let scale = if i % 4 == 0 { 40.0 } else { 2.0 * PI };
+        (rng.random::<f64>() * 2.0 - 1.0) * scale
+    }));
+    while values.len() % 8 != 0 {
+        values.push(0.5);
+    }
+    on_every_isa(|name, _| {
+        let mut checked = 0;
+        for chunk in values.chunks(8) {
+            let mut lanes: [f64; 8] = chunk.try_into().unwrap();
+            match name {
+                "scalar" => Simd::vectorize(pulp::Scalar::new(), Wrap(&mut lanes)),
+                #[cfg(target_arch = "x86_64")]
+                "avx2" => Simd::vectorize(pulp::x86::V3::try_new().unwrap(), Wrap(&mut lanes)),
+                #[cfg(target_arch = "x86_64")]
+                "avx512" => Simd::vectorize(pulp::x86::V4::try_new().unwrap(), Wrap(&mut lanes)),
+                #[cfg(target_arch = "aarch64")]
+                "neon" => {
+                    Simd::vectorize(pulp::aarch64::Neon::try_new().unwrap(), Wrap(&mut lanes))
+                }
+                _ => unreachable!(),
+            }
+            for (&v, &w) in chunk.iter().zip(&lanes) {
+                let want = kalibra_models::wrap_angle(v);
+                assert!(
+                    want.to_bits() == w.to_bits() || (want.is_nan() && w.is_nan()),
+                    "{name}: wrap_angle({v:e}) = {want:e}, lanes {w:e}"
+                );
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, values.len());
+    });
 }

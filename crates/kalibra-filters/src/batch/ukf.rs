@@ -1,5 +1,5 @@
-//! The batched unscented Kalman filter: [`BATCH`] runs of one model, the sigma-point
-//! measurements evaluated for all lanes at once and the unscented update stepped together,
+//! The batched unscented Kalman filter: [`BATCH`] runs of one model, the sigma points
+//! evaluated for all lanes at once and the unscented prediction and update stepped together,
 //! with a fixed kappa or one chosen per lane from a grid (paper 001's adaptive UKFs).
 
 // The kernels index matrices as the formulas do (`a[i][k] b[k][j]`); iterator chains would
@@ -27,6 +27,12 @@ struct State<const N: usize, const M: usize> {
     // The prediction's per-lane model evaluations.
     f: [[Lanes; N]; N],
     q: [[Lanes; N]; N],
+    /// The unscented prediction's transformed points: `f(x)`, `f(x + spread L_j)`,
+    /// `f(x - spread L_j)`, and a lane's prediction error (reported by the next update).
+    fx0: [Lanes; N],
+    fplus: [[Lanes; N]; N],
+    fminus: [[Lanes; N]; N],
+    predict_failure: [Option<FilterError>; BATCH],
     /// The prior's square root `L` (`L L^T = P-`) and whether it is the Cholesky factor (the
     /// semi-definite fallback of `sigma_sqrt` leaves the posterior criteria undefined).
     l: [[Lanes; N]; N],
@@ -243,6 +249,127 @@ impl<const N: usize, D: LaneDynamics<N>> WithSimd for Predict<'_, N, D> {
     }
 }
 
+/// The unscented prediction as a pulp operation, in the scalar `unscented_predict`'s order:
+/// the posterior's square root, `f` at the mean and at the `2n` sigma points, their weighted
+/// mean and scatter (symmetrised), then `+ Q` and symmetrised again (`KalmanCore`'s
+/// prediction). `F` and `Q` are evaluated at the mean.
+struct PredictUnscented<'a, const N: usize, const M: usize, D> {
+    dynamics: &'a D,
+    state: &'a mut State<N, M>,
+    w: SigmaWeights,
+}
+
+impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
+    for PredictUnscented<'_, N, M, D>
+{
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let PredictUnscented {
+            dynamics,
+            state: st,
+            w,
+        } = self;
+        let k = st.k;
+        let chunks = BATCH / S::F64_LANES;
+        for c in 0..chunks {
+            let p = load_mat(simd, &st.p, c);
+            store_mat::<S, N, N>(&mut st.l, c, &cholesky_div(simd, &p));
+        }
+        for lane in 0..BATCH {
+            let finite = (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
+            if !finite {
+                predict_fallback(st, lane);
+            }
+        }
+        st.fx0 = st.x;
+        dynamics.predict_lanes(simd, k, &mut st.fx0, &mut st.f, &mut st.q);
+        let spread = simd.splat_f64s(w.spread);
+        for j in 0..N {
+            for c in 0..chunks {
+                for i in 0..N {
+                    let x = load::<S>(&st.x[i], c);
+                    let d = simd.mul_f64s(load::<S>(&st.l[i][j], c), spread);
+                    store::<S>(&mut st.fplus[j][i], c, simd.add_f64s(x, d));
+                    store::<S>(&mut st.fminus[j][i], c, simd.sub_f64s(x, d));
+                }
+            }
+            dynamics.transition_lanes(simd, k, &mut st.fplus[j]);
+            dynamics.transition_lanes(simd, k, &mut st.fminus[j]);
+        }
+        let (mean_center, cov_center) = (
+            simd.splat_f64s(w.mean_center),
+            simd.splat_f64s(w.cov_center),
+        );
+        let other = simd.splat_f64s(w.other);
+        let zero = simd.splat_f64s(0.0);
+        for c in 0..chunks {
+            let x0 = load_vec(simd, &st.fx0, c);
+            let plus = load_mat(simd, &st.fplus, c);
+            let minus = load_mat(simd, &st.fminus, c);
+            // The points in the scalar's scratch order: the + points, then the - points.
+            let mut mean = [zero; N];
+            for i in 0..N {
+                mean[i] = simd.mul_f64s(x0[i], mean_center);
+            }
+            for xi in plus.iter().chain(minus.iter()) {
+                for i in 0..N {
+                    mean[i] = simd.add_f64s(mean[i], simd.mul_f64s(xi[i], other));
+                }
+            }
+            let mut cov = [[zero; N]; N];
+            let mut d = [zero; N];
+            for i in 0..N {
+                d[i] = simd.sub_f64s(x0[i], mean[i]);
+            }
+            for a in 0..N {
+                for b in 0..N {
+                    cov[a][b] = simd.mul_f64s(simd.mul_f64s(d[a], d[b]), cov_center);
+                }
+            }
+            for xi in plus.iter().chain(minus.iter()) {
+                for i in 0..N {
+                    d[i] = simd.sub_f64s(xi[i], mean[i]);
+                }
+                for a in 0..N {
+                    for b in 0..N {
+                        let t = simd.mul_f64s(simd.mul_f64s(d[a], d[b]), other);
+                        cov[a][b] = simd.add_f64s(cov[a][b], t);
+                    }
+                }
+            }
+            symmetrize(simd, &mut cov);
+            let q = load_mat(simd, &st.q, c);
+            let mut p = add(simd, &cov, &q);
+            symmetrize(simd, &mut p);
+            store_vec::<S, N>(&mut st.x, c, &mean);
+            store_mat::<S, N, N>(&mut st.p, c, &p);
+        }
+    }
+}
+
+/// The scalar `sigma_sqrt` for lane `lane`'s posterior before an unscented prediction (off
+/// the hot path): its factor, or the lane's prediction error (its sigma points then collapse
+/// onto the mean; the next update reports the error).
+#[cold]
+#[inline(never)]
+fn predict_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: usize) {
+    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.p[i][j][lane]);
+    let l = match sigma_sqrt(&p, "covariance for sigma points") {
+        Ok((l, _)) => l,
+        Err(e) => {
+            st.predict_failure[lane] = Some(FilterError::at(st.k, e));
+            SMatrix::zeros()
+        }
+    };
+    for i in 0..N {
+        for j in 0..N {
+            st.l[i][j][lane] = l[(i, j)];
+        }
+    }
+}
+
 /// The unscented update of every lane as a pulp operation.
 struct Update<'a, const N: usize, const M: usize, H> {
     measurement: &'a H,
@@ -271,6 +398,24 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
         let k = st.k;
         let chunks = BATCH / S::F64_LANES;
         let at = |e| FilterError::at(k, e);
+        // The prior's square root: Cholesky across the lanes, and a health sum (`sum v * 0`:
+        // 0 when the prior and its factor are finite, NaN otherwise) so that the lanes check
+        // them one by one only when something is not finite.
+        let zero = simd.splat_f64s(0.0);
+        for c in 0..chunks {
+            let p = load_mat(simd, &st.p, c);
+            let l = cholesky_div(simd, &p);
+            let mut health = zero;
+            for i in 0..N {
+                health = simd.mul_add_e_f64s(load::<S>(&st.x[i], c), zero, health);
+                for j in 0..N {
+                    health = simd.mul_add_e_f64s(p[i][j], zero, health);
+                    health = simd.mul_add_e_f64s(l[i][j], zero, health);
+                }
+            }
+            store_mat::<S, N, N>(&mut st.l, c, &l);
+            store::<S>(&mut st.take, c, health);
+        }
         for lane in 0..BATCH {
             st.failure[lane] = None;
             st.first_error[lane] = None;
@@ -278,9 +423,14 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             st.best_value[lane] = f64::INFINITY;
             // A non-finite prediction is the scalar's prediction error (the scalar filter
             // stops there); the update then checks the measurement first.
-            let prior_finite = (0..N)
-                .all(|i| st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite()));
-            if !prior_finite {
+            let healthy = st.take[lane] == 0.0;
+            let prior_finite = healthy
+                || (0..N).all(|i| {
+                    st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite())
+                });
+            if let Some(e) = st.predict_failure[lane].take() {
+                st.failure[lane] = Some(e);
+            } else if !prior_finite {
                 st.failure[lane] = Some(FilterError::NonFinite {
                     what: "predicted covariance (process noise Q?)",
                     step: k,
@@ -291,14 +441,11 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
                 }));
             }
         }
-        // The prior's square root: Cholesky across the lanes; a lane where it is not finite
-        // takes the scalar `sigma_sqrt` (its semi-definite fallback, or its error).
-        for c in 0..chunks {
-            let p = load_mat(simd, &st.p, c);
-            store_mat::<S, N, N>(&mut st.l, c, &cholesky_div(simd, &p));
-        }
+        // A lane whose factor is not finite takes the scalar `sigma_sqrt` (its semi-definite
+        // fallback, or its error).
         for lane in 0..BATCH {
-            let finite = (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
+            let finite = st.take[lane] == 0.0
+                || (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
             st.cholesky_prior[lane] = finite;
             if !finite {
                 prior_fallback(st, lane);
@@ -765,8 +912,12 @@ fn commit<S: Simd, const N: usize, const M: usize>(
 /// [`Ukf`](crate::Ukf)'s update (sigma measurements as residuals from the central one,
 /// `Pz`, `Pxz`, `K` by Cholesky solve, `P+ = P- - K Pz K^T` symmetrised), with a fixed sigma
 /// set or kappa chosen per lane from a grid ([`UkfBatch::with_adaptive_kappa`], paper 001's
-/// UKF-ML and UKF-MPP), and the linearised prediction `x- = f(x+)`, `P- = F P+ F^T + Q` of
-/// [`UkfPrediction::Linearised`] (the batch kernel's products).
+/// UKF-ML and UKF-MPP), predicting as [`UkfPrediction`] says: the linearised
+/// `x- = f(x+)`, `P- = F P+ F^T + Q` (the batch kernel's products), or the unscented transform
+/// of the posterior's sigma points through `f` (the scalar's order of operations, `f` through
+/// [`LaneDynamics::transition_lanes`]). After a lane's failed update its next prediction
+/// agrees with the scalar's to rounding (the scalar carries the prior's split of `P` into
+/// propagated and noise parts, which adds the same terms in another order).
 ///
 /// The measurement is evaluated for all lanes at once through [`LaneSigmaMeasurement`]
 /// ([`PerLane`](super::PerLane) of any scalar model, or a lane-wise model such as
@@ -801,6 +952,9 @@ pub struct UkfBatch<const N: usize, const M: usize, D, H> {
     dynamics: D,
     measurement: H,
     set: SigmaSet,
+    prediction: UkfPrediction,
+    /// The set's own weights (the unscented prediction's, adaptive or not).
+    weights: SigmaWeights,
     /// The kappas an update tries and their weights: the set's own, or the grid's.
     candidates: Vec<(f64, SigmaWeights)>,
     criterion: Option<KappaCriterion>,
@@ -816,8 +970,7 @@ where
     /// predicting as `prediction` says, on instruction set `isa`.
     ///
     /// # Errors
-    /// [`FilterError::Unsupported`] if the CPU does not run `isa`, or for
-    /// [`UkfPrediction::Unscented`] (not batched yet); [`FilterError::Initial`] if `x0` is not
+    /// [`FilterError::Unsupported`] if the CPU does not run `isa`; [`FilterError::Initial`] if `x0` is not
     /// finite or `P0` not symmetric positive semi-definite (the scalar check);
     /// [`FilterError::InvalidParameter`] for a sigma set invalid at dimension `N`.
     pub fn new(
@@ -830,11 +983,6 @@ where
         prediction: UkfPrediction,
     ) -> Result<Self, FilterError> {
         let isa = isa.checked()?;
-        if prediction != UkfPrediction::Linearised {
-            return Err(FilterError::Unsupported {
-                what: "the batched UKF with the unscented prediction",
-            });
-        }
         let w = set.weights(N)?;
         let (x, p) = super::initial_lanes(&x0, p0)?;
         let zn = [[[0.0; BATCH]; N]; N];
@@ -846,6 +994,10 @@ where
             kappa: [None; BATCH],
             f: zn,
             q: zn,
+            fx0: [[0.0; BATCH]; N],
+            fplus: zn,
+            fminus: zn,
+            predict_failure: std::array::from_fn(|_| None),
             l: zn,
             cholesky_prior: [true; BATCH],
             r: [[[0.0; BATCH]; M]; M],
@@ -871,6 +1023,8 @@ where
             dynamics,
             measurement,
             set,
+            prediction,
+            weights: w,
             candidates: vec![(set.kappa(), w)],
             criterion: None,
             state: Box::new(state),
@@ -971,14 +1125,22 @@ where
     /// update fails keeps its prediction, as the scalar filter does.
     pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
         let st = &mut *self.state;
-        self.isa.dispatch(Predict {
-            dynamics: &self.dynamics,
-            k: st.k,
-            x: &mut st.x,
-            p: &mut st.p,
-            f: &mut st.f,
-            q: &mut st.q,
-        });
+        match self.prediction {
+            UkfPrediction::Linearised => self.isa.dispatch(Predict {
+                dynamics: &self.dynamics,
+                k: st.k,
+                x: &mut st.x,
+                p: &mut st.p,
+                f: &mut st.f,
+                q: &mut st.q,
+            }),
+            _ => self.isa.dispatch(PredictUnscented {
+                dynamics: &self.dynamics,
+                state: st,
+                w: self.weights,
+            }),
+        }
+        let st = &mut *self.state;
         st.k += 1;
         self.update(z, truth)
     }

@@ -44,6 +44,16 @@ pub trait LaneDynamics<const N: usize> {
         f: &mut [[Lanes; N]; N],
         q: &mut [[Lanes; N]; N],
     );
+
+    /// At step `k`: replaces each lane's point in `x` by `f_k(x)` (the batched UKF's sigma
+    /// points). By default through [`predict_lanes`](Self::predict_lanes), its `F` and `Q`
+    /// discarded; a model overrides it to skip them.
+    #[inline(always)]
+    fn transition_lanes<S: Simd>(&self, simd: S, k: usize, x: &mut [Lanes; N]) {
+        let mut f = [[[0.0; BATCH]; N]; N];
+        let mut q = [[[0.0; BATCH]; N]; N];
+        self.predict_lanes(simd, k, x, &mut f, &mut q);
+    }
 }
 
 /// A measurement a batch evaluates for all its lanes at once: for every lane, the innovation
@@ -166,6 +176,11 @@ impl<const N: usize, T: LaneDynamics<N>> LaneDynamics<N> for &T {
     ) {
         (**self).predict_lanes(simd, k, x, f, q);
     }
+
+    #[inline(always)]
+    fn transition_lanes<S: Simd>(&self, simd: S, k: usize, x: &mut [Lanes; N]) {
+        (**self).transition_lanes(simd, k, x);
+    }
 }
 
 impl<const N: usize, const M: usize, T: LaneMeasurement<N, M>> LaneMeasurement<N, M> for &T {
@@ -247,6 +262,15 @@ impl<const N: usize, T: Dynamics<Const<N>>> LaneDynamics<N> for PerLane<T> {
             let pred = self.0.transition(k, &xl);
             set_lane(f, l, &self.0.jacobian(k, &xl));
             set_lane(q, l, &self.0.noise_cov(k));
+            for (i, xi) in x.iter_mut().enumerate() {
+                xi[l] = pred[i];
+            }
+        }
+    }
+
+    fn transition_lanes<S: Simd>(&self, _simd: S, k: usize, x: &mut [Lanes; N]) {
+        for l in 0..BATCH {
+            let pred = self.0.transition(k, &lane(x, l));
             for (i, xi) in x.iter_mut().enumerate() {
                 xi[l] = pred[i];
             }

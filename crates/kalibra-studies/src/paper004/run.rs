@@ -9,7 +9,7 @@ use kalibra_metrics::MetricsError;
 use kalibra_metrics::hypothesis::{
     BatchMeans, TestResult, ks_two_sample, paired_t_test, runs_test,
 };
-use kalibra_models::lanes::lane;
+use kalibra_models::lanes::{LaneDynamics, lane};
 use kalibra_models::{AccelAxis, Dynamics, LinearObservation, Measurement, Target3d};
 use kalibra_sim::{ChaCha8Rng, MonteCarlo, RunFailure};
 use pulp::{Simd, WithSimd};
@@ -185,6 +185,7 @@ type AxisEkf<'a, const M: usize> =
 /// after), as a pulp operation on the batch's instruction set.
 struct Advance<'a> {
     dynamics: &'a AccelAxis,
+    k: usize,
     x: &'a mut [Lanes; 3],
 }
 
@@ -192,7 +193,7 @@ impl WithSimd for Advance<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
-        self.dynamics.transition_lanes(simd, self.x);
+        self.dynamics.transition_lanes(simd, self.k, self.x);
     }
 }
 
@@ -250,6 +251,7 @@ fn run_axis<const M: usize>(
     for k in 1..=steps {
         isa.dispatch(Advance {
             dynamics: &axis.dynamics,
+            k: k - 1,
             x: &mut x,
         });
         for (l, rng) in rngs.iter_mut().enumerate() {
