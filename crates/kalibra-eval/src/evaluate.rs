@@ -167,7 +167,7 @@ impl Evaluation {
     /// diagnostic run beyond the log; [`EvalError::Metrics`] if a metric fails on data that
     /// passed the checks (not expected). A failing cell's error is that of the first failing
     /// cell run after run, as one pass would meet it.
-    pub fn evaluate(&self, log: &FilterLog) -> Result<Report, EvalError> {
+    pub fn evaluate(&self, log: &FilterLog<'_>) -> Result<Report, EvalError> {
         let (runs, steps) = (log.runs(), log.steps());
         let block = if log.model.is_some() {
             steps

@@ -625,7 +625,8 @@ mod fixed {
     /// The cell's matrix (its length checked by `square`).
     fn load<const N: usize>(cell: MatrixCell<'_>) -> SMatrix<f64, N, N> {
         match cell {
-            MatrixCell::Full(v) => SMatrix::from_fn(|i, j| v[i * N + j]),
+            // One bounds check for the cell rather than one per entry.
+            MatrixCell::Full(v) => SMatrix::from_row_slice(&v[..N * N]),
             MatrixCell::Diagonal(v) => SMatrix::from_fn(|i, j| if i == j { v[i] } else { 0.0 }),
         }
     }
