@@ -282,6 +282,7 @@ impl Credibility {
     /// # Errors
     /// As [`Credibility::push`] for the step and the error; [`MetricsError::InvalidParameter`]
     /// for a NEES that is negative or not finite.
+    #[inline]
     pub fn push_nees(&mut self, step: usize, error: &[f64], nees: f64) -> Result<(), MetricsError> {
         self.check(step, error)?;
         if !(nees.is_finite() && nees >= 0.0) {
@@ -295,6 +296,7 @@ impl Credibility {
     }
 
     /// Checks what both pushes need: the step, the error's length and finiteness.
+    #[inline]
     fn check(&self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         self.check_step(step)?;
         if self.dim == 0 {
@@ -331,6 +333,7 @@ impl Credibility {
         }
     }
 
+    #[inline]
     fn store(&mut self, step: usize, error: &[f64], nees: f64) {
         self.errors[step].extend_from_slice(error);
         self.nees[step].push(nees);
