@@ -189,10 +189,12 @@ impl Evaluation {
                     // The blocks run in parallel with each other: each feeds its cells on its
                     // own thread, one at a time.
                     let mut scratch = evaluator.scratch();
-                    for (run, step) in cells {
-                        evaluator
-                            .push_with(run, step, &log.cell(run, step), &mut scratch)
-                            .map_err(|e| ((run, step), e))?;
+                    for run in 0..runs {
+                        for step in range.clone() {
+                            evaluator
+                                .push_with(run, step, &log.cell(run, step), &mut scratch)
+                                .map_err(|e| ((run, step), e))?;
+                        }
                     }
                     return Ok(evaluator);
                 }

@@ -282,6 +282,7 @@ impl<'a> Array<'a> {
         })
     }
 
+    #[inline]
     fn index(&self, run: usize, step: usize) -> usize {
         match self.scope {
             Scope::Constant => 0,
@@ -290,11 +291,13 @@ impl<'a> Array<'a> {
         }
     }
 
+    #[inline]
     fn slice(&self, run: usize, step: usize) -> Option<&[f64]> {
         self.cell_at(self.index(run, step))
     }
 
     /// The values of cell `i` (in storage order), if present.
+    #[inline]
     fn cell_at(&self, i: usize) -> Option<&[f64]> {
         if self.present.as_ref().is_some_and(|p| !p[i]) {
             return None;
@@ -308,6 +311,7 @@ impl<'a> Array<'a> {
     }
 
     /// The cell at (run, step) as a matrix cell, if logged.
+    #[inline]
     fn matrix_cell(&self, run: usize, step: usize) -> Option<MatrixCell<'_>> {
         self.slice(run, step).map(|v| match self.layout {
             Layout::Full => MatrixCell::Full(v),
