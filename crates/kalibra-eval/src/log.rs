@@ -505,9 +505,11 @@ impl<'a> FilterLog<'a> {
         if run >= self.runs || step >= self.steps {
             return Cell::default();
         }
+        #[inline(always)]
         fn vector<'s>(a: &'s Option<Array<'_>>, run: usize, step: usize) -> Option<&'s [f64]> {
             a.as_ref().and_then(|a| a.slice(run, step))
         }
+        #[inline(always)]
         fn matrix<'s>(a: &'s Option<Array<'_>>, run: usize, step: usize) -> Option<MatrixCell<'s>> {
             a.as_ref().and_then(|a| a.matrix_cell(run, step))
         }

@@ -1298,7 +1298,7 @@ struct PerRun {
 }
 
 impl PerRun {
-    #[inline]
+    #[inline(always)]
     fn add(&mut self, run: usize, step: usize, value: f64) {
         if run >= self.blocks.len() {
             self.blocks.resize_with(run + 1, Vec::new);
