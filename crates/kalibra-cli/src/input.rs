@@ -1,5 +1,6 @@
 //! Reading a filter log: the format by extension, and the arrays both readers produce.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use kalibra_eval::{Evaluation, FilterLog, Matrices, Report, Vectors};
@@ -32,15 +33,16 @@ column, or the array and index), 2 bad usage.";
 
 /// The cells of an array as read, in run-major order.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) enum CellValues {
-    /// Every cell logged: the values in one buffer (the NPZ reader's common case, which saves
-    /// an allocation per cell).
-    Dense(Vec<f64>),
+pub(crate) enum CellValues<'a> {
     /// One entry per cell, `None` where not logged.
     Sparse(Vec<Option<Vec<f64>>>),
+    /// Every cell's values in one buffer, owned or borrowed, a cell of all NaN not logged:
+    /// arrays handed over whole (`log_from_arrays`), read in place and never scanned up front
+    /// (the evaluation looks at each cell as it reads it).
+    NanUnlogged(Cow<'a, [f64]>),
 }
 
-impl From<Vec<Option<Vec<f64>>>> for CellValues {
+impl From<Vec<Option<Vec<f64>>>> for CellValues<'_> {
     fn from(cells: Vec<Option<Vec<f64>>>) -> Self {
         Self::Sparse(cells)
     }
@@ -48,18 +50,18 @@ impl From<Vec<Option<Vec<f64>>>> for CellValues {
 
 /// One array of vectors: `dim` values per cell.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct VectorArray {
+pub(crate) struct VectorArray<'a> {
     pub dim: usize,
-    pub cells: CellValues,
+    pub cells: CellValues<'a>,
 }
 
 /// One array of square matrices per run and step: full (`dim * dim` values, row by row) or
 /// diagonal (`dim` values).
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct MatrixArray {
+pub(crate) struct MatrixArray<'a> {
     pub dim: usize,
     pub diagonal: bool,
-    pub cells: CellValues,
+    pub cells: CellValues<'a>,
 }
 
 /// A model matrix array: constant, per step or per run and step, every cell present.
@@ -72,7 +74,7 @@ pub(crate) struct ModelArray {
 }
 
 impl ModelArray {
-    fn matrices(self) -> Matrices {
+    fn matrices(self) -> Matrices<'static> {
         match self.scope {
             kalibra_eval::Scope::Constant => Matrices::constant(self.rows, self.cols, self.data),
             kalibra_eval::Scope::PerStep => Matrices::per_step(self.rows, self.cols, self.data),
@@ -83,15 +85,15 @@ impl ModelArray {
 
 /// What a reader found, before `kalibra_eval` checks it.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub(crate) struct RawLog {
+pub(crate) struct RawLog<'a> {
     pub runs: usize,
     pub steps: usize,
     pub time: Option<Vec<f64>>,
-    pub truth: Option<VectorArray>,
-    pub estimate: Option<VectorArray>,
-    pub covariance: Option<MatrixArray>,
-    pub innovation: Option<VectorArray>,
-    pub innovation_cov: Option<MatrixArray>,
+    pub truth: Option<VectorArray<'a>>,
+    pub estimate: Option<VectorArray<'a>>,
+    pub covariance: Option<MatrixArray<'a>>,
+    pub innovation: Option<VectorArray<'a>>,
+    pub innovation_cov: Option<MatrixArray<'a>>,
     /// `F`, `H`, `Q`, `R`.
     pub model: Option<[ModelArray; 4]>,
     /// The per-cell array that fixed `runs` and `steps` (for the error when another disagrees).
@@ -122,23 +124,23 @@ pub(crate) fn model_given(present: &[&str]) -> Result<bool, String> {
     }
 }
 
-fn matrices(m: MatrixArray) -> Matrices {
+fn matrices(m: MatrixArray<'_>) -> Matrices<'_> {
     match (m.cells, m.diagonal) {
-        (CellValues::Dense(data), true) => Matrices::diagonal(m.dim, data),
-        (CellValues::Dense(data), false) => Matrices::dense(m.dim, m.dim, data),
         (CellValues::Sparse(cells), true) => Matrices::diagonal_cells(m.dim, cells),
         (CellValues::Sparse(cells), false) => Matrices::cells(m.dim, m.dim, cells),
+        // Only `log_from_arrays` gives these, and numpy's arrays hold full matrices.
+        (CellValues::NanUnlogged(data), _) => Matrices::nan_unlogged(m.dim, m.dim, data),
     }
 }
 
-fn vectors(v: VectorArray) -> Vectors {
+fn vectors(v: VectorArray<'_>) -> Vectors<'_> {
     match v.cells {
-        CellValues::Dense(data) => Vectors::dense(v.dim, data),
         CellValues::Sparse(cells) => Vectors::cells(v.dim, cells),
+        CellValues::NanUnlogged(data) => Vectors::nan_unlogged(v.dim, data),
     }
 }
 
-impl RawLog {
+impl<'a> RawLog<'a> {
     /// Stores the per-cell array `array` (one of [`PER_CELL`]) of `runs x steps` cells of
     /// `rows x cols` values (`cols` is ignored for vectors). The first such array fixes the
     /// runs and steps; another that disagrees, or a non-square covariance, is an error.
@@ -147,7 +149,7 @@ impl RawLog {
         array: &'static str,
         (runs, steps): (usize, usize),
         (rows, cols): (usize, usize),
-        cells: CellValues,
+        cells: CellValues<'a>,
     ) -> Result<(), String> {
         match self.shape_from {
             None => {
@@ -199,13 +201,13 @@ impl RawLog {
     }
 
     /// The checked log; an error names the file and the array at fault.
-    pub fn build(self, file: &Path) -> Result<FilterLog, String> {
+    pub fn build(self, file: &Path) -> Result<FilterLog<'a>, String> {
         self.checked()
             .map_err(|e| format!("{}: {e}", file.display()))
     }
 
     /// The checked log; an error names the array at fault.
-    fn checked(self) -> Result<FilterLog, kalibra_eval::EvalError> {
+    fn checked(self) -> Result<FilterLog<'a>, kalibra_eval::EvalError> {
         let mut log = FilterLog::new(self.runs, self.steps)?;
         if let Some(t) = self.time {
             log = log.with_times(t)?;
@@ -255,9 +257,12 @@ impl RawLog {
 /// assert_eq!((log.runs(), log.steps()), (1, 2));
 /// # Ok::<(), String>(())
 /// ```
-pub fn log_from_arrays(arrays: Vec<(String, Vec<usize>, Vec<f64>)>) -> Result<FilterLog, String> {
+pub fn log_from_arrays<'a, D: Into<Cow<'a, [f64]>>>(
+    arrays: Vec<(String, Vec<usize>, D)>,
+) -> Result<FilterLog<'a>, String> {
     let mut named = std::collections::BTreeMap::new();
     for (name, shape, data) in arrays {
+        let data = data.into();
         // Checked: the shape comes from the caller, and a product that wraps could match a
         // short buffer.
         let size = shape.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));

@@ -33,7 +33,7 @@ struct Cells {
 }
 
 /// Reads the JSON log in `bytes` (from `file`, named in errors).
-pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog, String> {
+pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, String> {
     let name = file.display();
     let bytes = python_floats(bytes).map_err(|(line, column, literal)| {
         format!(

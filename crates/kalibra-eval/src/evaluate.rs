@@ -167,7 +167,7 @@ impl Evaluation {
     /// diagnostic run beyond the log; [`EvalError::Metrics`] if a metric fails on data that
     /// passed the checks (not expected). A failing cell's error is that of the first failing
     /// cell run after run, as one pass would meet it.
-    pub fn evaluate(&self, log: &FilterLog) -> Result<Report, EvalError> {
+    pub fn evaluate(&self, log: &FilterLog<'_>) -> Result<Report, EvalError> {
         let (runs, steps) = (log.runs(), log.steps());
         let block = if log.model.is_some() {
             steps
@@ -189,10 +189,12 @@ impl Evaluation {
                     // The blocks run in parallel with each other: each feeds its cells on its
                     // own thread, one at a time.
                     let mut scratch = evaluator.scratch();
-                    for (run, step) in cells {
-                        evaluator
-                            .push_with(run, step, &log.cell(run, step), &mut scratch)
-                            .map_err(|e| ((run, step), e))?;
+                    for run in 0..runs {
+                        for step in range.clone() {
+                            evaluator
+                                .push_with(run, step, &log.cell(run, step), &mut scratch)
+                                .map_err(|e| ((run, step), e))?;
+                        }
                     }
                     return Ok(evaluator);
                 }

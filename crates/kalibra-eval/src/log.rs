@@ -1,5 +1,9 @@
 //! A filter log held as arrays: `R` runs by `K` steps, each cell optional.
 
+use std::borrow::Cow;
+
+use rayon::prelude::*;
+
 use crate::EvalError;
 use crate::stream::{Cell, Contents, MatrixCell, ModelCell};
 
@@ -7,24 +11,57 @@ use crate::stream::{Cell, Contents, MatrixCell, ModelCell};
 ///
 /// Values are in run-major order: run 0's steps `0..K`, then run 1's, and so on, each cell's
 /// `dim` values together (numpy's C order for an array of shape `(R, K, dim)`).
+///
+/// The values are owned (a `Vec<f64>`) or borrowed (a `&[f64]`, read in place: the Python
+/// package reads numpy's memory this way), hence the lifetime `'a` (`'static` when owned).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Vectors {
+pub struct Vectors<'a> {
     dim: usize,
-    data: CellData,
+    data: CellData<'a>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
-enum CellData {
-    Dense(Vec<f64>),
+enum CellData<'a> {
+    /// Every cell's values; with `nan_unlogged`, a cell whose values are all NaN was not
+    /// logged (decided as each cell is read, so no pass over the values is needed up front).
+    Dense {
+        values: Cow<'a, [f64]>,
+        nan_unlogged: bool,
+    },
     Cells(Vec<Option<Vec<f64>>>),
 }
 
-impl Vectors {
-    /// Every cell present: `R K dim` values.
-    pub fn dense(dim: usize, data: Vec<f64>) -> Self {
+impl<'a> CellData<'a> {
+    fn dense(values: impl Into<Cow<'a, [f64]>>) -> Self {
+        CellData::Dense {
+            values: values.into(),
+            nan_unlogged: false,
+        }
+    }
+}
+
+impl<'a> Vectors<'a> {
+    /// Every cell present: `R K dim` values, owned (`Vec<f64>`) or borrowed (`&[f64]`).
+    pub fn dense(dim: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
         Self {
             dim,
-            data: CellData::Dense(data),
+            data: CellData::Dense {
+                values: data.into(),
+                nan_unlogged: false,
+            },
+        }
+    }
+
+    /// `R K dim` values, where a cell whose values are all NaN was not logged (the rule of
+    /// numpy arrays, `.npz` logs and the Python package); a cell only partly NaN is logged.
+    /// Nothing is scanned here: each cell is looked at as it is read.
+    pub fn nan_unlogged(dim: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
+        Self {
+            dim,
+            data: CellData::Dense {
+                values: data.into(),
+                nan_unlogged: true,
+            },
         }
     }
 
@@ -60,31 +97,45 @@ enum Layout {
 
 /// Matrices per run and step, per step, or one for all, not yet checked against a log (see
 /// [`FilterLog`]). Full matrices are given row by row (numpy's C order), so an array of shape
-/// `(R, K, rows, cols)` passes its buffer as it is.
+/// `(R, K, rows, cols)` passes its buffer as it is, owned or borrowed (as [`Vectors`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Matrices {
+pub struct Matrices<'a> {
     rows: usize,
     cols: usize,
     scope: Scope,
     layout: Layout,
-    data: CellData,
+    data: CellData<'a>,
 }
 
-impl Matrices {
+impl<'a> Matrices<'a> {
     /// One `rows x cols` matrix per run and step, every cell present: `R K rows cols` values.
-    pub fn dense(rows: usize, cols: usize, data: Vec<f64>) -> Self {
-        Self::full(Scope::PerRunStep, rows, cols, CellData::Dense(data))
+    pub fn dense(rows: usize, cols: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
+        Self::full(Scope::PerRunStep, rows, cols, CellData::dense(data))
+    }
+
+    /// One `rows x cols` matrix per run and step, `R K rows cols` values, where a cell whose
+    /// values are all NaN was not logged (as [`Vectors::nan_unlogged`]).
+    pub fn nan_unlogged(rows: usize, cols: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
+        Self::full(
+            Scope::PerRunStep,
+            rows,
+            cols,
+            CellData::Dense {
+                values: data.into(),
+                nan_unlogged: true,
+            },
+        )
     }
 
     /// The diagonals alone of `dim x dim` matrices per run and step (a log that records
     /// variances only): `R K dim` values.
-    pub fn diagonal(dim: usize, data: Vec<f64>) -> Self {
+    pub fn diagonal(dim: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
         Self {
             rows: dim,
             cols: dim,
             scope: Scope::PerRunStep,
             layout: Layout::Diagonal,
-            data: CellData::Dense(data),
+            data: CellData::dense(data),
         }
     }
 
@@ -106,13 +157,13 @@ impl Matrices {
     }
 
     /// One matrix per step, shared by every run: `K rows cols` values.
-    pub fn per_step(rows: usize, cols: usize, data: Vec<f64>) -> Self {
-        Self::full(Scope::PerStep, rows, cols, CellData::Dense(data))
+    pub fn per_step(rows: usize, cols: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
+        Self::full(Scope::PerStep, rows, cols, CellData::dense(data))
     }
 
     /// One matrix for every run and step: `rows cols` values.
-    pub fn constant(rows: usize, cols: usize, data: Vec<f64>) -> Self {
-        Self::full(Scope::Constant, rows, cols, CellData::Dense(data))
+    pub fn constant(rows: usize, cols: usize, data: impl Into<Cow<'a, [f64]>>) -> Self {
+        Self::full(Scope::Constant, rows, cols, CellData::dense(data))
     }
 
     /// How the cells are shared.
@@ -120,7 +171,7 @@ impl Matrices {
         self.scope
     }
 
-    fn full(scope: Scope, rows: usize, cols: usize, data: CellData) -> Self {
+    fn full(scope: Scope, rows: usize, cols: usize, data: CellData<'a>) -> Self {
         Self {
             rows,
             cols,
@@ -131,21 +182,25 @@ impl Matrices {
     }
 }
 
-/// Checked, flat storage of one array: values and a presence flag per cell.
+/// Checked, flat storage of one array: values, owned or borrowed, and which cells are
+/// present.
 #[derive(Clone, Debug, PartialEq)]
-pub(crate) struct Array {
+pub(crate) struct Array<'a> {
     pub(crate) rows: usize,
     pub(crate) cols: usize,
     scope: Scope,
     layout: Layout,
     /// Values per cell (`rows cols` for full matrices and vectors, `rows` for diagonals).
     width: usize,
-    data: Vec<f64>,
-    present: Vec<bool>,
+    data: Cow<'a, [f64]>,
+    /// A flag per cell; `None` when every cell is present, or decided by `nan_unlogged`.
+    present: Option<Vec<bool>>,
+    /// A cell whose values are all NaN is absent.
+    nan_unlogged: bool,
     steps: usize,
 }
 
-impl Array {
+impl<'a> Array<'a> {
     fn check(
         array: &'static str,
         (runs, steps): (usize, usize),
@@ -153,7 +208,7 @@ impl Array {
         cols: usize,
         scope: Scope,
         layout: Layout,
-        data: CellData,
+        data: CellData<'a>,
     ) -> Result<Self, EvalError> {
         if rows == 0 || cols == 0 {
             return Err(EvalError::Empty {
@@ -169,17 +224,20 @@ impl Array {
             Layout::Full => rows * cols,
             Layout::Diagonal => rows,
         };
-        let (data, present) = match data {
-            CellData::Dense(data) => {
-                if data.len() != cells * width {
+        let (data, present, nan_unlogged) = match data {
+            CellData::Dense {
+                values,
+                nan_unlogged,
+            } => {
+                if values.len() != cells * width {
                     return Err(EvalError::Shape {
                         array,
                         unit: "values",
                         expected: cells * width,
-                        found: data.len(),
+                        found: values.len(),
                     });
                 }
-                (data, vec![true; cells])
+                (values, None, nan_unlogged)
             }
             CellData::Cells(list) => {
                 if list.len() != cells {
@@ -208,7 +266,7 @@ impl Array {
                         present[i] = true;
                     }
                 }
-                (data, present)
+                (Cow::Owned(data), Some(present), false)
             }
         };
         Ok(Self {
@@ -219,10 +277,12 @@ impl Array {
             width,
             data,
             present,
+            nan_unlogged,
             steps,
         })
     }
 
+    #[inline]
     fn index(&self, run: usize, step: usize) -> usize {
         match self.scope {
             Scope::Constant => 0,
@@ -231,12 +291,27 @@ impl Array {
         }
     }
 
+    #[inline]
     fn slice(&self, run: usize, step: usize) -> Option<&[f64]> {
-        let i = self.index(run, step);
-        self.present[i].then(|| &self.data[i * self.width..(i + 1) * self.width])
+        self.cell_at(self.index(run, step))
+    }
+
+    /// The values of cell `i` (in storage order), if present.
+    #[inline]
+    fn cell_at(&self, i: usize) -> Option<&[f64]> {
+        if self.present.as_ref().is_some_and(|p| !p[i]) {
+            return None;
+        }
+        let values = &self.data[i * self.width..(i + 1) * self.width];
+        // The first value decides for almost every cell: a logged one is rarely NaN there.
+        if self.nan_unlogged && values[0].is_nan() && values.iter().all(|v| v.is_nan()) {
+            return None;
+        }
+        Some(values)
     }
 
     /// The cell at (run, step) as a matrix cell, if logged.
+    #[inline]
     fn matrix_cell(&self, run: usize, step: usize) -> Option<MatrixCell<'_>> {
         self.slice(run, step).map(|v| match self.layout {
             Layout::Full => MatrixCell::Full(v),
@@ -244,15 +319,18 @@ impl Array {
         })
     }
 
-    /// The first present cell holding a non-finite value, as (run, step).
+    /// The first present cell holding a non-finite value, as (run, step). A large array is
+    /// scanned on every core (the first in storage order is found whatever the threads).
     fn first_non_finite(&self) -> Option<(usize, usize)> {
-        (0..self.present.len())
-            .find(|&i| {
-                self.present[i]
-                    && self.data[i * self.width..(i + 1) * self.width]
-                        .iter()
-                        .any(|v| !v.is_finite())
-            })
+        let cells = self.data.len() / self.width;
+        let bad = |i: usize| {
+            self.cell_at(i)
+                .is_some_and(|v| !v.iter().all(|x| x.is_finite()))
+        };
+        (0..cells)
+            .into_par_iter()
+            .with_min_len(1 << 14)
+            .position_first(bad)
             .map(|i| position(self.scope, self.steps, i))
     }
 
@@ -299,11 +377,11 @@ pub(crate) fn check_times(times: &[f64], steps: usize) -> Result<(), EvalError> 
 /// the prediction from step `k - 1` to step `k`, `H[k]` and `R[k]` those of the update at step
 /// `k` (so `F[0]` and `Q[0]` are never used).
 #[derive(Clone, Debug, PartialEq)]
-pub(crate) struct Model {
-    pub(crate) f: Array,
-    pub(crate) h: Array,
-    pub(crate) q: Array,
-    pub(crate) r: Array,
+pub(crate) struct Model<'a> {
+    pub(crate) f: Array<'a>,
+    pub(crate) h: Array<'a>,
+    pub(crate) q: Array<'a>,
+    pub(crate) r: Array<'a>,
 }
 
 /// A filter's log as arrays: `R` runs of `K` steps, and per run and step an optional truth and
@@ -332,20 +410,24 @@ pub(crate) struct Model {
 /// assert!(FilterLog::new(1, 2)?.with_truth(Vectors::dense(2, vec![0.0; 3])).is_err());
 /// # Ok::<(), kalibra_eval::EvalError>(())
 /// ```
+///
+/// The arrays' values are owned or borrowed ([`Vectors::dense`] takes a `Vec<f64>` or a
+/// `&[f64]`): a log of borrowed arrays, `FilterLog<'a>`, reads them in place; one of owned
+/// arrays is a `FilterLog<'static>`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct FilterLog {
+pub struct FilterLog<'a> {
     runs: usize,
     steps: usize,
     pub(crate) times: Option<Vec<f64>>,
-    pub(crate) truth: Option<Array>,
-    pub(crate) estimate: Option<Array>,
-    pub(crate) covariance: Option<Array>,
-    pub(crate) innovation: Option<Array>,
-    pub(crate) innovation_cov: Option<Array>,
-    pub(crate) model: Option<Model>,
+    pub(crate) truth: Option<Array<'a>>,
+    pub(crate) estimate: Option<Array<'a>>,
+    pub(crate) covariance: Option<Array<'a>>,
+    pub(crate) innovation: Option<Array<'a>>,
+    pub(crate) innovation_cov: Option<Array<'a>>,
+    pub(crate) model: Option<Model<'a>>,
 }
 
-impl FilterLog {
+impl<'a> FilterLog<'a> {
     /// An empty log of `runs` runs and `steps` steps.
     ///
     /// # Errors
@@ -407,7 +489,7 @@ impl FilterLog {
 
     /// Which arrays the log holds, as an [`crate::Evaluator`] is told them.
     pub fn contents(&self) -> Contents {
-        let dim = |a: &Option<Array>| a.as_ref().map(|a| a.rows);
+        let dim = |a: &Option<Array<'_>>| a.as_ref().map(|a| a.rows);
         Contents {
             truth: dim(&self.truth),
             estimate: dim(&self.estimate),
@@ -423,10 +505,12 @@ impl FilterLog {
         if run >= self.runs || step >= self.steps {
             return Cell::default();
         }
-        fn vector(a: &Option<Array>, run: usize, step: usize) -> Option<&[f64]> {
+        #[inline(always)]
+        fn vector<'s>(a: &'s Option<Array<'_>>, run: usize, step: usize) -> Option<&'s [f64]> {
             a.as_ref().and_then(|a| a.slice(run, step))
         }
-        fn matrix(a: &Option<Array>, run: usize, step: usize) -> Option<MatrixCell<'_>> {
+        #[inline(always)]
+        fn matrix<'s>(a: &'s Option<Array<'_>>, run: usize, step: usize) -> Option<MatrixCell<'s>> {
             a.as_ref().and_then(|a| a.matrix_cell(run, step))
         }
         let model = self.model.as_ref().and_then(|m| {
@@ -447,7 +531,7 @@ impl FilterLog {
         }
     }
 
-    fn vectors(&self, array: &'static str, v: Vectors) -> Result<Array, EvalError> {
+    fn vectors(&self, array: &'static str, v: Vectors<'a>) -> Result<Array<'a>, EvalError> {
         Array::check(
             array,
             (self.runs, self.steps),
@@ -459,7 +543,7 @@ impl FilterLog {
         )
     }
 
-    fn matrices(&self, array: &'static str, m: Matrices) -> Result<Array, EvalError> {
+    fn matrices(&self, array: &'static str, m: Matrices<'a>) -> Result<Array<'a>, EvalError> {
         Array::check(
             array,
             (self.runs, self.steps),
@@ -488,7 +572,7 @@ impl FilterLog {
         }
     }
 
-    fn square(array: &'static str, a: &Array) -> Result<(), EvalError> {
+    fn square(array: &'static str, a: &Array<'_>) -> Result<(), EvalError> {
         Self::same(array, "columns (a square matrix)", Some(a.rows), a.cols)
     }
 
@@ -508,7 +592,7 @@ impl FilterLog {
     /// # Errors
     /// [`EvalError::Shape`], [`EvalError::CellLength`], [`EvalError::Mismatch`] (a state
     /// dimension other than the log's), [`EvalError::NonFinite`].
-    pub fn with_truth(mut self, truth: Vectors) -> Result<Self, EvalError> {
+    pub fn with_truth(mut self, truth: Vectors<'a>) -> Result<Self, EvalError> {
         let a = self.vectors("truth", truth)?.require_finite("truth")?;
         Self::same("truth", "state dimension", self.state_dim(), a.rows)?;
         self.truth = Some(a);
@@ -519,7 +603,7 @@ impl FilterLog {
     ///
     /// # Errors
     /// [`EvalError::Shape`], [`EvalError::CellLength`], [`EvalError::Mismatch`].
-    pub fn with_estimate(mut self, estimate: Vectors) -> Result<Self, EvalError> {
+    pub fn with_estimate(mut self, estimate: Vectors<'a>) -> Result<Self, EvalError> {
         let a = self.vectors("estimate", estimate)?;
         Self::same("estimate", "state dimension", self.state_dim(), a.rows)?;
         self.estimate = Some(a);
@@ -531,7 +615,7 @@ impl FilterLog {
     /// # Errors
     /// [`EvalError::Shape`], [`EvalError::CellLength`], [`EvalError::Mismatch`] (not square,
     /// or a state dimension other than the log's).
-    pub fn with_covariance(mut self, covariance: Matrices) -> Result<Self, EvalError> {
+    pub fn with_covariance(mut self, covariance: Matrices<'a>) -> Result<Self, EvalError> {
         let a = self.matrices("covariance", covariance)?;
         Self::square("covariance", &a)?;
         Self::same("covariance", "state dimension", self.state_dim(), a.rows)?;
@@ -543,7 +627,7 @@ impl FilterLog {
     ///
     /// # Errors
     /// [`EvalError::Shape`], [`EvalError::CellLength`], [`EvalError::Mismatch`].
-    pub fn with_innovation(mut self, innovation: Vectors) -> Result<Self, EvalError> {
+    pub fn with_innovation(mut self, innovation: Vectors<'a>) -> Result<Self, EvalError> {
         let a = self.vectors("innovation", innovation)?;
         Self::same(
             "innovation",
@@ -559,7 +643,7 @@ impl FilterLog {
     ///
     /// # Errors
     /// [`EvalError::Shape`], [`EvalError::CellLength`], [`EvalError::Mismatch`].
-    pub fn with_innovation_cov(mut self, s: Matrices) -> Result<Self, EvalError> {
+    pub fn with_innovation_cov(mut self, s: Matrices<'a>) -> Result<Self, EvalError> {
         let a = self.matrices("innovation_cov", s)?;
         Self::square("innovation_cov", &a)?;
         Self::same(
@@ -582,10 +666,10 @@ impl FilterLog {
     /// [`EvalError::Mismatch`] for sizes that disagree with each other or with the log.
     pub fn with_model(
         mut self,
-        f: Matrices,
-        h: Matrices,
-        q: Matrices,
-        r: Matrices,
+        f: Matrices<'a>,
+        h: Matrices<'a>,
+        q: Matrices<'a>,
+        r: Matrices<'a>,
     ) -> Result<Self, EvalError> {
         let f = self.matrices("F", f)?.require_finite("F")?;
         let h = self.matrices("H", h)?.require_finite("H")?;

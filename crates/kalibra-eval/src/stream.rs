@@ -533,6 +533,7 @@ impl Factor {
 
     /// The NEES of error `v` under covariance `cell`: [`Factor::nees`] after
     /// [`Factor::load`], at a fixed size for the common dimensions (1 to 6).
+    #[inline]
     fn nees_of(
         &mut self,
         cell: MatrixCell<'_>,
@@ -554,6 +555,7 @@ impl Factor {
 
     /// The NIS of innovation `v` under `S = cell`, and `w = L^-1 v` left in `self.w`:
     /// [`Factor::nis`] after [`Factor::load`], at a fixed size for dimensions 1 to 6.
+    #[inline]
     fn nis_of(
         &mut self,
         cell: MatrixCell<'_>,
@@ -623,15 +625,18 @@ mod fixed {
     use super::MatrixCell;
 
     /// The cell's matrix (its length checked by `square`).
+    #[inline(always)]
     fn load<const N: usize>(cell: MatrixCell<'_>) -> SMatrix<f64, N, N> {
         match cell {
-            MatrixCell::Full(v) => SMatrix::from_fn(|i, j| v[i * N + j]),
+            // One bounds check for the cell rather than one per entry.
+            MatrixCell::Full(v) => SMatrix::from_row_slice(&v[..N * N]),
             MatrixCell::Diagonal(v) => SMatrix::from_fn(|i, j| if i == j { v[i] } else { 0.0 }),
         }
     }
 
     /// `w = L^-1 v` for the lower Cholesky factor `L` of `m`, or `None` if `m` is not
     /// positive definite; with `|w|^2`.
+    #[inline(always)]
     fn solve<const N: usize>(
         m: SMatrix<f64, N, N>,
         v: &[f64],
@@ -646,6 +651,7 @@ mod fixed {
     }
 
     /// [`super::Factor::nees`] at size `N`.
+    #[inline]
     pub(super) fn nees<const N: usize>(
         cell: MatrixCell<'_>,
         v: &[f64],
@@ -663,6 +669,7 @@ mod fixed {
     }
 
     /// [`super::Factor::nis`] at size `N`: the NIS and the normalised innovation `w`.
+    #[inline]
     pub(super) fn nis<const N: usize>(
         cell: MatrixCell<'_>,
         v: &[f64],
@@ -1291,6 +1298,7 @@ struct PerRun {
 }
 
 impl PerRun {
+    #[inline(always)]
     fn add(&mut self, run: usize, step: usize, value: f64) {
         if run >= self.blocks.len() {
             self.blocks.resize_with(run + 1, Vec::new);

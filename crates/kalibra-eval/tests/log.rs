@@ -162,3 +162,78 @@ fn bad_covariances_are_counted_named_and_left_out() {
     // Exactly 1 in every run: no spread, so the chi-square fallback decides.
     assert_eq!(r.summary.verdict.kind, VerdictKind::Consistent);
 }
+
+/// Arrays read in place with the NaN rule (`nan_unlogged`, borrowed) give the report of the
+/// same cells given one by one with `None` where every value is NaN; a truth partly NaN is
+/// the same error, at the first such cell run after run.
+#[test]
+fn borrowed_arrays_with_nan_cells_equal_the_cells_given_one_by_one() {
+    let (runs, steps, n, m) = (3, 40, 2, 1);
+    let cells = runs * steps;
+    let value = |i: usize, j: usize| ((i * 7 + j * 3) % 11) as f64 / 5.0 - 1.0;
+    let truth: Vec<f64> = (0..cells * n).map(|i| value(i, 1)).collect();
+    let mut estimate: Vec<f64> = (0..cells * n).map(|i| value(i, 2)).collect();
+    let mut covariance = Vec::new();
+    for i in 0..cells {
+        covariance.extend([1.0 + value(i, 3).abs(), 0.1, 0.1, 2.0]);
+    }
+    let mut innovation: Vec<f64> = (0..cells * m).map(|i| value(i, 4)).collect();
+    let mut s = vec![1.5; cells * m * m];
+    // Unlogged cells (all NaN), and cells only partly NaN (kept: a finding).
+    estimate[2 * 5..2 * 5 + 2].fill(f64::NAN);
+    covariance[4 * 9..4 * 9 + 4].fill(f64::NAN);
+    covariance[4 * 17] = f64::NAN;
+    innovation[33] = f64::NAN;
+    s[50] = f64::NAN;
+    estimate[2 * 61] = f64::NAN;
+    let split = |v: &[f64], w: usize| -> Vec<Option<Vec<f64>>> {
+        v.chunks(w)
+            .map(|c| (!c.iter().all(|x| x.is_nan())).then(|| c.to_vec()))
+            .collect()
+    };
+    let borrowed = FilterLog::new(runs, steps)
+        .and_then(|l| l.with_truth(Vectors::nan_unlogged(n, &truth[..])))
+        .and_then(|l| l.with_estimate(Vectors::nan_unlogged(n, &estimate[..])))
+        .and_then(|l| l.with_covariance(Matrices::nan_unlogged(n, n, &covariance[..])))
+        .and_then(|l| l.with_innovation(Vectors::nan_unlogged(m, &innovation[..])))
+        .and_then(|l| l.with_innovation_cov(Matrices::nan_unlogged(m, m, &s[..])))
+        .unwrap();
+    let given = FilterLog::new(runs, steps)
+        .and_then(|l| l.with_truth(Vectors::cells(n, split(&truth, n))))
+        .and_then(|l| l.with_estimate(Vectors::cells(n, split(&estimate, n))))
+        .and_then(|l| l.with_covariance(Matrices::cells(n, n, split(&covariance, n * n))))
+        .and_then(|l| l.with_innovation(Vectors::cells(m, split(&innovation, m))))
+        .and_then(|l| l.with_innovation_cov(Matrices::cells(m, m, split(&s, m * m))))
+        .unwrap();
+    for run in 0..runs {
+        for step in 0..steps {
+            // As text: a NaN is not equal to itself.
+            let (a, b) = (borrowed.cell(run, step), given.cell(run, step));
+            assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        }
+    }
+    assert!(borrowed.cell(0, 5).estimate.is_none());
+    assert!(borrowed.cell(0, 17).covariance.is_some());
+    let evaluation = Evaluation::new().lags(3).unwrap();
+    let (a, b) = (
+        evaluation.evaluate(&borrowed).unwrap(),
+        evaluation.evaluate(&given).unwrap(),
+    );
+    assert_eq!(a, b);
+    // Cell 17's covariance and cell 61's estimate, partly NaN; cells 5 and 9 were not logged.
+    assert_eq!(a.findings.state.cells, 2);
+    assert_eq!((a.nees_runs_per_step[5], a.nees_runs_per_step[9]), (2, 2));
+    // A truth partly NaN is an error, a truth all NaN at a cell is not logged.
+    let mut bad = truth.clone();
+    bad[2 * 70..2 * 70 + 2].fill(f64::NAN);
+    bad[2 * 90] = f64::NAN;
+    bad[2 * 100 + 1] = f64::INFINITY;
+    assert_eq!(
+        FilterLog::new(runs, steps).and_then(|l| l.with_truth(Vectors::nan_unlogged(n, &bad[..]))),
+        Err(EvalError::NonFinite {
+            array: "truth",
+            run: 2,
+            step: 10
+        })
+    );
+}

@@ -66,7 +66,7 @@ fn arrays(seed: u64, runs: usize, steps: usize) -> Arrays {
 }
 
 impl Arrays {
-    fn log(&self) -> FilterLog {
+    fn log(&self) -> FilterLog<'static> {
         let innovation = (0..self.runs * self.steps)
             .map(|i| (!self.gap[i]).then(|| vec![self.innovation[i]]))
             .collect();

@@ -139,6 +139,7 @@ impl StepMean {
     /// [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or infinite value, which
     /// would poison every later mean at the step, and for a value that would take the step's
     /// sum beyond f64's range (the mean stays finite). Nothing is stored on error.
+    #[inline]
     pub fn push(&mut self, step: usize, value: f64) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         let sum = self.sum[step] + value;
@@ -307,6 +308,7 @@ impl SquaredErrors {
     /// for a wrong length, [`MetricsError::NonFiniteSample`] (index: the step) for a NaN or
     /// infinite component, or one whose square would take the step's sum beyond f64's range
     /// (the MSE stays finite). Nothing is stored on error.
+    #[inline]
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         if error.len() != self.dim {

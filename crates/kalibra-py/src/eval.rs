@@ -8,7 +8,7 @@ use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::arrays::read_opt;
+use crate::arrays::{read_in_place, read_opt};
 use crate::error;
 
 /// The consistency report of a filter log: what `kalibra eval` writes as `report.json`, with
@@ -136,6 +136,12 @@ impl Report {
 /// * F (n, n), H (m, n), Q (n, n), R (m, m), optional and all four together (for J1/J2): one
 ///   matrix for all steps, one per step (K, ...) or one per run and step (R, K, ...).
 ///
+/// C-contiguous float64 arrays are read in place, without a copy, with the GIL released (as
+/// numpy's own functions do); each such array is set non-writeable for the duration of the
+/// call and its flag restored after. Do not change them from another thread during the call
+/// (through another view, say): the result would be undefined. Other dtypes and layouts are
+/// copied first.
+///
 /// A cell (one run and step) whose values are all NaN was not logged. Truth, estimate and
 /// covariance give NEES/ANEES, NCI, RMSE and sliding windows; innovation and innovation_cov
 /// give NIS/ANIS and whiteness. A covariance that is NaN, asymmetric or not positive definite
@@ -200,19 +206,39 @@ fn evaluate(
         ("Q", Q),
         ("R", R),
     ];
-    let mut arrays = Vec::new();
+    let evaluation = evaluation(confidence, window, groups, lags)?;
+    let per_cell = [
+        "truth",
+        "estimate",
+        "covariance",
+        "innovation",
+        "innovation_cov",
+    ];
+    // The per-cell arrays (all but 240 MB of a 1000 x 1000 log) are read in place without the
+    // GIL, the small ones copied; the guards set the arrays writeable again as they drop,
+    // after the evaluation.
+    let mut held = Vec::new();
     for (array, obj) in given {
-        if let Some(a) = read_opt(obj, array)? {
-            arrays.push((array.to_string(), a.shape, a.data));
+        let Some(obj) = obj.filter(|o| !o.is_none()) else {
+            continue;
+        };
+        if per_cell.contains(&array) {
+            held.push((array, read_in_place(obj, array)?));
+        } else if let Some(a) = read_opt(Some(obj), array)? {
+            held.push((array, crate::arrays::InPlace::Copied(a)));
         }
     }
-    let evaluation = evaluation(confidence, window, groups, lags)?;
+    let arrays: Vec<(String, Vec<usize>, &[f64])> = held
+        .iter()
+        .map(|(array, a)| (array.to_string(), a.shape(), a.data()))
+        .collect();
     let report = py
         .detach(|| {
             let log = kalibra_cli::input::log_from_arrays(arrays)?;
             evaluation.evaluate(&log).map_err(|e| e.to_string())
         })
         .map_err(error)?;
+    drop(held);
     Ok(Report::new(report, name))
 }
 

@@ -147,3 +147,26 @@ def test_save_replaces_an_earlier_report_and_refuses_other_directories(tmp_path)
     with pytest.raises(OSError, match="holds no earlier report"):
         report.save(other)
     assert (other / "notes.txt").read_text() == "mine"
+
+
+def test_arrays_read_in_place_keep_their_writeable_flag(kf_arrays):
+    # A C-contiguous float64 array is read in place with the GIL released and set read-only
+    # for the call only; a read-only one stays read-only, an array passed twice is restored
+    # once, and a copied layout (Fortran order, float32) gives the same report.
+    a = {k: kf_arrays[k].copy() for k in ("truth", "estimate", "covariance")}
+    frozen = a["covariance"].copy()
+    frozen.flags.writeable = False
+    expected = kalibra.evaluate(**a).to_json()
+    assert all(v.flags.writeable for v in a.values())
+    assert kalibra.evaluate(truth=a["truth"], estimate=a["estimate"], covariance=frozen).to_json() == expected
+    assert not frozen.flags.writeable
+    kalibra.evaluate(truth=a["truth"], estimate=a["truth"], covariance=a["covariance"])
+    assert a["truth"].flags.writeable
+    a["truth"][0, 0, 0] += 0.0  # writeable again
+    fortran = np.asfortranarray(a["covariance"])
+    assert kalibra.evaluate(truth=a["truth"], estimate=a["estimate"], covariance=fortran).to_json() == expected
+    assert fortran.flags.writeable
+    # An error raised after the arrays were taken leaves them writeable too.
+    with pytest.raises(kalibra.KalibraError):
+        kalibra.evaluate(truth=a["truth"], estimate=a["estimate"][:, :-1], covariance=a["covariance"])
+    assert a["truth"].flags.writeable and a["estimate"].flags.writeable
