@@ -9,6 +9,8 @@ use kalibra_filters::{Ekf, Filter, FilterError};
 use kalibra_linalg::{Matrix1, Matrix3, SMatrix, U1, U3, Vector1, Vector3};
 use kalibra_models::{AccelAxis, Measurement, Target3dParams};
 
+mod lane_data;
+
 /// The bearing of the point `(x0 + 3, x1 + 1)` seen from the origin, with its residual
 /// wrapped into (-pi, pi] as angle models do: the lanes cross the +-pi cut.
 #[derive(Clone, Copy, Debug)]
@@ -39,29 +41,13 @@ fn axis() -> AccelAxis {
     AccelAxis::new(Target3dParams::default(), 1).unwrap()
 }
 
-/// Lane `lane`'s measurement and truth at step `k`: deterministic, different per lane, with
-/// bearings near +-pi for the odd lanes.
+/// Lane `lane`'s measurement and truth at step `k` (`lane_data`).
 fn data(k: usize, lane: usize) -> (Vector1<f64>, Vector3<f64>) {
-    let t = k as f64 * 0.05;
-    let l = lane as f64;
-    let (side, up) = if lane % 2 == 1 {
-        (-6.0, -1.0)
-    } else {
-        (0.0, 0.0)
-    };
-    let x = Vector3::new(
-        side + (t + l).sin(),
-        up + 0.3 * (1.7 * t - l).cos(),
-        0.5 * (0.9 * t * (l + 1.0)).sin(),
-    );
-    let mut z = Bearing.measure(k, &x);
-    z[0] += 0.05 * (3.1 * t + l).sin();
-    if z[0] > PI {
-        z[0] -= 2.0 * PI;
-    } else if z[0] <= -PI {
-        z[0] += 2.0 * PI;
-    }
-    (z, x)
+    let x = lane_data::truth(k, lane);
+    (
+        lane_data::measured(k, lane, Bearing.measure(k, &x), 0.05),
+        x,
+    )
 }
 
 fn lanes_at(k: usize) -> ([Lanes; 1], [Lanes; 3]) {
@@ -81,23 +67,11 @@ fn rel(a: f64, b: f64, scale: f64) -> f64 {
     (a - b).abs() / a.abs().max(b.abs()).max(scale)
 }
 
-fn prior(lane: usize) -> (Vector3<f64>, Matrix3<f64>) {
-    let (side, up) = if lane % 2 == 1 {
-        (-6.0, -1.0)
-    } else {
-        (0.0, 0.0)
-    };
-    (
-        Vector3::new(side, up, 0.0),
-        Matrix3::from_diagonal(&Vector3::new(1.0, 0.5, 0.25)),
-    )
-}
-
 fn batch(isa: Isa) -> EkfBatch<3, 1, PerLane<AccelAxis>, PerLane<Bearing>> {
-    let (m0, p0) = prior(0);
+    let (m0, p0) = lane_data::prior(0);
     let mut b = EkfBatch::new(isa, PerLane(axis()), PerLane(Bearing), m0, p0).unwrap();
     for lane in 0..BATCH {
-        let (m, p) = prior(lane);
+        let (m, p) = lane_data::prior(lane);
         b.set_lane(lane, m, p).unwrap();
     }
     b
@@ -111,7 +85,7 @@ fn every_lane_agrees_with_the_scalar_ekf_on_every_instruction_set() {
         assert_eq!(batch.isa(), isa);
         let mut scalar: Vec<_> = (0..BATCH)
             .map(|lane| {
-                let (m, p) = prior(lane);
+                let (m, p) = lane_data::prior(lane);
                 Ekf::new(dynamics, Bearing, m, p).unwrap()
             })
             .collect();
@@ -193,7 +167,7 @@ fn a_nan_measurement_fails_only_its_lane_and_keeps_its_prediction() {
     for isa in Isa::available() {
         let mut clean = batch(isa);
         let mut dirty = batch(isa);
-        let (m, p) = prior(3);
+        let (m, p) = lane_data::prior(3);
         let mut ekf3 = Ekf::new(dynamics, Bearing, m, p).unwrap();
         for k in 1..=12 {
             let (z, x) = lanes_at(k);
@@ -248,7 +222,7 @@ impl kalibra_models::Dynamics<U3> for Squaring {
 #[test]
 fn a_model_that_overflows_in_one_lane_fails_that_lane_only() {
     for isa in Isa::available() {
-        let (m0, p0) = prior(0);
+        let (m0, p0) = lane_data::prior(0);
         let mut b = EkfBatch::new(isa, PerLane(Squaring), PerLane(Bearing), m0, p0).unwrap();
         b.set_lane(6, Vector3::new(1e200, 0.0, 0.0), p0).unwrap();
         let (z, x) = lanes_at(1);
@@ -265,7 +239,7 @@ fn a_model_that_overflows_in_one_lane_fails_that_lane_only() {
 
 #[test]
 fn bad_initial_estimates_are_errors_and_leave_the_lane_unchanged() {
-    let (m0, p0) = prior(0);
+    let (m0, p0) = lane_data::prior(0);
     let mut nan = m0;
     nan[1] = f64::NAN;
     assert!(matches!(

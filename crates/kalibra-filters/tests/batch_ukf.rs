@@ -16,6 +16,8 @@ use kalibra_filters::{
 use kalibra_linalg::{Matrix4, U4, Vector1, Vector2, Vector4};
 use kalibra_models::{Bearing, BearingReference, LinearGaussian, Measurement, Tabulated};
 
+mod lane_data;
+
 type Sensor = Bearing<U4, Tabulated<2>>;
 
 /// State `[x, vx, y, vy]`, unit time step.
@@ -478,7 +480,7 @@ fn bad_sets_are_errors() {
 /// default (unscented) prediction; and it is not the linearised one.
 #[test]
 fn the_unscented_prediction_agrees_with_the_scalar_ukf_on_every_instruction_set() {
-    use kalibra_linalg::{Matrix3, U3, Vector3};
+    use kalibra_linalg::{U3, Vector3};
     use kalibra_models::{AccelAxis, Stationary, Target3dParams};
 
     let axis = AccelAxis::new(Target3dParams::default(), 1).unwrap();
@@ -495,38 +497,10 @@ fn the_unscented_prediction_agrees_with_the_scalar_ukf_on_every_instruction_set(
     // near it, where the bearing's rounding is amplified without bound: the lane-wise
     // arithmetic, within 2 ulp of glibc's, then drifts from the scalar.)
     let data = |k: usize, lane: usize| {
-        let t = k as f64 * 0.05;
-        let l = lane as f64;
-        let (side, up) = if lane % 2 == 1 {
-            (-6.0, -1.0)
-        } else {
-            (0.0, 0.0)
-        };
-        let x = Vector3::new(
-            side + (t + l).sin(),
-            up + 0.3 * (1.7 * t - l).cos(),
-            0.5 * (0.9 * t * (l + 1.0)).sin(),
-        );
-        let mut z = sensor.measure(k, &x);
-        z[0] += 0.01 * (3.1 * t + l).sin();
-        if z[0] > PI {
-            z[0] -= 2.0 * PI;
-        } else if z[0] <= -PI {
-            z[0] += 2.0 * PI;
-        }
-        (z, x)
+        let x = lane_data::truth(k, lane);
+        (lane_data::measured(k, lane, sensor.measure(k, &x), 0.01), x)
     };
-    let prior = |lane: usize| {
-        let (side, up) = if lane % 2 == 1 {
-            (-6.0, -1.0)
-        } else {
-            (0.0, 0.0)
-        };
-        (
-            Vector3::new(side, up, 0.0),
-            Matrix3::from_diagonal(&Vector3::new(1.0, 0.5, 0.25)),
-        )
-    };
+    let prior = lane_data::prior;
     let set = SigmaSet::Symmetric { kappa: 0.5 };
     let grid = KappaGrid::equidistant(0.0, 57.0, 10).unwrap();
     type Scalar = Ukf<U3, kalibra_linalg::U1, AccelAxis, Bearing<U3, Stationary<2>>>;

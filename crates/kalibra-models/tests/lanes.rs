@@ -54,6 +54,42 @@ macro_rules! each_isa {
     }};
 }
 
+/// The largest distance in ulp between a lane-wise function and glibc's over `points`, taken
+/// `BATCH` at a time: `ours` maps a batch of arguments to one or more batches of results,
+/// `glibc` one argument to the same results. Beyond `limit` (or at NaN) the lane-wise
+/// function hands the lane to libm, so it must be glibc's own there. `Some(failure)` when
+/// the distance exceeds `bound` or a lane beyond the limit is not libm's.
+fn against_glibc(
+    isa: &str,
+    points: &[f64],
+    limit: f64,
+    bound: u64,
+    ours: impl Fn(&[f64; 8]) -> Vec<[f64; 8]>,
+    glibc: impl Fn(f64) -> Vec<f64>,
+) -> Option<String> {
+    let mut worst = (0u64, 0.0);
+    for chunk in points.chunks(8) {
+        let mut x = [0.0; 8];
+        x[..chunk.len()].copy_from_slice(chunk);
+        let out = ours(&x);
+        for (l, v) in chunk.iter().enumerate() {
+            let d = glibc(*v)
+                .iter()
+                .zip(&out)
+                .map(|(r, o)| ulps(o[l], *r))
+                .max()
+                .unwrap_or(0);
+            if (v.abs() > limit || v.is_nan()) && d != 0 {
+                return Some(format!("{isa}: libm's own beyond the limit, not at {v:e}"));
+            }
+            if d > worst.0 {
+                worst = (d, *v);
+            }
+        }
+    }
+    (worst.0 > bound).then(|| format!("{isa}: {} ulp at {:e}", worst.0, worst.1))
+}
+
 /// `atan2` of 8 lanes on one instruction set.
 struct Atan2<'a> {
     y: &'a [f64; 8],
@@ -510,29 +546,14 @@ mod trig {
     }
 
     fn check<S: Simd>(simd: S, isa: &str, points: &[f64]) -> Option<String> {
-        let mut worst = (0u64, 0.0);
-        for chunk in points.chunks(BATCH) {
-            let mut x = [0.0; BATCH];
-            x[..chunk.len()].copy_from_slice(chunk);
+        let ours = |x: &Lanes| {
             let mut out = ([0.0; BATCH], [0.0; BATCH]);
-            Simd::vectorize(
-                simd,
-                SinCos {
-                    x: &x,
-                    out: &mut out,
-                },
-            );
-            for (l, v) in chunk.iter().enumerate() {
-                let d = ulps(out.0[l], v.sin()).max(ulps(out.1[l], v.cos()));
-                if v.abs() > SIN_COS_LIMIT && d != 0 {
-                    return Some(format!("{isa}: libm's own beyond the limit, not at {v:e}"));
-                }
-                if d > worst.0 {
-                    worst = (d, *v);
-                }
-            }
-        }
-        (worst.0 > 2).then(|| format!("{isa}: {} ulp at {:e}", worst.0, worst.1))
+            Simd::vectorize(simd, SinCos { x, out: &mut out });
+            vec![out.0, out.1]
+        };
+        against_glibc(isa, points, SIN_COS_LIMIT, 2, ours, |v| {
+            vec![v.sin(), v.cos()]
+        })
     }
 
     #[test]
@@ -680,29 +701,12 @@ mod exp {
     }
 
     fn check<S: Simd>(simd: S, isa: &str, points: &[f64]) -> Option<String> {
-        let mut worst = (0u64, 0.0);
-        for chunk in points.chunks(BATCH) {
-            let mut x = [0.0; BATCH];
-            x[..chunk.len()].copy_from_slice(chunk);
+        let ours = |x: &Lanes| {
             let mut out = [0.0; BATCH];
-            Simd::vectorize(
-                simd,
-                Exp {
-                    x: &x,
-                    out: &mut out,
-                },
-            );
-            for (l, v) in chunk.iter().enumerate() {
-                let d = ulps(out[l], v.exp());
-                if (v.abs() > EXP_LIMIT || v.is_nan()) && d != 0 {
-                    return Some(format!("{isa}: libm's own beyond the limit, not at {v:e}"));
-                }
-                if d > worst.0 {
-                    worst = (d, *v);
-                }
-            }
-        }
-        (worst.0 > 1).then(|| format!("{isa}: {} ulp at {:e}", worst.0, worst.1))
+            Simd::vectorize(simd, Exp { x, out: &mut out });
+            vec![out]
+        };
+        against_glibc(isa, points, EXP_LIMIT, 1, ours, |v| vec![v.exp()])
     }
 
     #[test]
