@@ -18,7 +18,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use kalibra_filters::batch::{
-    BATCH, EkfBatch, Isa, LaneDynamics, LaneMeasurement, LaneSigmaMeasurement, PerLane, UkfBatch,
+    BATCH, BatchStep, EkfBatch, Isa, LaneDynamics, LaneMeasurement, LaneSigmaMeasurement, Lanes,
+    PerLane, UkfBatch,
 };
 use kalibra_filters::{Ekf, Filter, SigmaSet, Ukf, UkfPrediction};
 use kalibra_linalg::{U1, U2};
@@ -360,39 +361,15 @@ fn batched_ekf<D: LaneDynamics<2> + Clone, H: LaneMeasurement<2, 1> + Clone>(
     steps: usize,
     isa: Isa,
 ) -> Result<Vec<f64>> {
-    let mut sums = vec![0.0; steps];
-    for group in runs.chunks(BATCH) {
-        let first = &group[0];
-        let mut ekf = EkfBatch::new(
+    per_step_nees(runs, steps, |first| {
+        Ok(EkfBatch::new(
             isa,
             dynamics.clone(),
             measurement.clone(),
             first.init_mean,
             first.init_cov,
-        )?;
-        for (lane, run) in group.iter().enumerate() {
-            ekf.set_lane(lane, run.init_mean, run.init_cov)?;
-        }
-        let mut z = [[0.0; BATCH]; 1];
-        let mut truth = [[0.0; BATCH]; 2];
-        for (k, sum) in sums.iter_mut().enumerate() {
-            for (lane, run) in group.iter().enumerate() {
-                z[0][lane] = run.measurements[k][0];
-                truth[0][lane] = run.states[k][0];
-                truth[1][lane] = run.states[k][1];
-            }
-            let step = if k == 0 {
-                ekf.update(&z, &truth)
-            } else {
-                ekf.predict_update(&z, &truth)
-            };
-            for lane in 0..group.len() {
-                *sum += step.nees(lane)?;
-            }
-        }
-    }
-    let n = runs.len() as f64;
-    Ok(sums.into_iter().map(|s| s / n).collect())
+        )?)
+    })
 }
 
 /// The UKF of [`lib_ukf`] through [`UkfBatch`] on the models `dynamics` and `measurement`
@@ -404,10 +381,8 @@ fn batched_ukf<D: LaneDynamics<2> + Clone, H: LaneSigmaMeasurement<2, 1> + Clone
     steps: usize,
     isa: Isa,
 ) -> Result<Vec<f64>> {
-    let mut sums = vec![0.0; steps];
-    for group in runs.chunks(BATCH) {
-        let first = &group[0];
-        let mut ukf = UkfBatch::new(
+    per_step_nees(runs, steps, |first| {
+        Ok(UkfBatch::new(
             isa,
             dynamics.clone(),
             measurement.clone(),
@@ -415,9 +390,55 @@ fn batched_ukf<D: LaneDynamics<2> + Clone, H: LaneSigmaMeasurement<2, 1> + Clone
             first.init_cov,
             SigmaSet::recommended(2),
             UkfPrediction::Linearised,
-        )?;
+        )?)
+    })
+}
+
+/// What the W2 loop asks of a batched filter (the EKF's and the UKF's methods of the same
+/// names).
+trait Batched {
+    fn set_lane(&mut self, lane: usize, x: Vector2<f64>, p: Matrix2<f64>) -> Result<()>;
+    fn step(&mut self, first: bool, z: &[Lanes; 1], truth: &[Lanes; 2]) -> &BatchStep<2>;
+}
+
+impl<D: LaneDynamics<2>, H: LaneMeasurement<2, 1>> Batched for EkfBatch<2, 1, D, H> {
+    fn set_lane(&mut self, lane: usize, x: Vector2<f64>, p: Matrix2<f64>) -> Result<()> {
+        Ok(EkfBatch::set_lane(self, lane, x, p)?)
+    }
+    fn step(&mut self, first: bool, z: &[Lanes; 1], truth: &[Lanes; 2]) -> &BatchStep<2> {
+        if first {
+            self.update(z, truth)
+        } else {
+            self.predict_update(z, truth)
+        }
+    }
+}
+
+impl<D: LaneDynamics<2>, H: LaneSigmaMeasurement<2, 1>> Batched for UkfBatch<2, 1, D, H> {
+    fn set_lane(&mut self, lane: usize, x: Vector2<f64>, p: Matrix2<f64>) -> Result<()> {
+        Ok(UkfBatch::set_lane(self, lane, x, p)?)
+    }
+    fn step(&mut self, first: bool, z: &[Lanes; 1], truth: &[Lanes; 2]) -> &BatchStep<2> {
+        if first {
+            self.update(z, truth)
+        } else {
+            self.predict_update(z, truth)
+        }
+    }
+}
+
+/// The per-step mean NEES over `runs` of a batched filter that `make` builds for each group
+/// of [`BATCH`] runs (from the group's first run; each lane then starts from its own run).
+fn per_step_nees<B: Batched>(
+    runs: &[BotRun<U2>],
+    steps: usize,
+    make: impl Fn(&BotRun<U2>) -> Result<B>,
+) -> Result<Vec<f64>> {
+    let mut sums = vec![0.0; steps];
+    for group in runs.chunks(BATCH) {
+        let mut filter = make(&group[0])?;
         for (lane, run) in group.iter().enumerate() {
-            ukf.set_lane(lane, run.init_mean, run.init_cov)?;
+            filter.set_lane(lane, run.init_mean, run.init_cov)?;
         }
         let mut z = [[0.0; BATCH]; 1];
         let mut truth = [[0.0; BATCH]; 2];
@@ -427,11 +448,7 @@ fn batched_ukf<D: LaneDynamics<2> + Clone, H: LaneSigmaMeasurement<2, 1> + Clone
                 truth[0][lane] = run.states[k][0];
                 truth[1][lane] = run.states[k][1];
             }
-            let step = if k == 0 {
-                ukf.update(&z, &truth)
-            } else {
-                ukf.predict_update(&z, &truth)
-            };
+            let step = filter.step(k == 0, &z, &truth);
             for lane in 0..group.len() {
                 *sum += step.nees(lane)?;
             }

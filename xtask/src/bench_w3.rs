@@ -21,6 +21,7 @@ use anyhow::{Context, Result, bail};
 use kalibra_filters::batch::{BATCH, EkfBatch, Isa, LaneDynamics, LaneMeasurement, PerLane};
 use kalibra_filters::{Ekf, Filter};
 use kalibra_metrics::j_step;
+use kalibra_models::lanes::set_lane_vector;
 use kalibra_models::{Ballistic, Dynamics, Measurement, RadarRates, Simulator, wrap_angle};
 use kalibra_sim::MonteCarlo;
 use kalibra_studies::paper003::{p0_table, q_nom, qt, r, x0_table};
@@ -192,12 +193,8 @@ fn batched_on<'a, D: LaneDynamics<4>, H: LaneMeasurement<4, 3> + Copy>(
             let mut x = [[0.0; BATCH]; 4];
             for k in 0..group[0].measurements.len() {
                 for (l, t) in group.iter().enumerate() {
-                    for (zi, v) in z.iter_mut().zip(t.measurements[k].iter()) {
-                        zi[l] = *v;
-                    }
-                    for (xi, v) in x.iter_mut().zip(t.states[k].iter()) {
-                        xi[l] = *v;
-                    }
+                    set_lane_vector(&mut z, l, &t.measurements[k]);
+                    set_lane_vector(&mut x, l, &t.states[k]);
                 }
                 let (step, terms) = ekf.predict_update_j(&z, &x);
                 for l in 0..group.len() {

@@ -161,6 +161,24 @@ impl AccelAxis {
 }
 
 impl AccelAxis {
+    /// `F` given the slope `g'(a)` of the acceleration term: the only entry that depends on
+    /// the state.
+    fn jacobian_at_slope(&self, dg: f64) -> Matrix3<f64> {
+        let p = &self.params;
+        let (dt, d) = (p.dt, p.damping[self.axis]);
+        Matrix3::new(
+            1.0 + d,
+            dt,
+            0.5 * dt * dt,
+            0.0,
+            p.velocity_diagonal + d,
+            dt,
+            0.0,
+            0.0,
+            1.0 + p.accel_coefficient + p.accel_amplitude * dg,
+        )
+    }
+
     /// `g(a)` and `g'(a)` of every lane of `a` (sine on x and z, cosine on y), from one
     /// [`sin_cos_lanes`](crate::lanes::math::sin_cos_lanes) (within 2 ulp of glibc's).
     #[inline(always)]
@@ -220,7 +238,8 @@ impl AccelAxis {
     ) {
         use crate::lanes::{BATCH, broadcast, load, store};
         let p = &self.params;
-        broadcast(f, &self.jacobian(0, &Vector3::zeros()));
+        // The constant entries; F[2][2] is overwritten below.
+        broadcast(f, &self.jacobian_at_slope(0.0));
         let (c_a, amp) = (
             simd.splat_f64s(1.0 + p.accel_coefficient),
             simd.splat_f64s(p.accel_amplitude),
@@ -294,20 +313,7 @@ impl Dynamics<U3> for AccelAxis {
         )
     }
     fn jacobian(&self, _k: usize, x: &Vector3<f64>) -> Matrix3<f64> {
-        let p = &self.params;
-        let (dt, d) = (p.dt, p.damping[self.axis]);
-        let (_, dg) = self.g(x[2]);
-        Matrix3::new(
-            1.0 + d,
-            dt,
-            0.5 * dt * dt,
-            0.0,
-            p.velocity_diagonal + d,
-            dt,
-            0.0,
-            0.0,
-            1.0 + p.accel_coefficient + p.accel_amplitude * dg,
-        )
+        self.jacobian_at_slope(self.g(x[2]).1)
     }
     fn noise_cov(&self, _k: usize) -> Matrix3<f64> {
         let b = self.noise_direction() * self.params.sigma_w;

@@ -223,6 +223,13 @@ pub fn lane<const N: usize>(x: &[Lanes; N], l: usize) -> SVector<f64, N> {
     SVector::from_fn(|i, _| x[i][l])
 }
 
+/// Writes the vector `v` into lane `l` of `out` (the inverse of [`lane`]).
+pub fn set_lane_vector<const N: usize>(out: &mut [Lanes; N], l: usize, v: &SVector<f64, N>) {
+    for (o, x) in out.iter_mut().zip(v.iter()) {
+        o[l] = *x;
+    }
+}
+
 /// Writes `m` into lane `l` of `out`.
 pub fn set_lane<const R: usize, const C: usize>(
     out: &mut [[Lanes; C]; R],
@@ -262,18 +269,14 @@ impl<const N: usize, T: Dynamics<Const<N>>> LaneDynamics<N> for PerLane<T> {
             let pred = self.0.transition(k, &xl);
             set_lane(f, l, &self.0.jacobian(k, &xl));
             set_lane(q, l, &self.0.noise_cov(k));
-            for (i, xi) in x.iter_mut().enumerate() {
-                xi[l] = pred[i];
-            }
+            set_lane_vector(x, l, &pred);
         }
     }
 
     fn transition_lanes<S: Simd>(&self, _simd: S, k: usize, x: &mut [Lanes; N]) {
         for l in 0..BATCH {
             let pred = self.0.transition(k, &lane(x, l));
-            for (i, xi) in x.iter_mut().enumerate() {
-                xi[l] = pred[i];
-            }
+            set_lane_vector(x, l, &pred);
         }
     }
 }
@@ -295,9 +298,7 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneMea
             let xl = lane(x, l);
             let zhat = self.0.measure(k, &xl);
             let residual = self.0.residual(&lane(z, l), &zhat);
-            for (i, v) in nu.iter_mut().enumerate() {
-                v[l] = residual[i];
-            }
+            set_lane_vector(nu, l, &residual);
             set_lane(h, l, &self.0.jacobian(k, &xl));
             set_lane(r, l, &self.0.noise_cov(k, &xl));
         }
@@ -310,9 +311,7 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneSig
     fn measure_lanes<S: Simd>(&self, _simd: S, k: usize, x: &[Lanes; N], z: &mut [Lanes; M]) {
         for l in 0..BATCH {
             let zl = self.0.measure(k, &lane(x, l));
-            for (i, v) in z.iter_mut().enumerate() {
-                v[l] = zl[i];
-            }
+            set_lane_vector(z, l, &zl);
         }
     }
 
@@ -325,9 +324,7 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneSig
     ) {
         for l in 0..BATCH {
             let e = self.0.residual(&lane(a, l), &lane(b, l));
-            for (i, v) in out.iter_mut().enumerate() {
-                v[l] = e[i];
-            }
+            set_lane_vector(out, l, &e);
         }
     }
 
@@ -335,9 +332,7 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneSig
         for l in 0..BATCH {
             let mut zl = lane(z, l);
             self.0.normalize(&mut zl);
-            for (i, v) in z.iter_mut().enumerate() {
-                v[l] = zl[i];
-            }
+            set_lane_vector(z, l, &zl);
         }
     }
 
@@ -361,9 +356,7 @@ impl<const N: usize, const M: usize, T: Measurement<Const<N>, Const<M>>> LaneSig
             let e = self
                 .0
                 .residual(&self.0.measure(k, &lane(x, l)), &lane(z0, l));
-            for (i, v) in out.iter_mut().enumerate() {
-                v[l] = e[i];
-            }
+            set_lane_vector(out, l, &e);
         }
     }
 }

@@ -6,6 +6,7 @@ use kalibra_filters::batch::{BATCH, EkfBatch, Isa};
 use kalibra_filters::{Ekf, Filter, Start};
 use kalibra_linalg::{Matrix4, Vector3, Vector4};
 use kalibra_metrics::{JHorizon, SquaredErrors, itse};
+use kalibra_models::lanes::set_lane_vector;
 use kalibra_models::{Dynamics, Measurement, Simulator};
 use kalibra_sim::{MonteCarlo, RunFailure};
 use serde::Serialize;
@@ -307,12 +308,8 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
                 let mut x = [[0.0; BATCH]; 4];
                 for k in 1..=horizon {
                     for (l, truth) in group.iter().enumerate() {
-                        for (zi, v) in z.iter_mut().zip(truth.measurements[k - 1].iter()) {
-                            zi[l] = *v;
-                        }
-                        for (xi, v) in x.iter_mut().zip(truth.states[k].iter()) {
-                            xi[l] = *v;
-                        }
+                        set_lane_vector(&mut z, l, &truth.measurements[k - 1]);
+                        set_lane_vector(&mut x, l, &truth.states[k]);
                     }
                     let step = ekf.predict_update(&z, &x);
                     for l in 0..group.len() {

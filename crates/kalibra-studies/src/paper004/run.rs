@@ -9,7 +9,7 @@ use kalibra_metrics::MetricsError;
 use kalibra_metrics::hypothesis::{
     BatchMeans, TestResult, ks_two_sample, paired_t_test, runs_test,
 };
-use kalibra_models::lanes::{LaneDynamics, lane};
+use kalibra_models::lanes::{LaneDynamics, lane, set_lane_vector};
 use kalibra_models::{AccelAxis, Dynamics, LinearObservation, Measurement, Target3d};
 use kalibra_sim::{ChaCha8Rng, MonteCarlo, RunFailure};
 use pulp::{Simd, WithSimd};
@@ -235,9 +235,7 @@ fn run_axis<const M: usize>(
     let mut x = [[0.0; BATCH]; 3];
     for (l, rng) in rngs.iter_mut().enumerate() {
         let x0 = kalibra_models::standard_normal(U3, rng);
-        for (xi, v) in x.iter_mut().zip(x0.iter()) {
-            xi[l] = *v;
-        }
+        set_lane_vector(&mut x, l, &x0);
     }
     let mut ekf = EkfBatch::new(
         isa,
