@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use kalibra_filters::batch::{
-    BATCH, BatchStep, EkfBatch, Isa, LaneDynamics, LaneMeasurement, LaneSigmaMeasurement, Lanes,
+    BATCH, BatchFilter, EkfBatch, Isa, LaneDynamics, LaneMeasurement, LaneSigmaMeasurement,
     PerLane, UkfBatch,
 };
 use kalibra_filters::{Ekf, Filter, SigmaSet, Ukf, UkfPrediction};
@@ -394,42 +394,9 @@ fn batched_ukf<D: LaneDynamics<2> + Clone, H: LaneSigmaMeasurement<2, 1> + Clone
     })
 }
 
-/// What the W2 loop asks of a batched filter (the EKF's and the UKF's methods of the same
-/// names).
-trait Batched {
-    fn set_lane(&mut self, lane: usize, x: Vector2<f64>, p: Matrix2<f64>) -> Result<()>;
-    fn step(&mut self, first: bool, z: &[Lanes; 1], truth: &[Lanes; 2]) -> &BatchStep<2>;
-}
-
-impl<D: LaneDynamics<2>, H: LaneMeasurement<2, 1>> Batched for EkfBatch<2, 1, D, H> {
-    fn set_lane(&mut self, lane: usize, x: Vector2<f64>, p: Matrix2<f64>) -> Result<()> {
-        Ok(EkfBatch::set_lane(self, lane, x, p)?)
-    }
-    fn step(&mut self, first: bool, z: &[Lanes; 1], truth: &[Lanes; 2]) -> &BatchStep<2> {
-        if first {
-            self.update(z, truth)
-        } else {
-            self.predict_update(z, truth)
-        }
-    }
-}
-
-impl<D: LaneDynamics<2>, H: LaneSigmaMeasurement<2, 1>> Batched for UkfBatch<2, 1, D, H> {
-    fn set_lane(&mut self, lane: usize, x: Vector2<f64>, p: Matrix2<f64>) -> Result<()> {
-        Ok(UkfBatch::set_lane(self, lane, x, p)?)
-    }
-    fn step(&mut self, first: bool, z: &[Lanes; 1], truth: &[Lanes; 2]) -> &BatchStep<2> {
-        if first {
-            self.update(z, truth)
-        } else {
-            self.predict_update(z, truth)
-        }
-    }
-}
-
 /// The per-step mean NEES over `runs` of a batched filter that `make` builds for each group
 /// of [`BATCH`] runs (from the group's first run; each lane then starts from its own run).
-fn per_step_nees<B: Batched>(
+fn per_step_nees<B: BatchFilter<2, 1>>(
     runs: &[BotRun<U2>],
     steps: usize,
     make: impl Fn(&BotRun<U2>) -> Result<B>,
@@ -448,7 +415,11 @@ fn per_step_nees<B: Batched>(
                 truth[0][lane] = run.states[k][0];
                 truth[1][lane] = run.states[k][1];
             }
-            let step = filter.step(k == 0, &z, &truth);
+            let step = if k == 0 {
+                filter.update(&z, &truth)
+            } else {
+                filter.predict_update(&z, &truth)
+            };
             for lane in 0..group.len() {
                 *sum += step.nees(lane)?;
             }

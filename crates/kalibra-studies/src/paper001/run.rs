@@ -5,13 +5,11 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use kalibra_filters::batch::{BATCH, BatchStep, EkfBatch, Isa, Lanes, UkfBatch};
+use kalibra_filters::batch::{BATCH, BatchFilter, EkfBatch, Isa, UkfBatch};
 use kalibra_filters::{
     Ekf, Filter, FilterError, KappaCriterion, SigmaSet, Srf, Ukf, UkfPrediction,
 };
-use kalibra_linalg::{
-    Alloc, Const, DefaultAllocator, Dim, OMatrix, OVector, SMatrix, SVector, U1, U2, U4,
-};
+use kalibra_linalg::{Alloc, Const, DefaultAllocator, Dim, OMatrix, OVector, U1, U2, U4};
 use kalibra_metrics::{
     ChiSquareBand, Credibility, Merge, SquaredErrors, StepMean, consistent_median_nees, nees,
     time_average,
@@ -300,78 +298,34 @@ where
 /// The filters of [`FILTERS`] that a study steps eight runs at a time: the EKF through
 /// [`EkfBatch`], the UKF and the adaptive UKFs through [`UkfBatch`] (with the scenario's
 /// lane-wise `LinearGaussian` and `Bearing`). The SRF runs one filter at a time.
-fn batched_kind(which: usize) -> Option<Option<Option<KappaCriterion>>> {
+fn batched_kind(which: usize) -> Batched {
     match FILTERS[which] {
-        "EKF" => Some(None),
-        "UKF" => Some(Some(None)),
-        "UKF-ML" => Some(Some(Some(KappaCriterion::MaximumLikelihood))),
-        "UKF-MPP" => Some(Some(Some(KappaCriterion::MaximumPosterior))),
-        "UKF-MAP" => Some(Some(Some(KappaCriterion::PureMap))),
-        _ => None,
+        "EKF" => Batched::Ekf,
+        "UKF" => Batched::Ukf(None),
+        "UKF-ML" => Batched::Ukf(Some(KappaCriterion::MaximumLikelihood)),
+        "UKF-MPP" => Batched::Ukf(Some(KappaCriterion::MaximumPosterior)),
+        "UKF-MAP" => Batched::Ukf(Some(KappaCriterion::PureMap)),
+        _ => Batched::No,
     }
 }
 
-/// A batched filter as [`track_batched`] steps it.
-trait Lanewise<const D: usize> {
-    fn update(&mut self, z: &[Lanes; 1], truth: &[Lanes; D]) -> &BatchStep<D>;
-    fn predict_update(&mut self, z: &[Lanes; 1], truth: &[Lanes; D]) -> &BatchStep<D>;
-    fn mean(&self, lane: usize) -> SVector<f64, D>;
-    fn cov(&self, lane: usize) -> SMatrix<f64, D, D>;
-    fn kappa(&self, lane: usize) -> Option<f64>;
+/// How [`track_batched`] runs a filter of [`FILTERS`].
+enum Batched {
+    /// Through [`EkfBatch`].
+    Ekf,
+    /// Through [`UkfBatch`], with this adaptive criterion or a fixed kappa.
+    Ukf(Option<KappaCriterion>),
+    /// One filter at a time.
+    No,
 }
 
-impl<const D: usize, F, H> Lanewise<D> for EkfBatch<D, 1, F, H>
-where
-    F: kalibra_filters::batch::LaneDynamics<D>,
-    H: kalibra_filters::batch::LaneMeasurement<D, 1>,
-{
-    fn update(&mut self, z: &[Lanes; 1], truth: &[Lanes; D]) -> &BatchStep<D> {
-        EkfBatch::update(self, z, truth)
-    }
-    fn predict_update(&mut self, z: &[Lanes; 1], truth: &[Lanes; D]) -> &BatchStep<D> {
-        EkfBatch::predict_update(self, z, truth)
-    }
-    fn mean(&self, lane: usize) -> SVector<f64, D> {
-        EkfBatch::mean(self, lane)
-    }
-    fn cov(&self, lane: usize) -> SMatrix<f64, D, D> {
-        EkfBatch::cov(self, lane)
-    }
-    fn kappa(&self, _lane: usize) -> Option<f64> {
-        None
-    }
-}
-
-impl<const D: usize, F, H> Lanewise<D> for UkfBatch<D, 1, F, H>
-where
-    F: kalibra_filters::batch::LaneDynamics<D>,
-    H: kalibra_filters::batch::LaneSigmaMeasurement<D, 1>,
-{
-    fn update(&mut self, z: &[Lanes; 1], truth: &[Lanes; D]) -> &BatchStep<D> {
-        UkfBatch::update(self, z, truth)
-    }
-    fn predict_update(&mut self, z: &[Lanes; 1], truth: &[Lanes; D]) -> &BatchStep<D> {
-        UkfBatch::predict_update(self, z, truth)
-    }
-    fn mean(&self, lane: usize) -> SVector<f64, D> {
-        UkfBatch::mean(self, lane)
-    }
-    fn cov(&self, lane: usize) -> SMatrix<f64, D, D> {
-        UkfBatch::cov(self, lane)
-    }
-    fn kappa(&self, lane: usize) -> Option<f64> {
-        UkfBatch::kappa(self, lane)
-    }
-}
-
-/// Runs the batched `filter` over up to [`BATCH`] runs as [`track`] runs a scalar filter over
-/// one (the same start, the same evaluated indices): each run's track, or the error its lane
-/// failed with first (a failed lane goes on stepping, its later values unused, as the scalar
-/// run stops at its error).
-fn track_lanes<const D: usize>(
+/// The tracks of `runs` (at most [`BATCH`]) through a batched `filter`, each as
+/// [`track`] gives the run's own; `kappa` reads a lane's kappa of the last update.
+fn track_lanes<const D: usize, F: BatchFilter<D, 1>>(
     scenario: &BotScenario<Const<D>>,
     runs: &[BotRun<Const<D>>],
-    filter: &mut impl Lanewise<D>,
+    filter: &mut F,
+    kappa: impl Fn(&F, usize) -> Option<f64>,
 ) -> Vec<Result<Track<Const<D>>, FilterError>> {
     let mut out: Vec<Result<Track<Const<D>>, FilterError>> = runs
         .iter()
@@ -405,7 +359,7 @@ fn track_lanes<const D: usize>(
             for (lane, slot) in out.iter_mut().enumerate() {
                 if let Ok(track) = slot {
                     let e = runs[lane].states[i] - filter.mean(lane);
-                    let k = if updated { filter.kappa(lane) } else { None };
+                    let k = if updated { kappa(filter, lane) } else { None };
                     track.push((e, filter.cov(lane), k));
                 }
             }
@@ -428,14 +382,14 @@ fn track_batched<const D: usize>(
     let (x0, p0) = (runs[0].init_mean, runs[0].init_cov);
     let batched = || -> Result<_, FilterError> {
         match batched_kind(which) {
-            Some(None) => {
+            Batched::Ekf => {
                 let mut ekf = EkfBatch::new(isa, f, h, x0, p0)?;
                 for (lane, run) in runs.iter().enumerate() {
                     ekf.set_lane(lane, run.init_mean, run.init_cov)?;
                 }
-                Ok(Some(track_lanes(scenario, runs, &mut ekf)))
+                Ok(Some(track_lanes(scenario, runs, &mut ekf, |_, _| None)))
             }
-            Some(Some(criterion)) => {
+            Batched::Ukf(criterion) => {
                 let set = SigmaSet::recommended(D);
                 let mut ukf = UkfBatch::new(isa, f, h, x0, p0, set, UkfPrediction::Linearised)?;
                 if let Some(c) = criterion {
@@ -444,9 +398,11 @@ fn track_batched<const D: usize>(
                 for (lane, run) in runs.iter().enumerate() {
                     ukf.set_lane(lane, run.init_mean, run.init_cov)?;
                 }
-                Ok(Some(track_lanes(scenario, runs, &mut ukf)))
+                Ok(Some(track_lanes(scenario, runs, &mut ukf, |u, lane| {
+                    u.kappa(lane)
+                })))
             }
-            None => Ok(None),
+            Batched::No => Ok(None),
         }
     };
     match batched() {
@@ -752,7 +708,7 @@ mod tests {
         runs[5].measurements[3][0] = f64::NAN;
         for isa in Isa::available() {
             let mut worst = 0.0f64;
-            for which in (0..FILTERS.len()).filter(|&w| batched_kind(w).is_some()) {
+            for which in (0..FILTERS.len()).filter(|&w| !matches!(batched_kind(w), Batched::No)) {
                 for group in runs.chunks(BATCH) {
                     let batched = track_batched(scenario, group, which, isa);
                     for (run, got) in group.iter().zip(&batched) {
