@@ -251,6 +251,39 @@ fn blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count() {
     }
 }
 
+/// A block of steps is fed in strips of steps, each strip run after run, which meets the
+/// cells in another order than one pass: an error is still that of the first failing cell
+/// run after run. Here run 1 fails at step 10 (in the first strip) and run 0 at step 100 (a
+/// later strip of the same block): the error names step 100, as one pass meets it first.
+#[test]
+fn a_failing_cell_is_the_first_run_after_run_whatever_the_feeding_order() {
+    let mut a = arrays(5, 2, 300);
+    // An error whose square is beyond f64's range: the squared errors cannot sum it.
+    let huge = |a: &mut Arrays, run: usize, step: usize| {
+        a.estimate[(run * a.steps + step) * N] = 1e200;
+    };
+    huge(&mut a, 1, 10);
+    huge(&mut a, 0, 100);
+    let failing_step = |e: EvalError| match e {
+        EvalError::Metrics(kalibra_metrics::MetricsError::NonFiniteSample { index, .. }) => index,
+        other => panic!("unexpected error {other:?}"),
+    };
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let e = pool.install(|| Evaluation::new().evaluate(&a.log()).unwrap_err());
+        assert_eq!(failing_step(e), 100, "{threads} threads");
+    }
+    // One pass run after run meets the same cell first.
+    let mut one_pass = Evaluation::new().evaluator(contents()).unwrap();
+    let first = (0..a.runs)
+        .flat_map(|run| (0..a.steps).map(move |step| (run, step)))
+        .find(|&(run, step)| one_pass.push(run, step, &a.cell(run, step)).is_err());
+    assert_eq!(first, Some((0, 100)));
+}
+
 /// With model matrices, `J1`/`J2` come from consecutive steps of a run: a large batch
 /// computes most of them on several threads, a run's first cell in a batch and single cells
 /// on the calling thread. Batches cut mid-run, a model that changes every few steps, and
