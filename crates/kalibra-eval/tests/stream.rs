@@ -229,7 +229,14 @@ fn cell_by_cell_batched_and_whole_give_the_same_report_to_the_bit() {
 /// which is how `kalibra eval` streams an NPZ or CSV log.
 #[test]
 fn blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count() {
-    let a = arrays(3, 12, 300);
+    let mut a = arrays(3, 12, 300);
+    // Findings in several strips and blocks: covariances not positive definite (and the first
+    // of them, run after run, in a later strip than another's), a non-finite estimate.
+    for i in [5 * 300 + 40, 2 * 300 + 250, 11 * 300 + 3, 7 * 300 + 129] {
+        a.cov[i * N * N + 1] = 5.0;
+        a.cov[i * N * N + 2] = 5.0;
+    }
+    a.estimate[(4 * 300 + 77) * N] = f64::NAN;
     let evaluation = Evaluation::new();
     let mut one_pass = evaluation.evaluator(contents()).unwrap();
     for run in 0..a.runs {
@@ -240,6 +247,11 @@ fn blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count() {
     let one_pass = one_pass.finish(None).unwrap();
     let bits = |r: &Report| serde_json::to_string(r).unwrap();
     assert!(one_pass.summary.anees.is_some() && one_pass.summary.anis.is_some());
+    let first = one_pass.findings.state.first.as_ref().unwrap();
+    assert_eq!(
+        (one_pass.findings.state.cells, first.run, first.step),
+        (5, 2, 250)
+    );
     assert!(one_pass.nci_per_step.iter().all(Option::is_some));
     for threads in [1, 2, 3] {
         let pool = rayon::ThreadPoolBuilder::new()
