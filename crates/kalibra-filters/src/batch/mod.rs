@@ -361,6 +361,9 @@ pub struct BatchStep<const N: usize> {
     // The error of a lane's update, and of its NEES (the update's, or the NEES's own).
     failure: [Option<FilterError>; BATCH],
     nees_failure: [Option<FilterError>; BATCH],
+    // Whether `failure` or `nees_failure` holds an error (`finish` skips both when neither
+    // does and every lane succeeded: the common step costs a pass over the health sums).
+    stored_failures: bool,
 }
 
 impl<const N: usize> BatchStep<N> {
@@ -375,6 +378,9 @@ impl<const N: usize> BatchStep<N> {
         p: &[[Lanes; N]; N],
     ) {
         self.k = k;
+        if !self.stored_failures && self.ok().into_iter().all(|ok| ok) {
+            return;
+        }
         for lane in 0..BATCH {
             self.failure[lane] = (self.health[lane] != 0.0).then(|| self.explain(lane, z, x, p));
             self.nees_failure[lane] =
@@ -383,6 +389,11 @@ impl<const N: usize> BatchStep<N> {
                     step: k,
                 });
         }
+        self.stored_failures = self
+            .failure
+            .iter()
+            .chain(&self.nees_failure)
+            .any(Option::is_some);
     }
 
     /// The scalar filter's error for a failed lane (off the hot path).
@@ -431,6 +442,7 @@ impl<const N: usize> BatchStep<N> {
             health: [0.0; BATCH],
             failure: std::array::from_fn(|_| None),
             nees_failure: std::array::from_fn(|_| None),
+            stored_failures: false,
         }
     }
 
@@ -476,6 +488,38 @@ impl<const N: usize> BatchStep<N> {
             .iter()
             .chain(&self.nees_failure)
             .all(Option::is_none)
+    }
+
+    /// Lane by lane, whether the update and the NEES succeeded: `ok()[lane]` is
+    /// `nees(lane).is_ok()` (and then `nis(lane)` is `Ok` too). With [`BatchStep::nis_lanes`],
+    /// [`BatchStep::nees_lanes`] and [`BatchStep::errors`] a study takes a whole batch's
+    /// results per step without a call per lane; [`BatchStep::nees`] gives a failed lane's
+    /// error.
+    #[inline]
+    pub fn ok(&self) -> [bool; BATCH] {
+        let mut ok = [false; BATCH];
+        for ((ok, health), nees) in ok.iter_mut().zip(&self.health).zip(&self.nees) {
+            *ok = *health == 0.0 && nees.is_finite();
+        }
+        ok
+    }
+
+    /// Every lane's NIS, as [`BatchStep::nis`] gives it where that is `Ok`; the entry of a
+    /// lane whose update failed is meaningless (see [`BatchStep::ok`]).
+    pub fn nis_lanes(&self) -> &Lanes {
+        &self.nis
+    }
+
+    /// Every lane's NEES, as [`BatchStep::nees`] gives it where that is `Ok`; the entry of a
+    /// failed lane is meaningless (see [`BatchStep::ok`]).
+    pub fn nees_lanes(&self) -> &Lanes {
+        &self.nees
+    }
+
+    /// Every lane's estimation error `x - x+`, component by component: `errors()[i][lane]` is
+    /// [`BatchStep::error`]`(lane)[i]` (meaningful where the update succeeded).
+    pub fn errors(&self) -> &[Lanes; N] {
+        &self.error
     }
 
     /// Lane `lane`'s estimation error `x - x+` (meaningful when [`BatchStep::nis`] is `Ok`).

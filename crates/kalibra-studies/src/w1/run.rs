@@ -320,21 +320,30 @@ fn batched(
             } else {
                 kf.predict_update(truth.measurement(), truth.state())
             };
-            for (lane, slot) in failed.iter_mut().enumerate().take(runs.len()) {
-                if slot.is_some() {
-                    continue;
-                }
-                let pushed = (|| -> Result<(), StudyError> {
-                    let nis = step.nis(lane)?;
-                    nees_acc.push(k, step.nees(lane)? / 4.0)?;
-                    nis_acc.push(k, nis / 2.0)?;
-                    err_acc.push_slice(k, &step.error(lane))?;
-                    Ok(())
-                })();
-                if let Err(e) = pushed {
-                    *slot = Some(e);
+            // The lanes to push: runs that have not stopped and whose update and NEES
+            // succeeded; a run whose step failed stops with the step's error.
+            let ok = step.ok();
+            let mut live = [false; BATCH];
+            for lane in 0..runs.len() {
+                if failed[lane].is_none() {
+                    if ok[lane] {
+                        live[lane] = true;
+                    } else {
+                        failed[lane] = step.nees(lane).err().map(StudyError::from);
+                    }
                 }
             }
+            // Each accumulator adds the lanes in order, as pushing run after run does; a
+            // refused value stops its run (it leaves `live`) before its later pushes, as in
+            // the scalar run.
+            let nees = step.nees_lanes().map(|v| v / 4.0);
+            let nis = step.nis_lanes().map(|v| v / 2.0);
+            let mut stop = |lane: usize, e: kalibra_metrics::MetricsError| {
+                failed[lane] = Some(e.into());
+            };
+            nees_acc.push_lanes(k, &nees, &mut live, &mut stop);
+            nis_acc.push_lanes(k, &nis, &mut live, &mut stop);
+            err_acc.push_lanes(k, step.errors(), &mut live, &mut stop);
         }
         // The lowest failing run of the group.
         match failed
