@@ -367,23 +367,47 @@ where
             // NIS through the factor of S.
             let nis = norm_squared(simd, &forward(simd, &ls, &nu));
             // Health: 0 if the measurement, the NIS (so S's factor) and the posterior are all
-            // finite, NaN otherwise; a lane keeps its old estimate unless it is 0.
-            let mut ok = health(simd, hz, nis);
+            // finite, NaN otherwise; a lane keeps its old estimate unless it is 0. P+ is
+            // symmetric (`symmetrize` wrote one value to both triangles), so its upper triangle
+            // says all; four independent sums keep the test short (0 + 0 is 0 and NaN stays
+            // NaN in any order).
+            let mut sums = [hz, zero, zero, zero];
+            sums[1] = health(simd, sums[1], nis);
             for i in 0..N {
-                ok = health(simd, ok, x_post[i]);
-                for j in 0..N {
-                    ok = health(simd, ok, p_post[i][j]);
+                sums[(2 + i) % 4] = health(simd, sums[(2 + i) % 4], x_post[i]);
+            }
+            let mut t = 0;
+            for i in 0..N {
+                for j in i..N {
+                    sums[t % 4] = health(simd, sums[t % 4], p_post[i][j]);
+                    t += 1;
                 }
             }
+            let ok = simd.add_f64s(
+                simd.add_f64s(sums[0], sums[1]),
+                simd.add_f64s(sums[2], sums[3]),
+            );
             let keep = simd.equal_f64s(ok, zero);
-            for i in 0..N {
-                store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
-                for j in 0..N {
-                    store::<S>(
-                        &mut ps[i][j],
-                        c,
-                        simd.select_f64s(keep, p_post[i][j], p[i][j]),
-                    );
+            // The common case, every lane healthy, stores the posterior without a selection
+            // (and without waiting for the health test: the branch is predicted).
+            let failing = simd.xor_m64s(keep, simd.equal_f64s(zero, zero));
+            if simd.first_true_m64s(failing) == S::F64_LANES {
+                for i in 0..N {
+                    store::<S>(&mut xs[i], c, x_post[i]);
+                    for j in 0..N {
+                        store::<S>(&mut ps[i][j], c, p_post[i][j]);
+                    }
+                }
+            } else {
+                for i in 0..N {
+                    store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
+                    for j in 0..N {
+                        store::<S>(
+                            &mut ps[i][j],
+                            c,
+                            simd.select_f64s(keep, p_post[i][j], p[i][j]),
+                        );
+                    }
                 }
             }
             // NEES of the truth against the posterior, through P+'s factor.
