@@ -66,6 +66,15 @@ fn refuse_live<const L: usize>(
     }
 }
 
+/// An error vector of `found` components where the accumulator has `expected`.
+fn dim_mismatch(expected: usize, found: usize) -> MetricsError {
+    MetricsError::DimensionMismatch {
+        what: "error vector",
+        expected,
+        found,
+    }
+}
+
 /// Why [`StepMean::push`] refuses `value` at `step` (the step's sum would not be finite).
 #[cold]
 fn refused_mean(step: usize, value: f64) -> MetricsError {
@@ -230,8 +239,10 @@ impl StepMean {
         // lane would have refused nothing: the same sum, without a test per lane.
         let (mut sum, mut count) = (self.sum[step], self.count[step]);
         let mut all = sum;
+        let every = live.iter().all(|l| *l);
         for lane in 0..L {
-            if live[lane] {
+            // (Without a test per lane when every lane is live, the usual case.)
+            if every || live[lane] {
                 all += values[lane];
             }
         }
@@ -410,7 +421,9 @@ impl SquaredErrors {
     #[inline]
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
-        self.check_dim(error.len())?;
+        if error.len() != self.dim {
+            return Err(dim_mismatch(self.dim, error.len()));
+        }
         let sums = &mut self.sum[step * self.dim..(step + 1) * self.dim];
         if !error
             .iter()
@@ -424,18 +437,6 @@ impl SquaredErrors {
         }
         self.count[step] += 1;
         Ok(())
-    }
-
-    fn check_dim(&self, len: usize) -> Result<(), MetricsError> {
-        if len == self.dim {
-            Ok(())
-        } else {
-            Err(MetricsError::DimensionMismatch {
-                what: "error vector",
-                expected: self.dim,
-                found: len,
-            })
-        }
     }
 
     /// Adds, at `step`, the error of every lane `i` with `live[i]`, lane 0 first, where
@@ -460,37 +461,37 @@ impl SquaredErrors {
     /// # Ok::<(), kalibra_metrics::MetricsError>(())
     /// ```
     #[inline]
-    pub fn push_lanes<const L: usize>(
+    pub fn push_lanes<const L: usize, const D: usize>(
         &mut self,
         step: usize,
-        errors: &[[f64; L]],
+        errors: &[[f64; L]; D],
         live: &mut [bool; L],
         mut refused: impl FnMut(usize, MetricsError),
     ) {
-        if let Err(e) = check_step(step, self.steps()).and_then(|()| self.check_dim(errors.len())) {
+        if let Err(e) = check_step(step, self.steps()) {
             return refuse_live(live, e, refused);
         }
-        let sums = &mut self.sum[step * self.dim..(step + 1) * self.dim];
+        let dim = self.dim;
+        let Ok(sums) = <&mut [f64; D]>::try_from(&mut self.sum[step * dim..(step + 1) * dim])
+        else {
+            return refuse_live(live, dim_mismatch(dim, D), refused);
+        };
         // As in `StepMean::push_lanes`: if each component's sum over every live lane is
         // finite, pushing lane by lane would have refused nothing (each component's sum sees
-        // the lanes in the same order either way). A state of at most `FAST` components.
-        const FAST: usize = 8;
-        if sums.len() <= FAST {
-            let mut next = [0.0; FAST];
-            for ((n, s), e) in next.iter_mut().zip(sums.iter()).zip(errors) {
-                *n = *s;
-                for lane in 0..L {
-                    if live[lane] {
-                        *n += e[lane] * e[lane];
-                    }
+        // the lanes in the same order either way).
+        let mut next = *sums;
+        let every = live.iter().all(|l| *l);
+        for lane in 0..L {
+            if every || live[lane] {
+                for c in 0..D {
+                    next[c] += errors[c][lane] * errors[c][lane];
                 }
             }
-            let next = &next[..sums.len()];
-            if next.iter().all(|s| s.is_finite()) {
-                sums.copy_from_slice(next);
-                self.count[step] += live.iter().filter(|l| **l).count() as u64;
-                return;
-            }
+        }
+        if next.iter().all(|s| s.is_finite()) {
+            *sums = next;
+            self.count[step] += live.iter().filter(|l| **l).count() as u64;
+            return;
         }
         let mut count = self.count[step];
         for lane in 0..L {
@@ -760,14 +761,13 @@ mod tests {
     /// horizon and a wrong dimension.
     #[test]
     fn lanewise_pushes_equal_pushing_lane_by_lane() {
-        // A state of 3 components (summed component by component over the lanes first) and
-        // one of 9 (lane by lane).
-        for dim in [3, 9] {
-            lanewise_pushes(dim);
-        }
+        // Two state sizes.
+        lanewise_pushes::<3>();
+        lanewise_pushes::<9>();
     }
 
-    fn lanewise_pushes(dim: usize) {
+    fn lanewise_pushes<const D: usize>() {
+        let dim = D;
         use rand::{RngExt, SeedableRng};
         const L: usize = 8;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
@@ -790,9 +790,8 @@ mod tests {
                 }
             };
             let values: [f64; L] = std::array::from_fn(|_| value(&mut rng));
-            let errors: Vec<[f64; L]> = (0..dim)
-                .map(|_| std::array::from_fn(|_| value(&mut rng)))
-                .collect();
+            let errors: [[f64; L]; D] =
+                std::array::from_fn(|_| std::array::from_fn(|_| value(&mut rng)));
             // All lanes, none, or a random subset.
             let live: [bool; L] = match round % 7 {
                 0 => [true; L],

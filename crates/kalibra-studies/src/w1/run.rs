@@ -300,7 +300,8 @@ fn batched(
         let mut truth = LinearTruthBatch::new(&f, &h, first, rngs, |rng| {
             m0 + sample_with_factor(&p0_factor, rng)
         })
-        .map_err(to_study)?;
+        .map_err(to_study)?
+        .with_isa(isa);
         let mut kf = KfBatch::new(isa, model.clone(), m0, p0).map_err(|e| RunFailure {
             run: first,
             source: e.into(),
