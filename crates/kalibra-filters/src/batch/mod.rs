@@ -499,7 +499,8 @@ impl<const N: usize> BatchStep<N> {
     pub fn ok(&self) -> [bool; BATCH] {
         let mut ok = [false; BATCH];
         for ((ok, health), nees) in ok.iter_mut().zip(&self.health).zip(&self.nees) {
-            *ok = *health == 0.0 && nees.is_finite();
+            // `&`, not `&&`: no branch per lane.
+            *ok = (*health == 0.0) & nees.is_finite();
         }
         ok
     }

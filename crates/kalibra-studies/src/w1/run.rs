@@ -307,14 +307,20 @@ fn batched(
             source: e.into(),
         })?;
         // A run stops at its first error, as the scalar run does; the others go on.
+        // `running`: the lanes of runs that have not failed (lanes past the group's runs
+        // never run).
         let mut failed: [Option<StudyError>; BATCH] = std::array::from_fn(|_| None);
+        let mut running: [bool; BATCH] = std::array::from_fn(|lane| lane < runs.len());
         for k in 0..steps {
             // A diverging truth fails its run (the scalar run's error); the others go on.
             // The step names the lowest failing lane: a higher one failing too cannot be
             // the group's lowest failure.
             if let Err(e) = truth.step(rngs) {
                 let lane = e.run - first;
-                failed[lane].get_or_insert_with(|| to_study(e).source);
+                if running[lane] {
+                    running[lane] = false;
+                    failed[lane] = Some(to_study(e).source);
+                }
             }
             let step = if k == 0 {
                 kf.update(truth.measurement(), truth.state())
@@ -325,11 +331,13 @@ fn batched(
             // succeeded; a run whose step failed stops with the step's error.
             let ok = step.ok();
             let mut live = [false; BATCH];
-            for lane in 0..runs.len() {
-                if failed[lane].is_none() {
-                    if ok[lane] {
-                        live[lane] = true;
-                    } else {
+            for lane in 0..BATCH {
+                live[lane] = running[lane] & ok[lane];
+            }
+            if live != running {
+                for lane in 0..BATCH {
+                    if running[lane] && !live[lane] {
+                        running[lane] = false;
                         failed[lane] = step.nees(lane).err().map(StudyError::from);
                     }
                 }
@@ -340,6 +348,7 @@ fn batched(
             let nees = step.nees_lanes().map(|v| v / 4.0);
             let nis = step.nis_lanes().map(|v| v / 2.0);
             let mut stop = |lane: usize, e: kalibra_metrics::MetricsError| {
+                running[lane] = false;
                 failed[lane] = Some(e.into());
             };
             nees_acc.push_lanes(k, &nees, &mut live, &mut stop);
