@@ -361,8 +361,9 @@ pub struct BatchStep<const N: usize> {
     // The error of a lane's update, and of its NEES (the update's, or the NEES's own).
     failure: [Option<FilterError>; BATCH],
     nees_failure: [Option<FilterError>; BATCH],
-    // Whether `failure` or `nees_failure` holds an error (`finish` skips both when neither
-    // does and every lane succeeded: the common step costs a pass over the health sums).
+    // Whether `failure` or `nees_failure` holds an error, as `finish` leaves them (it skips
+    // both when neither does and every lane succeeded: the common step costs a pass over the
+    // health sums). The UKF writes the two itself and never reads this.
     stored_failures: bool,
 }
 
