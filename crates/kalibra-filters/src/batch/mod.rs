@@ -371,6 +371,7 @@ impl<const N: usize> BatchStep<N> {
     /// Completes the kernel's output for step `k`: the kernel's health sum is 0 for a lane
     /// whose update succeeded and NaN otherwise; the NEES is checked apart, as the scalar
     /// record's `nees` is a separate call. `x`, `p`: the lanes' states after the step.
+    #[inline]
     fn finish<const M: usize>(
         &mut self,
         k: usize,
@@ -379,9 +380,21 @@ impl<const N: usize> BatchStep<N> {
         p: &[[Lanes; N]; N],
     ) {
         self.k = k;
-        if !self.stored_failures && self.ok().into_iter().all(|ok| ok) {
-            return;
+        if self.stored_failures || !self.ok().into_iter().all(|ok| ok) {
+            self.name_failures(z, x, p);
         }
+    }
+
+    /// The errors of the failed lanes, and `None` for the others (off the hot path).
+    #[cold]
+    #[inline(never)]
+    fn name_failures<const M: usize>(
+        &mut self,
+        z: &[Lanes; M],
+        x: &[Lanes; N],
+        p: &[[Lanes; N]; N],
+    ) {
+        let k = self.k;
         for lane in 0..BATCH {
             self.failure[lane] = (self.health[lane] != 0.0).then(|| self.explain(lane, z, x, p));
             self.nees_failure[lane] =
