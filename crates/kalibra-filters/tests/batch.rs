@@ -2,7 +2,7 @@
 //! this CPU has, forced in turn: estimates, NIS and NEES, and per-lane errors that hit only
 //! their lane.
 
-use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch, Lanes};
+use kalibra_filters::batch::{BATCH, BatchModel, BatchStep, Isa, KfBatch, Lanes};
 use kalibra_filters::{Filter, FilterError, Kf};
 use kalibra_linalg::{Matrix2, Matrix4, SMatrix, U2, U4, Vector2, Vector4};
 use kalibra_models::{LinearGaussian, LinearObservation};
@@ -148,6 +148,8 @@ fn a_nan_measurement_fails_only_its_lane() {
             let mut z3 = data(k, 3).0;
             z3[1] = z_bad[1][3];
             let scalar = kf3.update(&z3).map(|rec| rec.nis());
+            whole_batch_views_agree(&a);
+            whole_batch_views_agree(&b);
             for lane in 0..BATCH {
                 if lane == 3 && k == 5 {
                     let expected = FilterError::NonFinite {
@@ -159,6 +161,7 @@ fn a_nan_measurement_fails_only_its_lane() {
                     assert_eq!(b.nees(lane), Err(expected), "{isa}");
                     // Left at its prediction, as the scalar filter is.
                     assert_eq!(dirty.mean(3), *kf3.mean(), "{isa}");
+                    assert!(!b.ok()[lane]);
                 } else if lane == 3 && k > 5 {
                     // Lane 3 went on from its prediction: no longer the clean lane's numbers.
                     assert!(b.nis(lane).is_ok());
@@ -172,6 +175,26 @@ fn a_nan_measurement_fails_only_its_lane() {
             }
         }
     }
+}
+
+/// The whole-batch views of a step ([`BatchStep::ok`], [`BatchStep::nis_lanes`],
+/// [`BatchStep::nees_lanes`], [`BatchStep::errors`]) say what the per-lane calls say.
+fn whole_batch_views_agree<const N: usize>(step: &BatchStep<N>) {
+    let ok = step.ok();
+    for (lane, ok) in ok.into_iter().enumerate() {
+        assert_eq!(ok, step.nees(lane).is_ok(), "lane {lane}");
+        if ok {
+            assert_eq!(Ok(step.nis_lanes()[lane]), step.nis(lane));
+            assert_eq!(Ok(step.nees_lanes()[lane]), step.nees(lane));
+        }
+        for i in 0..N {
+            assert_eq!(
+                step.errors()[i][lane].to_bits(),
+                step.error(lane)[i].to_bits()
+            );
+        }
+    }
+    assert_eq!(ok.iter().all(|o| *o), step.all_ok());
 }
 
 #[test]
@@ -199,6 +222,9 @@ fn a_singular_s_fails_only_its_lane() {
         let mut batch = KfBatch::new(isa, BatchModel::new(f, q, h, r).unwrap(), m0, p0).unwrap();
         batch.set_lane(5, m0, Matrix4::zeros()).unwrap();
         let step = batch.update(&z, &x);
+        whole_batch_views_agree(step);
+        // (R = 0 leaves every P+ singular: no lane has a NEES.)
+        assert_eq!(step.ok(), [false; BATCH]);
         for lane in 0..BATCH {
             if lane == 5 {
                 assert_eq!(step.nis(lane), Err(expected.clone()), "{isa}");

@@ -50,6 +50,57 @@ impl<A: Merge, B: Merge, C: Merge> Merge for (A, B, C) {
     }
 }
 
+/// Refuses every live lane with `e`: a lane-wise push whose lanes all fail alike (a step
+/// beyond the horizon, a wrong dimension).
+#[cold]
+fn refuse_live<const L: usize>(
+    live: &mut [bool; L],
+    e: MetricsError,
+    mut refused: impl FnMut(usize, MetricsError),
+) {
+    for (lane, l) in live.iter_mut().enumerate() {
+        if *l {
+            *l = false;
+            refused(lane, e.clone());
+        }
+    }
+}
+
+/// An error vector of `found` components where the accumulator has `expected`.
+fn dim_mismatch(expected: usize, found: usize) -> MetricsError {
+    MetricsError::DimensionMismatch {
+        what: "error vector",
+        expected,
+        found,
+    }
+}
+
+/// Why [`StepMean::push`] refuses `value` at `step` (the step's sum would not be finite).
+#[cold]
+fn refused_mean(step: usize, value: f64) -> MetricsError {
+    MetricsError::NonFiniteSample {
+        what: if value.is_finite() {
+            "step mean (sum beyond f64's range)"
+        } else {
+            "step mean"
+        },
+        index: step,
+    }
+}
+
+/// Why [`SquaredErrors::push_slice`] refuses an error whose components are `error` at `step`.
+#[cold]
+fn refused_squares(step: usize, mut error: impl Iterator<Item = f64>) -> MetricsError {
+    MetricsError::NonFiniteSample {
+        what: if error.all(f64::is_finite) {
+            "squared errors (sum beyond f64's range)"
+        } else {
+            "squared errors"
+        },
+        index: step,
+    }
+}
+
 fn check_step(step: usize, steps: usize) -> Result<(), MetricsError> {
     if step < steps {
         Ok(())
@@ -144,18 +195,77 @@ impl StepMean {
         check_step(step, self.steps())?;
         let sum = self.sum[step] + value;
         if !sum.is_finite() {
-            return Err(MetricsError::NonFiniteSample {
-                what: if value.is_finite() {
-                    "step mean (sum beyond f64's range)"
-                } else {
-                    "step mean"
-                },
-                index: step,
-            });
+            return Err(refused_mean(step, value));
         }
         self.sum[step] = sum;
         self.count[step] += 1;
         Ok(())
+    }
+
+    /// Adds, at `step`, the value `values[i]` of every lane `i` with `live[i]` (one run per
+    /// lane of a batch of runs stepped together), lane 0 first: what [`StepMean::push`] of
+    /// each live lane's value, one after the other, would do, to the bit. A study stepping
+    /// its runs in lanes adds them to the sums in the order the one-run loop does, with one
+    /// call per step instead of one per run.
+    ///
+    /// A value [`StepMean::push`] would refuse is not stored: its lane is cleared in `live`
+    /// and `refused(lane, error)` called with the error `push` would return (in lane order,
+    /// off the common path), and the later lanes are still pushed. On return `live` holds the
+    /// lanes pushed, ready for the next accumulator of the same runs.
+    ///
+    /// ```
+    /// use kalibra_metrics::StepMean;
+    /// let mut m = StepMean::new(1);
+    /// let mut refused = Vec::new();
+    /// let mut live = [true, true, true, false];
+    /// m.push_lanes(0, &[1.0, f64::NAN, 2.0, 9.0], &mut live, |lane, _| refused.push(lane));
+    /// assert_eq!(refused, [1]);
+    /// assert_eq!(live, [true, false, true, false]);
+    /// assert_eq!((m.mean(0), m.count(0)), (Some(1.5), 2));
+    /// ```
+    #[inline]
+    pub fn push_lanes<const L: usize>(
+        &mut self,
+        step: usize,
+        values: &[f64; L],
+        live: &mut [bool; L],
+        mut refused: impl FnMut(usize, MetricsError),
+    ) {
+        if let Err(e) = check_step(step, self.steps()) {
+            return refuse_live(live, e, refused);
+        }
+        // Every live lane added in order; if the sum is then finite, so was every partial
+        // sum (a NaN or infinite sum stays so whatever is added to it), so pushing lane by
+        // lane would have refused nothing: the same sum, without a test per lane.
+        let (mut sum, mut count) = (self.sum[step], self.count[step]);
+        let mut all = sum;
+        let every = live.iter().all(|l| *l);
+        for lane in 0..L {
+            // (Without a test per lane when every lane is live, the usual case.)
+            if every || live[lane] {
+                all += values[lane];
+            }
+        }
+        if all.is_finite() {
+            self.sum[step] = all;
+            self.count[step] += live.iter().filter(|l| **l).count() as u64;
+            return;
+        }
+        for lane in 0..L {
+            if !live[lane] {
+                continue;
+            }
+            let next = sum + values[lane];
+            if next.is_finite() {
+                sum = next;
+                count += 1;
+            } else {
+                live[lane] = false;
+                refused(lane, refused_mean(step, values[lane]));
+            }
+        }
+        self.sum[step] = sum;
+        self.count[step] = count;
     }
 
     /// Number of values pushed at `step` (0 beyond the horizon).
@@ -312,11 +422,7 @@ impl SquaredErrors {
     pub fn push_slice(&mut self, step: usize, error: &[f64]) -> Result<(), MetricsError> {
         check_step(step, self.steps())?;
         if error.len() != self.dim {
-            return Err(MetricsError::DimensionMismatch {
-                what: "error vector",
-                expected: self.dim,
-                found: error.len(),
-            });
+            return Err(dim_mismatch(self.dim, error.len()));
         }
         let sums = &mut self.sum[step * self.dim..(step + 1) * self.dim];
         if !error
@@ -324,20 +430,89 @@ impl SquaredErrors {
             .zip(sums.iter())
             .all(|(e, s)| (s + e * e).is_finite())
         {
-            return Err(MetricsError::NonFiniteSample {
-                what: if error.iter().all(|e| e.is_finite()) {
-                    "squared errors (sum beyond f64's range)"
-                } else {
-                    "squared errors"
-                },
-                index: step,
-            });
+            return Err(refused_squares(step, error.iter().copied()));
         }
         for (s, e) in sums.iter_mut().zip(error) {
             *s += e * e;
         }
         self.count[step] += 1;
         Ok(())
+    }
+
+    /// Adds, at `step`, the error of every lane `i` with `live[i]`, lane 0 first, where
+    /// `errors[c][i]` is component `c` of lane `i`'s error (one run per lane of a batch of
+    /// runs stepped together, components as rows): what [`SquaredErrors::push_slice`] of each
+    /// live lane's error, one after the other, would do, to the bit.
+    ///
+    /// An error [`SquaredErrors::push_slice`] would refuse is not stored: its lane is cleared
+    /// in `live` and `refused(lane, error)` called with the error `push_slice` would return
+    /// (in lane order), and the later lanes are still pushed. On return `live` holds the
+    /// lanes pushed.
+    ///
+    /// ```
+    /// use kalibra_metrics::SquaredErrors;
+    /// let mut acc = SquaredErrors::new(1, 2);
+    /// // Lanes 0 and 1 are runs with errors (3, 4) and (6, 8); lane 2 is not live.
+    /// let errors = [[3.0, 6.0, 1.0], [4.0, 8.0, 1.0]];
+    /// let mut live = [true, true, false];
+    /// acc.push_lanes(0, &errors, &mut live, |lane, e| panic!("{lane}: {e}"));
+    /// assert_eq!(acc.count(0), 2);
+    /// assert_eq!(acc.rmse_group(0, &[0, 1])?, 62.5f64.sqrt());
+    /// # Ok::<(), kalibra_metrics::MetricsError>(())
+    /// ```
+    #[inline]
+    pub fn push_lanes<const L: usize, const D: usize>(
+        &mut self,
+        step: usize,
+        errors: &[[f64; L]; D],
+        live: &mut [bool; L],
+        mut refused: impl FnMut(usize, MetricsError),
+    ) {
+        if let Err(e) = check_step(step, self.steps()) {
+            return refuse_live(live, e, refused);
+        }
+        let dim = self.dim;
+        let Ok(sums) = <&mut [f64; D]>::try_from(&mut self.sum[step * dim..(step + 1) * dim])
+        else {
+            return refuse_live(live, dim_mismatch(dim, D), refused);
+        };
+        // As in `StepMean::push_lanes`: if each component's sum over every live lane is
+        // finite, pushing lane by lane would have refused nothing (each component's sum sees
+        // the lanes in the same order either way).
+        let mut next = *sums;
+        let every = live.iter().all(|l| *l);
+        for lane in 0..L {
+            if every || live[lane] {
+                for c in 0..D {
+                    next[c] += errors[c][lane] * errors[c][lane];
+                }
+            }
+        }
+        if next.iter().all(|s| s.is_finite()) {
+            *sums = next;
+            self.count[step] += live.iter().filter(|l| **l).count() as u64;
+            return;
+        }
+        let mut count = self.count[step];
+        for lane in 0..L {
+            if !live[lane] {
+                continue;
+            }
+            if errors
+                .iter()
+                .zip(sums.iter())
+                .all(|(e, s)| (s + e[lane] * e[lane]).is_finite())
+            {
+                for (s, e) in sums.iter_mut().zip(errors) {
+                    *s += e[lane] * e[lane];
+                }
+                count += 1;
+            } else {
+                live[lane] = false;
+                refused(lane, refused_squares(step, errors.iter().map(|e| e[lane])));
+            }
+        }
+        self.count[step] = count;
     }
 
     /// Adds one run's error vector at `step`.
@@ -578,5 +753,129 @@ mod tests {
             squared.rmse_series(&[0]),
             Err(MetricsError::Empty { .. })
         ));
+    }
+
+    /// Lane-wise pushes equal pushing the live lanes one after the other, to the bit: sums
+    /// with rounding in them, lanes left out, values refused (NaN, infinite, or taking a sum
+    /// beyond f64's range) with the error the one-by-one push returns, a step beyond the
+    /// horizon and a wrong dimension.
+    #[test]
+    fn lanewise_pushes_equal_pushing_lane_by_lane() {
+        // Two state sizes.
+        lanewise_pushes::<3>();
+        lanewise_pushes::<9>();
+    }
+
+    fn lanewise_pushes<const D: usize>() {
+        let dim = D;
+        use rand::{RngExt, SeedableRng};
+        const L: usize = 8;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let steps = 3;
+        let mut lanes = (StepMean::new(steps), SquaredErrors::new(steps, dim));
+        let mut one = lanes.clone();
+        let specials = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e308, 1.5e154];
+        for round in 0..400 {
+            // Steps 0 .. steps - 1, and now and then one beyond the horizon.
+            let step = if round % 50 == 49 {
+                steps
+            } else {
+                round % steps
+            };
+            let value = |rng: &mut rand_chacha::ChaCha8Rng| {
+                if rng.random::<f64>() < 0.05 {
+                    specials[rng.random_range(0..specials.len())]
+                } else {
+                    rng.random::<f64>() * 10f64.powi(rng.random_range(-3..4))
+                }
+            };
+            let values: [f64; L] = std::array::from_fn(|_| value(&mut rng));
+            let errors: [[f64; L]; D] =
+                std::array::from_fn(|_| std::array::from_fn(|_| value(&mut rng)));
+            // All lanes, none, or a random subset.
+            let live: [bool; L] = match round % 7 {
+                0 => [true; L],
+                1 => [false; L],
+                _ => std::array::from_fn(|_| rng.random::<bool>()),
+            };
+            let mut got = vec![];
+            let (mut live0, mut live1) = (live, live);
+            lanes
+                .0
+                .push_lanes(step, &values, &mut live0, |lane, e| got.push((0, lane, e)));
+            lanes
+                .1
+                .push_lanes(step, &errors, &mut live1, |lane, e| got.push((1, lane, e)));
+            let mut want = vec![];
+            for (acc, lane) in [0, 1].into_iter().flat_map(|a| (0..L).map(move |l| (a, l))) {
+                if !live[lane] {
+                    continue;
+                }
+                let e: Vec<f64> = errors.iter().map(|row| row[lane]).collect();
+                let pushed = match acc {
+                    0 => one.0.push(step, values[lane]),
+                    _ => one.1.push_slice(step, &e),
+                };
+                if let Err(e) = pushed {
+                    want.push((acc, lane, e));
+                }
+            }
+            assert_eq!(got, want, "round {round}");
+            // The lanes left live are those pushed.
+            for (acc, after) in [live0, live1].into_iter().enumerate() {
+                for lane in 0..L {
+                    let refused = want.iter().any(|w| (w.0, w.1) == (acc, lane));
+                    assert_eq!(after[lane], live[lane] && !refused, "round {round}");
+                }
+            }
+            // PartialEq on f64 sums: equal values (no NaN is ever stored), compared by bits too.
+            assert_eq!(lanes, one, "round {round}");
+            assert!(
+                lanes
+                    .0
+                    .sum
+                    .iter()
+                    .zip(&one.0.sum)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+            assert!(
+                lanes
+                    .1
+                    .sum
+                    .iter()
+                    .zip(&one.1.sum)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
+        // Something was stored and something was refused, or the test tested little.
+        assert!(lanes.0.count(0) > 100 && lanes.1.count(0) > 100);
+        let mut refused = vec![];
+        let mut all = [true; L];
+        lanes
+            .0
+            .push_lanes(0, &[f64::NAN; L], &mut all, |lane, _| refused.push(lane));
+        assert_eq!(refused, (0..L).collect::<Vec<_>>());
+        assert_eq!(all, [false; L]);
+        // A wrong dimension fails every live lane and stores nothing.
+        let before = lanes.1.clone();
+        let mut wrong = vec![];
+        let mut every_other = std::array::from_fn(|lane| lane % 2 == 0);
+        lanes
+            .1
+            .push_lanes(0, &[[1.0; L]; 2], &mut every_other, |lane, e| {
+                wrong.push((lane, e))
+            });
+        assert_eq!(every_other, [false; L]);
+        let expected = MetricsError::DimensionMismatch {
+            what: "error vector",
+            expected: dim,
+            found: 2,
+        };
+        let want: Vec<_> = (0..L)
+            .step_by(2)
+            .map(|lane| (lane, expected.clone()))
+            .collect();
+        assert_eq!(wrong, want);
+        assert_eq!(lanes.1, before);
     }
 }

@@ -1,12 +1,13 @@
 //! Batched Monte Carlo: runs stepped [`BATCH`] at a time ([`MonteCarlo::accumulate_batched`])
 //! and their true trajectories ([`LinearTruthBatch`] for linear models, [`TruthBatch`] for any).
 
-use kalibra_filters::batch::{BATCH, Lanes};
+use kalibra_filters::batch::{BATCH, Isa, Lanes};
 use kalibra_linalg::{Const, SMatrix, SVector};
 use kalibra_metrics::Merge;
 use kalibra_models::{
     Dynamics, LinearGaussian, LinearObservation, Measurement, ModelError, Simulator,
 };
+use pulp::{Simd, WithSimd};
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::{ChaCha8Rng, MonteCarlo, Partial, Shard, SimError, StudyId};
@@ -305,7 +306,7 @@ fn write_lane<const D: usize>(out: &mut [Lanes; D], lane: usize, v: &SVector<f64
 /// them as the models do (`z = H x + L_R n_v`, `x' = F x + L_Q n_w` with the models' own
 /// factors, each product summed in column order as nalgebra's), so a lane's truth is the
 /// scalar run's, bit for bit where the compiler keeps the operation order. Unlike
-/// [`TruthBatch`], the arithmetic runs across the lanes (the compiler vectorises the loops) and
+/// [`TruthBatch`], the arithmetic runs across the lanes (the compiler vectorises the loops, for the instruction set of [`LinearTruthBatch::with_isa`]) and
 /// skips the per-lane model calls; the draws stay per lane, since each generator is sequential.
 #[derive(Clone, Debug)]
 pub struct LinearTruthBatch<const N: usize, const M: usize> {
@@ -313,12 +314,34 @@ pub struct LinearTruthBatch<const N: usize, const M: usize> {
     lq: [[f64; N]; N],
     h: [[f64; N]; M],
     lr: [[f64; M]; M],
+    // The instruction set the arithmetic runs on (the draws are per lane).
+    isa: Isa,
     lanes: usize,
     first_run: usize,
     k: usize,
     x: [Lanes; N],
     current: [Lanes; N],
     z: [Lanes; M],
+}
+
+/// `z = H x + L_R n_v` and `x' = F x + L_Q n_w` for every lane, compiled inside the
+/// dispatched function for its instruction set. Products and sums are separate operations
+/// (Rust never fuses them), so every instruction set gives the same numbers.
+struct Affine<'a, const N: usize, const M: usize> {
+    truth: &'a mut LinearTruthBatch<N, M>,
+    nv: &'a [Lanes; M],
+    nw: &'a [Lanes; N],
+}
+
+impl<const N: usize, const M: usize> WithSimd for Affine<'_, N, M> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _simd: S) {
+        let t = self.truth;
+        affine(&t.h, &t.current, &t.lr, self.nv, &mut t.z);
+        affine(&t.f, &t.current, &t.lq, self.nw, &mut t.x);
+    }
 }
 
 fn rows<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> [[f64; C]; R] {
@@ -408,6 +431,7 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
             lq: rows(dynamics.q().factor()),
             h: rows(measurement.h()),
             lr: rows(measurement.r().factor()),
+            isa: Isa::detect(),
             lanes: rngs.len(),
             first_run,
             k: 0,
@@ -415,6 +439,14 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
             current: [[0.0; BATCH]; N],
             z: [[0.0; BATCH]; M],
         })
+    }
+
+    /// Runs the arithmetic on instruction set `isa` (the CPU's widest by default, the
+    /// scalar fallback if the CPU does not run `isa`): a study pins its batch's instruction
+    /// set with it, so that a forced one runs everywhere. The numbers do not depend on it.
+    pub fn with_isa(mut self, isa: Isa) -> Self {
+        self.isa = isa;
+        self
     }
 
     /// Number of live lanes.
@@ -451,8 +483,12 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
             }
         }
         self.current = self.x;
-        affine(&self.h, &self.current, &self.lr, &nv, &mut self.z);
-        affine(&self.f, &self.current, &self.lq, &nw, &mut self.x);
+        let isa = self.isa;
+        isa.dispatch(Affine {
+            truth: self,
+            nv: &nv,
+            nw: &nw,
+        });
         let k = self.k;
         self.k += 1;
         for lane in 0..self.lanes {

@@ -78,10 +78,12 @@ fn batched_runs(
     let (m0, p0) = prior();
     let l0 = *PsdMatrix::new(p0).unwrap().factor();
     let mut rngs: Vec<_> = runs.clone().map(|r| mc.rng(r)).collect();
+    // The truth's arithmetic on `isa` too: every instruction set's is the scalar simulator's.
     let mut truth = LinearTruthBatch::new(&f, &h, runs.start, &mut rngs, |rng| {
         m0 + sample_with_factor(&l0, rng)
     })
-    .unwrap();
+    .unwrap()
+    .with_isa(isa);
     let mut kf = KfBatch::new(isa, batch_model(), m0, p0).unwrap();
     let mut out = vec![Vec::new(); runs.len()];
     for k in 0..steps {

@@ -14,28 +14,70 @@ use super::{BATCH, BatchStep, JLanes, Lanes};
 /// Where the kernel reads a model matrix: one matrix broadcast to every lane
 /// (`&[[f64; C]; R]`), or one per lane (`&[[Lanes; C]; R]`).
 pub(super) trait Operand<const R: usize, const C: usize> {
-    /// The matrix for the lanes of chunk `c` (one vector of the instruction set per entry).
-    fn get<S: Simd>(&self, simd: S, c: usize) -> [[S::f64s; C]; R];
+    /// Entry `(i, j)` for the lanes of chunk `c` (one vector of the instruction set).
+    fn at<S: Simd>(&self, simd: S, c: usize, i: usize, j: usize) -> S::f64s;
 }
 
 impl<const R: usize, const C: usize> Operand<R, C> for &[[f64; C]; R] {
     #[inline(always)]
-    fn get<S: Simd>(&self, simd: S, _c: usize) -> [[S::f64s; C]; R] {
-        splat(simd, self)
+    fn at<S: Simd>(&self, simd: S, _c: usize, i: usize, j: usize) -> S::f64s {
+        simd.splat_f64s(self[i][j])
     }
 }
 
 impl<const R: usize, const C: usize> Operand<R, C> for &[[Lanes; C]; R] {
     #[inline(always)]
-    fn get<S: Simd>(&self, simd: S, c: usize) -> [[S::f64s; C]; R] {
-        let mut out = [[simd.splat_f64s(0.0); C]; R];
-        for i in 0..R {
-            for j in 0..C {
-                out[i][j] = load::<S>(&self[i][j], c);
-            }
-        }
-        out
+    fn at<S: Simd>(&self, _simd: S, c: usize, i: usize, j: usize) -> S::f64s {
+        load::<S>(&self[i][j], c)
     }
+}
+
+/// A matrix the kernel's products read entry by entry: values computed in the step
+/// (`[[S::f64s; C]; R]`), or a model operand ([`Model`]).
+pub(super) trait Entries<S: Simd, const R: usize, const C: usize> {
+    /// Entry `(i, j)`.
+    fn at(&self, i: usize, j: usize) -> S::f64s;
+}
+
+impl<S: Simd, const R: usize, const C: usize> Entries<S, R, C> for [[S::f64s; C]; R] {
+    #[inline(always)]
+    fn at(&self, i: usize, j: usize) -> S::f64s {
+        self[i][j]
+    }
+}
+
+/// A model operand for the lanes of chunk `c`, read where it is used: a broadcast entry is
+/// splatted at its use (from memory into the instruction) rather than all 44 of W1's `F`,
+/// `Q`, `H`, `R` up front, which held more vectors than there are registers and went to the
+/// stack and back.
+pub(super) struct Model<'a, O, S> {
+    op: &'a O,
+    simd: S,
+    c: usize,
+}
+
+impl<O: Operand<R, C>, S: Simd, const R: usize, const C: usize> Entries<S, R, C>
+    for Model<'_, O, S>
+{
+    #[inline(always)]
+    fn at(&self, i: usize, j: usize) -> S::f64s {
+        self.op.at(self.simd, self.c, i, j)
+    }
+}
+
+/// The entries of `m` as values (for code that indexes rows).
+#[inline(always)]
+fn values<S: Simd, const R: usize, const C: usize>(
+    simd: S,
+    m: &impl Entries<S, R, C>,
+) -> [[S::f64s; C]; R] {
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            out[i][j] = m.at(i, j);
+        }
+    }
+    out
 }
 
 /// One batched step: `with_simd` is compiled once per instruction set.
@@ -76,31 +118,20 @@ pub(super) fn store<S: Simd>(a: &mut Lanes, c: usize, v: S::f64s) {
 // closure is a function of its own, compiled for the baseline instruction set unless it is
 // inlined, and one that was not made the AVX-512 kernel slower than the scalar one.
 
-#[inline(always)]
-fn splat<S: Simd, const R: usize, const C: usize>(simd: S, m: &[[f64; C]; R]) -> [[S::f64s; C]; R] {
-    let mut out = [[simd.splat_f64s(0.0); C]; R];
-    for i in 0..R {
-        for j in 0..C {
-            out[i][j] = simd.splat_f64s(m[i][j]);
-        }
-    }
-    out
-}
-
 /// `sum_k a[i][k] b[k][j]`, accumulated in `k` order like nalgebra's small products, with a
 /// fused multiply-add where the instruction set has one.
 #[inline(always)]
 pub(super) fn mul<S: Simd, const R: usize, const K: usize, const C: usize>(
     simd: S,
-    a: &[[S::f64s; K]; R],
-    b: &[[S::f64s; C]; K],
+    a: &impl Entries<S, R, K>,
+    b: &impl Entries<S, K, C>,
 ) -> [[S::f64s; C]; R] {
     let mut out = [[simd.splat_f64s(0.0); C]; R];
     for i in 0..R {
         for j in 0..C {
-            let mut s = simd.mul_f64s(a[i][0], b[0][j]);
+            let mut s = simd.mul_f64s(a.at(i, 0), b.at(0, j));
             for k in 1..K {
-                s = simd.mul_add_e_f64s(a[i][k], b[k][j], s);
+                s = simd.mul_add_e_f64s(a.at(i, k), b.at(k, j), s);
             }
             out[i][j] = s;
         }
@@ -112,14 +143,14 @@ pub(super) fn mul<S: Simd, const R: usize, const K: usize, const C: usize>(
 #[inline(always)]
 fn mul_vec<S: Simd, const R: usize, const K: usize>(
     simd: S,
-    a: &[[S::f64s; K]; R],
+    a: &impl Entries<S, R, K>,
     v: &[S::f64s; K],
 ) -> [S::f64s; R] {
     let mut out = [simd.splat_f64s(0.0); R];
     for i in 0..R {
-        let mut s = simd.mul_f64s(a[i][0], v[0]);
+        let mut s = simd.mul_f64s(a.at(i, 0), v[0]);
         for k in 1..K {
-            s = simd.mul_add_e_f64s(a[i][k], v[k], s);
+            s = simd.mul_add_e_f64s(a.at(i, k), v[k], s);
         }
         out[i] = s;
     }
@@ -130,15 +161,15 @@ fn mul_vec<S: Simd, const R: usize, const K: usize>(
 #[inline(always)]
 pub(super) fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
     simd: S,
-    a: &[[S::f64s; K]; R],
-    b: &[[S::f64s; K]; C],
+    a: &impl Entries<S, R, K>,
+    b: &impl Entries<S, C, K>,
 ) -> [[S::f64s; C]; R] {
     let mut out = [[simd.splat_f64s(0.0); C]; R];
     for i in 0..R {
         for j in 0..C {
-            let mut s = simd.mul_f64s(a[i][0], b[j][0]);
+            let mut s = simd.mul_f64s(a.at(i, 0), b.at(j, 0));
             for k in 1..K {
-                s = simd.mul_add_e_f64s(a[i][k], b[j][k], s);
+                s = simd.mul_add_e_f64s(a.at(i, k), b.at(j, k), s);
             }
             out[i][j] = s;
         }
@@ -146,16 +177,17 @@ pub(super) fn mul_t<S: Simd, const R: usize, const K: usize, const C: usize>(
     out
 }
 
+/// `a + b`.
 #[inline(always)]
 pub(super) fn add<S: Simd, const R: usize, const C: usize>(
     simd: S,
-    a: &[[S::f64s; C]; R],
-    b: &[[S::f64s; C]; R],
+    a: &impl Entries<S, R, C>,
+    b: &impl Entries<S, R, C>,
 ) -> [[S::f64s; C]; R] {
-    let mut out = *a;
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
     for i in 0..R {
         for j in 0..C {
-            out[i][j] = simd.add_f64s(a[i][j], b[i][j]);
+            out[i][j] = simd.add_f64s(a.at(i, j), b.at(i, j));
         }
     }
     out
@@ -287,13 +319,11 @@ where
         let zero = simd.splat_f64s(0.0);
         let one = simd.splat_f64s(1.0);
         for c in 0..BATCH / S::F64_LANES {
-            // The model for these lanes (a broadcast is loop-invariant and hoisted).
-            let (f, q, h, r) = (
-                fs.get(simd, c),
-                qs.get(simd, c),
-                hs.get(simd, c),
-                rs.get(simd, c),
-            );
+            // The model for these lanes, read where it is used.
+            let f = Model { op: &fs, simd, c };
+            let q = Model { op: &qs, simd, c };
+            let h = Model { op: &hs, simd, c };
+            let r = Model { op: &rs, simd, c };
             let mut x = [zero; N];
             let mut p = [[zero; N]; N];
             for i in 0..N {
@@ -367,23 +397,47 @@ where
             // NIS through the factor of S.
             let nis = norm_squared(simd, &forward(simd, &ls, &nu));
             // Health: 0 if the measurement, the NIS (so S's factor) and the posterior are all
-            // finite, NaN otherwise; a lane keeps its old estimate unless it is 0.
-            let mut ok = health(simd, hz, nis);
+            // finite, NaN otherwise; a lane keeps its old estimate unless it is 0. P+ is
+            // symmetric (`symmetrize` wrote one value to both triangles), so its upper triangle
+            // says all; four independent sums keep the test short (0 + 0 is 0 and NaN stays
+            // NaN in any order).
+            let mut sums = [hz, zero, zero, zero];
+            sums[1] = health(simd, sums[1], nis);
             for i in 0..N {
-                ok = health(simd, ok, x_post[i]);
-                for j in 0..N {
-                    ok = health(simd, ok, p_post[i][j]);
+                sums[(2 + i) % 4] = health(simd, sums[(2 + i) % 4], x_post[i]);
+            }
+            let mut t = 0;
+            for i in 0..N {
+                for j in i..N {
+                    sums[t % 4] = health(simd, sums[t % 4], p_post[i][j]);
+                    t += 1;
                 }
             }
+            let ok = simd.add_f64s(
+                simd.add_f64s(sums[0], sums[1]),
+                simd.add_f64s(sums[2], sums[3]),
+            );
             let keep = simd.equal_f64s(ok, zero);
-            for i in 0..N {
-                store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
-                for j in 0..N {
-                    store::<S>(
-                        &mut ps[i][j],
-                        c,
-                        simd.select_f64s(keep, p_post[i][j], p[i][j]),
-                    );
+            // The common case, every lane healthy, stores the posterior without a selection
+            // (and without waiting for the health test: the branch is predicted).
+            let failing = simd.xor_m64s(keep, simd.equal_f64s(zero, zero));
+            if simd.first_true_m64s(failing) == S::F64_LANES {
+                for i in 0..N {
+                    store::<S>(&mut xs[i], c, x_post[i]);
+                    for j in 0..N {
+                        store::<S>(&mut ps[i][j], c, p_post[i][j]);
+                    }
+                }
+            } else {
+                for i in 0..N {
+                    store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
+                    for j in 0..N {
+                        store::<S>(
+                            &mut ps[i][j],
+                            c,
+                            simd.select_f64s(keep, p_post[i][j], p[i][j]),
+                        );
+                    }
                 }
             }
             // NEES of the truth against the posterior, through P+'s factor.
@@ -396,6 +450,7 @@ where
             store::<S>(&mut out.nis, c, nis);
             store::<S>(&mut out.nees, c, nees);
             if let (true, Some(t)) = (PREDICT, terms.as_deref_mut()) {
+                let (h, r, q) = (values(simd, &h), values(simd, &r), values(simd, &q));
                 j_terms(simd, c, &h, &r, &propagated, &q, &p_post, t);
             }
             store::<S>(&mut out.health, c, ok);

@@ -361,12 +361,17 @@ pub struct BatchStep<const N: usize> {
     // The error of a lane's update, and of its NEES (the update's, or the NEES's own).
     failure: [Option<FilterError>; BATCH],
     nees_failure: [Option<FilterError>; BATCH],
+    // Whether `failure` or `nees_failure` holds an error, as `finish` leaves them (it skips
+    // both when neither does and every lane succeeded: the common step costs a pass over the
+    // health sums). The UKF writes the two itself and never reads this.
+    stored_failures: bool,
 }
 
 impl<const N: usize> BatchStep<N> {
     /// Completes the kernel's output for step `k`: the kernel's health sum is 0 for a lane
     /// whose update succeeded and NaN otherwise; the NEES is checked apart, as the scalar
     /// record's `nees` is a separate call. `x`, `p`: the lanes' states after the step.
+    #[inline]
     fn finish<const M: usize>(
         &mut self,
         k: usize,
@@ -375,6 +380,21 @@ impl<const N: usize> BatchStep<N> {
         p: &[[Lanes; N]; N],
     ) {
         self.k = k;
+        if self.stored_failures || !self.ok().into_iter().all(|ok| ok) {
+            self.name_failures(z, x, p);
+        }
+    }
+
+    /// The errors of the failed lanes, and `None` for the others (off the hot path).
+    #[cold]
+    #[inline(never)]
+    fn name_failures<const M: usize>(
+        &mut self,
+        z: &[Lanes; M],
+        x: &[Lanes; N],
+        p: &[[Lanes; N]; N],
+    ) {
+        let k = self.k;
         for lane in 0..BATCH {
             self.failure[lane] = (self.health[lane] != 0.0).then(|| self.explain(lane, z, x, p));
             self.nees_failure[lane] =
@@ -383,6 +403,11 @@ impl<const N: usize> BatchStep<N> {
                     step: k,
                 });
         }
+        self.stored_failures = self
+            .failure
+            .iter()
+            .chain(&self.nees_failure)
+            .any(Option::is_some);
     }
 
     /// The scalar filter's error for a failed lane (off the hot path).
@@ -431,6 +456,7 @@ impl<const N: usize> BatchStep<N> {
             health: [0.0; BATCH],
             failure: std::array::from_fn(|_| None),
             nees_failure: std::array::from_fn(|_| None),
+            stored_failures: false,
         }
     }
 
@@ -476,6 +502,39 @@ impl<const N: usize> BatchStep<N> {
             .iter()
             .chain(&self.nees_failure)
             .all(Option::is_none)
+    }
+
+    /// Lane by lane, whether the update and the NEES succeeded: `ok()[lane]` is
+    /// `nees(lane).is_ok()` (and then `nis(lane)` is `Ok` too). With [`BatchStep::nis_lanes`],
+    /// [`BatchStep::nees_lanes`] and [`BatchStep::errors`] a study takes a whole batch's
+    /// results per step without a call per lane; [`BatchStep::nees`] gives a failed lane's
+    /// error.
+    #[inline]
+    pub fn ok(&self) -> [bool; BATCH] {
+        let mut ok = [false; BATCH];
+        for ((ok, health), nees) in ok.iter_mut().zip(&self.health).zip(&self.nees) {
+            // `&`, not `&&`: no branch per lane.
+            *ok = (*health == 0.0) & nees.is_finite();
+        }
+        ok
+    }
+
+    /// Every lane's NIS, as [`BatchStep::nis`] gives it where that is `Ok`; the entry of a
+    /// lane whose update failed is meaningless (see [`BatchStep::ok`]).
+    pub fn nis_lanes(&self) -> &Lanes {
+        &self.nis
+    }
+
+    /// Every lane's NEES, as [`BatchStep::nees`] gives it where that is `Ok`; the entry of a
+    /// failed lane is meaningless (see [`BatchStep::ok`]).
+    pub fn nees_lanes(&self) -> &Lanes {
+        &self.nees
+    }
+
+    /// Every lane's estimation error `x - x+`, component by component: `errors()[i][lane]` is
+    /// [`BatchStep::error`]`(lane)[i]` (meaningful where the update succeeded).
+    pub fn errors(&self) -> &[Lanes; N] {
+        &self.error
     }
 
     /// Lane `lane`'s estimation error `x - x+` (meaningful when [`BatchStep::nis`] is `Ok`).

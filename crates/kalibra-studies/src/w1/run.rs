@@ -300,41 +300,60 @@ fn batched(
         let mut truth = LinearTruthBatch::new(&f, &h, first, rngs, |rng| {
             m0 + sample_with_factor(&p0_factor, rng)
         })
-        .map_err(to_study)?;
+        .map_err(to_study)?
+        .with_isa(isa);
         let mut kf = KfBatch::new(isa, model.clone(), m0, p0).map_err(|e| RunFailure {
             run: first,
             source: e.into(),
         })?;
         // A run stops at its first error, as the scalar run does; the others go on.
+        // `running`: the lanes of runs that have not failed (lanes past the group's runs
+        // never run).
         let mut failed: [Option<StudyError>; BATCH] = std::array::from_fn(|_| None);
+        let mut running: [bool; BATCH] = std::array::from_fn(|lane| lane < runs.len());
         for k in 0..steps {
             // A diverging truth fails its run (the scalar run's error); the others go on.
             // The step names the lowest failing lane: a higher one failing too cannot be
             // the group's lowest failure.
             if let Err(e) = truth.step(rngs) {
                 let lane = e.run - first;
-                failed[lane].get_or_insert_with(|| to_study(e).source);
+                if running[lane] {
+                    running[lane] = false;
+                    failed[lane] = Some(to_study(e).source);
+                }
             }
             let step = if k == 0 {
                 kf.update(truth.measurement(), truth.state())
             } else {
                 kf.predict_update(truth.measurement(), truth.state())
             };
-            for (lane, slot) in failed.iter_mut().enumerate().take(runs.len()) {
-                if slot.is_some() {
-                    continue;
-                }
-                let pushed = (|| -> Result<(), StudyError> {
-                    let nis = step.nis(lane)?;
-                    nees_acc.push(k, step.nees(lane)? / 4.0)?;
-                    nis_acc.push(k, nis / 2.0)?;
-                    err_acc.push_slice(k, &step.error(lane))?;
-                    Ok(())
-                })();
-                if let Err(e) = pushed {
-                    *slot = Some(e);
+            // The lanes to push: runs that have not stopped and whose update and NEES
+            // succeeded; a run whose step failed stops with the step's error.
+            let ok = step.ok();
+            let mut live = [false; BATCH];
+            for lane in 0..BATCH {
+                live[lane] = running[lane] & ok[lane];
+            }
+            if live != running {
+                for lane in 0..BATCH {
+                    if running[lane] && !live[lane] {
+                        running[lane] = false;
+                        failed[lane] = step.nees(lane).err().map(StudyError::from);
+                    }
                 }
             }
+            // Each accumulator adds the lanes in order, as pushing run after run does; a
+            // refused value stops its run (it leaves `live`) before its later pushes, as in
+            // the scalar run.
+            let nees = step.nees_lanes().map(|v| v / 4.0);
+            let nis = step.nis_lanes().map(|v| v / 2.0);
+            let mut stop = |lane: usize, e: kalibra_metrics::MetricsError| {
+                running[lane] = false;
+                failed[lane] = Some(e.into());
+            };
+            nees_acc.push_lanes(k, &nees, &mut live, &mut stop);
+            nis_acc.push_lanes(k, &nis, &mut live, &mut stop);
+            err_acc.push_lanes(k, step.errors(), &mut live, &mut stop);
         }
         // The lowest failing run of the group.
         match failed
