@@ -35,10 +35,13 @@
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod batch;
+mod lanes;
 mod shard;
 mod tuning;
+mod ziggurat_tables;
 
 pub use batch::{LinearTruthBatch, RunFailure, TruthBatch};
+pub use lanes::{ChaCha8Lanes, LaneRng, LanesError};
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
 pub use shard::{
