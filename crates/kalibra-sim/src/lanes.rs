@@ -35,7 +35,7 @@ use std::convert::Infallible;
 use kalibra_filters::FilterError;
 use kalibra_filters::batch::{BATCH, Isa, Lanes};
 use pulp::{Simd, WithSimd};
-use rand_chacha::rand_core::TryRng;
+use rand_chacha::rand_core::{Rng, TryRng};
 use rand_distr::{Distribution, Open01, StandardNormal, StandardUniform};
 
 use crate::ChaCha8Rng;
@@ -46,15 +46,17 @@ const BLOCK_WORDS: usize = 16;
 /// Blocks each lane receives per refill: rand_chacha's 4-block buffer, so a lane refills as
 /// often as its scalar generator would.
 const CHUNK_BLOCKS: usize = 4;
-/// Words each lane receives per refill.
+/// Words each lane receives per refill (a chunk).
 const CHUNK: usize = CHUNK_BLOCKS * BLOCK_WORDS;
-/// A lane's buffer: room for one chunk beside the unread words of a lane that has drawn less
-/// than the lane that asked for the refill (lanes drift apart through the ziggurat's rare
-/// extra draws).
-const CAP: usize = 2 * CHUNK;
+/// Chunk slots in the ring: a lane that has drawn less than the others (lanes drift apart
+/// through the ziggurat's rare extra draws) keeps up to this many chunks unread.
+const SLOTS: usize = 4;
 /// Blocks per refill, over all lanes: a multiple of every instruction set's u32 lane count
-/// (16, 8, 4, 1), so the kernel has no remainder.
+/// (16, 8, 4, 1), so the kernel has no remainder. Column `lane * CHUNK_BLOCKS + b` is block
+/// `b` of the chunk of lane `lane`.
 const GEN: usize = CHUNK_BLOCKS * BATCH;
+/// One chunk slot: word `w` of every column (the kernel's output as it is).
+type Slot = [[u32; GEN]; BLOCK_WORDS];
 /// ChaCha8: four double rounds.
 const DOUBLE_ROUNDS: usize = 4;
 /// "expand 32-byte k", ChaCha's first four state words.
@@ -136,10 +138,21 @@ pub struct ChaCha8Lanes {
     block: [u64; BATCH],
     /// Words of its first block a lane skips (a generator taken mid-block).
     skip: [usize; BATCH],
-    /// Lane `l`'s unread words are `words[l][start[l]..end[l]]`.
-    start: [usize; BATCH],
-    end: [usize; BATCH],
-    words: [[u32; CAP]; BATCH],
+    /// State words 4..16 of every column (key, counter, stream): only the counters change.
+    input: [[u32; GEN]; 12],
+    /// The ring of chunk slots the kernel writes into; a refill writes slot `next_slot`.
+    ring: [Slot; SLOTS],
+    next_slot: usize,
+    /// Lane `l`'s unread chunks, oldest first: slots `queue[l][(head[l] + i) % SLOTS]` for
+    /// `i < queued[l]`; it has read `pos[l]` words of the oldest (`CHUNK` when none is queued).
+    queue: [[usize; SLOTS]; BATCH],
+    head: [usize; BATCH],
+    /// `queue[l][head[l]]`, the slot lane `l` reads (kept for the fast path).
+    front: [usize; BATCH],
+    /// With [`Isa::Scalar`], each lane's generator at the lane's next block; empty otherwise.
+    scalar: Vec<ChaCha8Rng>,
+    queued: [usize; BATCH],
+    pos: [usize; BATCH],
 }
 
 impl std::fmt::Debug for ChaCha8Lanes {
@@ -178,9 +191,15 @@ impl ChaCha8Lanes {
             stream: [0; BATCH],
             block: [0; BATCH],
             skip: [0; BATCH],
-            start: [0; BATCH],
-            end: [0; BATCH],
-            words: [[0; CAP]; BATCH],
+            input: [[0; GEN]; 12],
+            ring: [[[0; GEN]; BLOCK_WORDS]; SLOTS],
+            next_slot: 0,
+            queue: [[0; SLOTS]; BATCH],
+            head: [0; BATCH],
+            front: [0; BATCH],
+            queued: [0; BATCH],
+            pos: [CHUNK; BATCH],
+            scalar: Vec::new(),
         };
         for (lane, rng) in rngs.iter().enumerate() {
             let seed = rng.get_seed();
@@ -192,6 +211,20 @@ impl ChaCha8Lanes {
             // pos < 2^68, so the block index fits the 64-bit counter.
             out.block[lane] = (pos / BLOCK_WORDS as u128) as u64;
             out.skip[lane] = (pos % BLOCK_WORDS as u128) as usize;
+            for b in 0..CHUNK_BLOCKS {
+                let col = lane * CHUNK_BLOCKS + b;
+                for (k, key) in out.key[lane].iter().enumerate() {
+                    out.input[k][col] = *key;
+                }
+                out.input[10][col] = out.stream[lane] as u32;
+                out.input[11][col] = (out.stream[lane] >> 32) as u32;
+            }
+            if isa == Isa::Scalar {
+                let mut scalar = rng.clone();
+                // Block-aligned: no block is computed until the first refill.
+                scalar.set_word_pos(u128::from(out.block[lane]) * BLOCK_WORDS as u128);
+                out.scalar.push(scalar);
+            }
         }
         Ok(out)
     }
@@ -216,7 +249,7 @@ impl ChaCha8Lanes {
     pub fn word_pos(&self, lane: usize) -> Option<u128> {
         (lane < self.lanes).then(|| {
             let generated = u128::from(self.block[lane]) * BLOCK_WORDS as u128;
-            let unread = (self.end[lane] - self.start[lane]) as u128;
+            let unread = (self.queued[lane] * CHUNK).saturating_sub(self.pos[lane]) as u128;
             // A wrapped block counter is below its unread words: add the period first.
             (generated + WORD_POS_MOD + self.skip[lane] as u128 - unread) % WORD_POS_MOD
         })
@@ -266,7 +299,9 @@ impl ChaCha8Lanes {
     /// call, bit for bit the value [`StandardNormal`] draws from the lane's [`ChaCha8Rng`] in
     /// its place. Entries of lanes past [`ChaCha8Lanes::len`] are left as they are.
     pub fn standard_normals(&mut self, rows: &mut [Lanes]) {
-        for row in rows {
+        // Row by row: consecutive draws are from different lanes, so their dependency chains
+        // (each lane's read position) overlap.
+        for row in rows.iter_mut() {
             for (lane, value) in row.iter_mut().enumerate().take(self.lanes) {
                 *value = self.standard_normal(lane);
             }
@@ -276,16 +311,10 @@ impl ChaCha8Lanes {
     /// One standard normal from lane `lane`: the ziggurat's fast path inline.
     #[inline(always)]
     fn standard_normal(&mut self, lane: usize) -> f64 {
-        let bits = self.next_u64(lane);
-        // rand_distr's ziggurat: the low 8 bits choose the box, the top 52 a value in [2, 4)
-        // (exponent 1), shifted to [-1, 1).
-        let i = (bits & 0xff) as usize;
-        let u = f64::from_bits((bits >> 12) | (1024 << 52)) - 3.0;
-        let x = u * ZIG_NORM_X[i];
-        if x.abs() < ZIG_NORM_X[i + 1] {
-            return x;
+        match ziggurat_fast(self.next_u64(lane)) {
+            Ok(x) => x,
+            Err((i, u, x)) => self.standard_normal_slow(lane, i, u, x),
         }
-        self.standard_normal_slow(lane, i, u, x)
     }
 
     /// The rest of rand_distr's ziggurat loop after a rejected fast try `x` in box `i`: the
@@ -305,79 +334,153 @@ impl ChaCha8Lanes {
         StandardNormal.sample(&mut rng)
     }
 
+    /// Word `k` of lane `lane`'s oldest chunk.
+    #[inline(always)]
+    fn word(&self, lane: usize, k: usize) -> u32 {
+        self.ring[self.front[lane]][k % BLOCK_WORDS][lane * CHUNK_BLOCKS + k / BLOCK_WORDS]
+    }
+
     /// Lane `lane`'s next two words, low first, as `ChaCha8Rng::next_u64` reads them.
     #[inline(always)]
     fn next_u64(&mut self, lane: usize) -> u64 {
-        if self.start[lane] + 2 > self.end[lane] {
-            self.refill();
+        let k = self.pos[lane];
+        // At an even word of the oldest chunk (`pos` is `CHUNK` when there is none), both
+        // words are in one block: rows `k % 16` and the next of the lane's column.
+        if k.is_multiple_of(2) && k < CHUNK {
+            self.pos[lane] = k + 2;
+            let slot = self.ring[self.front[lane]].as_flattened();
+            let at = (k % BLOCK_WORDS) * GEN + lane * CHUNK_BLOCKS + k / BLOCK_WORDS;
+            let (lo, hi) = (slot[at], slot[at + GEN]);
+            return (u64::from(hi) << 32) | u64::from(lo);
         }
-        let s = self.start[lane];
-        let (lo, hi) = (self.words[lane][s], self.words[lane][s + 1]);
-        self.start[lane] = s + 2;
+        self.next_u64_across(lane)
+    }
+
+    /// [`ChaCha8Lanes::next_u64`] when the words are not both in the oldest chunk.
+    #[inline(never)]
+    fn next_u64_across(&mut self, lane: usize) -> u64 {
+        if self.pos[lane] == CHUNK {
+            // The oldest chunk is used up at a word boundary: the next chunk (refilling if
+            // there is none) starts at an even word, unless this lane's generator started
+            // mid-block at an odd word.
+            self.next_chunk(lane);
+            if self.pos[lane].is_multiple_of(2) {
+                return self.next_u64(lane);
+            }
+        }
+        let lo = self.next_u32(lane);
+        let hi = self.next_u32(lane);
         (u64::from(hi) << 32) | u64::from(lo)
     }
 
     /// Lane `lane`'s next word.
     #[inline(always)]
     fn next_u32(&mut self, lane: usize) -> u32 {
-        if self.start[lane] >= self.end[lane] {
-            self.refill();
+        if self.pos[lane] >= CHUNK {
+            self.next_chunk(lane);
         }
-        let s = self.start[lane];
-        self.start[lane] = s + 1;
-        self.words[lane][s]
+        let k = self.pos[lane];
+        self.pos[lane] = k + 1;
+        self.word(lane, k)
     }
 
-    /// Appends the next [`CHUNK_BLOCKS`] blocks to every lane with room for them, after moving
-    /// its unread words to the front. Called when a lane has fewer words than it needs, which
-    /// leaves it at most one word, so that lane always has room. A lane without room (one that
-    /// has drawn much less) keeps its counter: its blocks are computed again next time.
+    /// Moves lane `lane` past its finished oldest chunk, refilling when it has no other.
+    #[inline(never)]
+    fn next_chunk(&mut self, lane: usize) {
+        self.drop_finished(lane);
+        if self.queued[lane] == 0 {
+            self.refill();
+        }
+    }
+
+    /// Drops lane `lane`'s oldest chunk if it has read all of it.
+    fn drop_finished(&mut self, lane: usize) {
+        if self.queued[lane] > 0 && self.pos[lane] >= CHUNK {
+            self.head[lane] = (self.head[lane] + 1) % SLOTS;
+            self.front[lane] = self.queue[lane][self.head[lane]];
+            self.queued[lane] -= 1;
+            self.pos[lane] = if self.queued[lane] > 0 { 0 } else { CHUNK };
+        }
+    }
+
+    /// Computes the next [`CHUNK_BLOCKS`] blocks of every lane that takes them into ring slot
+    /// `next_slot`. A lane takes them unless it still has unread words in that slot (it has
+    /// drawn [`SLOTS`] - 1 chunks fewer than the lane asking); such a lane keeps its words
+    /// (the kernel leaves its columns as they are) and its counter, so it computes these
+    /// blocks at a later refill. Called when a lane has no chunk left, so that lane takes.
     #[inline(never)]
     fn refill(&mut self) {
-        let mut room = [false; BATCH];
-        for (lane, room) in room.iter_mut().enumerate().take(self.lanes) {
-            let (start, end) = (self.start[lane], self.end[lane]);
-            if start > 0 {
-                self.words[lane].copy_within(start..end, 0);
-                self.start[lane] = 0;
-                self.end[lane] = end - start;
+        let slot = self.next_slot;
+        self.next_slot = (slot + 1) % SLOTS;
+        let mut take = [0u32; GEN];
+        let mut takes = [false; BATCH];
+        for (lane, takes) in takes.iter_mut().enumerate().take(self.lanes) {
+            self.drop_finished(lane);
+            let held = (0..self.queued[lane])
+                .any(|i| self.queue[lane][(self.head[lane] + i) % SLOTS] == slot);
+            if held {
+                continue;
             }
-            *room = self.end[lane] + CHUNK <= CAP;
-        }
-        // The per-block state words 4..16 (key, counter, stream); block `b` of lane `l` is
-        // column `b * BATCH + l`. Lanes past `self.lanes` compute zeros nobody reads.
-        let mut input = [[0u32; GEN]; 12];
-        for lane in 0..self.lanes {
+            *takes = true;
             for b in 0..CHUNK_BLOCKS {
-                let col = b * BATCH + lane;
-                for (k, key) in self.key[lane].iter().enumerate() {
-                    input[k][col] = *key;
-                }
+                let col = lane * CHUNK_BLOCKS + b;
                 let counter = self.block[lane].wrapping_add(b as u64);
-                input[8][col] = counter as u32;
-                input[9][col] = (counter >> 32) as u32;
-                input[10][col] = self.stream[lane] as u32;
-                input[11][col] = (self.stream[lane] >> 32) as u32;
+                self.input[8][col] = counter as u32;
+                self.input[9][col] = (counter >> 32) as u32;
+                take[col] = 1;
             }
         }
-        let mut out = [[0u32; GEN]; BLOCK_WORDS];
-        self.isa.dispatch(Blocks {
-            input: &input,
-            out: &mut out,
-        });
-        for lane in (0..self.lanes).filter(|l| room[*l]) {
-            let end = self.end[lane];
-            for b in 0..CHUNK_BLOCKS {
-                let dst = &mut self.words[lane][end + b * BLOCK_WORDS..][..BLOCK_WORDS];
-                for (w, word) in dst.iter_mut().enumerate() {
-                    *word = out[w][b * BATCH + lane];
+        if self.scalar.is_empty() {
+            self.isa.dispatch(Blocks {
+                input: &self.input,
+                take: &take,
+                out: &mut self.ring[slot],
+            });
+        } else {
+            // The scalar fallback: each lane's blocks from its own rand_chacha generator, kept
+            // at the lane's next block (whole chunks only), whose block function uses the
+            // vector instructions every x86-64 has (pulp's scalar token would compute one
+            // block at a time, 2.5x slower than the generators it stands in for).
+            let mut bytes = [0u8; CHUNK * 4];
+            for (lane, rng) in self
+                .scalar
+                .iter_mut()
+                .enumerate()
+                .filter(|(l, _)| takes[*l])
+            {
+                rng.fill_bytes(&mut bytes);
+                for (k, word) in bytes.chunks_exact(4).enumerate() {
+                    self.ring[slot][k % BLOCK_WORDS][lane * CHUNK_BLOCKS + k / BLOCK_WORDS] =
+                        u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
                 }
             }
-            self.end[lane] = end + CHUNK;
-            self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
-            // A generator taken mid-block starts inside its first block.
-            self.start[lane] += std::mem::take(&mut self.skip[lane]);
         }
+        for lane in (0..self.lanes).filter(|l| takes[*l]) {
+            let tail = (self.head[lane] + self.queued[lane]) % SLOTS;
+            self.queue[lane][tail] = slot;
+            self.queued[lane] += 1;
+            self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
+            if self.queued[lane] == 1 {
+                self.front[lane] = slot;
+                // A generator taken mid-block starts inside its first block.
+                self.pos[lane] = std::mem::take(&mut self.skip[lane]);
+            }
+        }
+    }
+}
+
+/// rand_distr's ziggurat fast try from one `u64`: the low 8 bits choose the box `i`, the top
+/// 52 a value `u` in [2, 4) (exponent 1), shifted to [-1, 1); `x = u X[i]` is accepted inside
+/// the box's rectangle. A rejection returns `(i, u, x)` for the slow path.
+#[inline(always)]
+fn ziggurat_fast(bits: u64) -> Result<f64, (usize, f64, f64)> {
+    let i = (bits & 0xff) as usize;
+    let u = f64::from_bits((bits >> 12) | (1024 << 52)) - 3.0;
+    let x = u * ZIG_NORM_X[i];
+    if x.abs() < ZIG_NORM_X[i + 1] {
+        Ok(x)
+    } else {
+        Err((i, u, x))
     }
 }
 
@@ -431,10 +534,12 @@ impl TryRng for LaneRng<'_> {
 }
 
 /// [`GEN`] ChaCha8 blocks, column by column: `input` holds state words 4..16 of every block,
-/// `out` receives the 16 output words.
+/// `out` receives the 16 output words in the columns where `take` is not 0 and keeps its
+/// values elsewhere.
 struct Blocks<'a> {
     input: &'a [[u32; GEN]; 12],
-    out: &'a mut [[u32; GEN]; BLOCK_WORDS],
+    take: &'a [u32; GEN],
+    out: &'a mut Slot,
 }
 
 impl WithSimd for Blocks<'_> {
@@ -462,8 +567,10 @@ impl WithSimd for Blocks<'_> {
                 quarter(simd, &mut x, 2, 7, 8, 13);
                 quarter(simd, &mut x, 3, 4, 9, 14);
             }
+            let take = simd.greater_than_u32s(S::as_simd_u32s(self.take).0[v], simd.splat_u32s(0));
             for (w, row) in self.out.iter_mut().enumerate() {
-                S::as_mut_simd_u32s(row).0[v] = simd.add_u32s(x[w], init[w]);
+                let out = &mut S::as_mut_simd_u32s(row).0[v];
+                *out = simd.select_u32s(take, simd.add_u32s(x[w], init[w]), *out);
             }
         }
     }
