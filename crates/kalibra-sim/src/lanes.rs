@@ -57,6 +57,8 @@ const SLOTS: usize = 4;
 const GEN: usize = CHUNK_BLOCKS * BATCH;
 /// One chunk slot: word `w` of every column (the kernel's output as it is).
 type Slot = [[u32; GEN]; BLOCK_WORDS];
+/// Words per slot.
+const SLOT_WORDS: usize = GEN * BLOCK_WORDS;
 /// ChaCha8: four double rounds.
 const DOUBLE_ROUNDS: usize = 4;
 /// "expand 32-byte k", ChaCha's first four state words.
@@ -147,9 +149,11 @@ pub struct ChaCha8Lanes {
     /// `i < queued[l]`; it has read `pos[l]` words of the oldest (`CHUNK` when none is queued).
     queue: [[usize; SLOTS]; BATCH],
     head: [usize; BATCH],
-    /// `queue[l][head[l]]`, the slot lane `l` reads (kept for the fast path).
-    front: [usize; BATCH],
-    /// With [`Isa::Scalar`], each lane's generator at the lane's next block; empty otherwise.
+    /// Where lane `l`'s column of its oldest chunk starts in the flattened ring:
+    /// `queue[l][head[l]] * SLOT_WORDS + l * CHUNK_BLOCKS` (kept for the fast path).
+    base: [usize; BATCH],
+    /// With [`Isa::Scalar`], the lanes' own generators, which every draw goes through (the
+    /// ring is unused); empty otherwise.
     scalar: Vec<ChaCha8Rng>,
     queued: [usize; BATCH],
     pos: [usize; BATCH],
@@ -196,7 +200,7 @@ impl ChaCha8Lanes {
             next_slot: 0,
             queue: [[0; SLOTS]; BATCH],
             head: [0; BATCH],
-            front: [0; BATCH],
+            base: [0; BATCH],
             queued: [0; BATCH],
             pos: [CHUNK; BATCH],
             scalar: Vec::new(),
@@ -220,10 +224,7 @@ impl ChaCha8Lanes {
                 out.input[11][col] = (out.stream[lane] >> 32) as u32;
             }
             if isa == Isa::Scalar {
-                let mut scalar = rng.clone();
-                // Block-aligned: no block is computed until the first refill.
-                scalar.set_word_pos(u128::from(out.block[lane]) * BLOCK_WORDS as u128);
-                out.scalar.push(scalar);
+                out.scalar.push(rng.clone());
             }
         }
         Ok(out)
@@ -247,6 +248,9 @@ impl ChaCha8Lanes {
     /// Lane `lane`'s position in its stream, in 32-bit words (modulo 2^68, as
     /// [`ChaCha8Rng::set_word_pos`] takes it); `None` past the lanes.
     pub fn word_pos(&self, lane: usize) -> Option<u128> {
+        if let Some(rng) = self.scalar.get(lane) {
+            return Some(rng.get_word_pos() % WORD_POS_MOD);
+        }
         (lane < self.lanes).then(|| {
             let generated = u128::from(self.block[lane]) * BLOCK_WORDS as u128;
             let unread = (self.queued[lane] * CHUNK).saturating_sub(self.pos[lane]) as u128;
@@ -299,6 +303,14 @@ impl ChaCha8Lanes {
     /// call, bit for bit the value [`StandardNormal`] draws from the lane's [`ChaCha8Rng`] in
     /// its place. Entries of lanes past [`ChaCha8Lanes::len`] are left as they are.
     pub fn standard_normals(&mut self, rows: &mut [Lanes]) {
+        if !self.scalar.is_empty() {
+            for row in rows.iter_mut() {
+                for (value, rng) in row.iter_mut().zip(&mut self.scalar) {
+                    *value = StandardNormal.sample(rng);
+                }
+            }
+            return;
+        }
         // Row by row: consecutive draws are from different lanes, so their dependency chains
         // (each lane's read position) overlap.
         for row in rows.iter_mut() {
@@ -337,7 +349,8 @@ impl ChaCha8Lanes {
     /// Word `k` of lane `lane`'s oldest chunk.
     #[inline(always)]
     fn word(&self, lane: usize, k: usize) -> u32 {
-        self.ring[self.front[lane]][k % BLOCK_WORDS][lane * CHUNK_BLOCKS + k / BLOCK_WORDS]
+        self.ring.as_flattened().as_flattened()
+            [self.base[lane] + (k % BLOCK_WORDS) * GEN + k / BLOCK_WORDS]
     }
 
     /// Lane `lane`'s next two words, low first, as `ChaCha8Rng::next_u64` reads them.
@@ -348,9 +361,9 @@ impl ChaCha8Lanes {
         // words are in one block: rows `k % 16` and the next of the lane's column.
         if k.is_multiple_of(2) && k < CHUNK {
             self.pos[lane] = k + 2;
-            let slot = self.ring[self.front[lane]].as_flattened();
-            let at = (k % BLOCK_WORDS) * GEN + lane * CHUNK_BLOCKS + k / BLOCK_WORDS;
-            let (lo, hi) = (slot[at], slot[at + GEN]);
+            let ring = self.ring.as_flattened().as_flattened();
+            let at = self.base[lane] + (k % BLOCK_WORDS) * GEN + k / BLOCK_WORDS;
+            let (lo, hi) = (ring[at], ring[at + GEN]);
             return (u64::from(hi) << 32) | u64::from(lo);
         }
         self.next_u64_across(lane)
@@ -397,7 +410,7 @@ impl ChaCha8Lanes {
     fn drop_finished(&mut self, lane: usize) {
         if self.queued[lane] > 0 && self.pos[lane] >= CHUNK {
             self.head[lane] = (self.head[lane] + 1) % SLOTS;
-            self.front[lane] = self.queue[lane][self.head[lane]];
+            self.base[lane] = self.queue[lane][self.head[lane]] * SLOT_WORDS + lane * CHUNK_BLOCKS;
             self.queued[lane] -= 1;
             self.pos[lane] = if self.queued[lane] > 0 { 0 } else { CHUNK };
         }
@@ -430,38 +443,18 @@ impl ChaCha8Lanes {
                 take[col] = 1;
             }
         }
-        if self.scalar.is_empty() {
-            self.isa.dispatch(Blocks {
-                input: &self.input,
-                take: &take,
-                out: &mut self.ring[slot],
-            });
-        } else {
-            // The scalar fallback: each lane's blocks from its own rand_chacha generator, kept
-            // at the lane's next block (whole chunks only), whose block function uses the
-            // vector instructions every x86-64 has (pulp's scalar token would compute one
-            // block at a time, 2.5x slower than the generators it stands in for).
-            let mut bytes = [0u8; CHUNK * 4];
-            for (lane, rng) in self
-                .scalar
-                .iter_mut()
-                .enumerate()
-                .filter(|(l, _)| takes[*l])
-            {
-                rng.fill_bytes(&mut bytes);
-                for (k, word) in bytes.chunks_exact(4).enumerate() {
-                    self.ring[slot][k % BLOCK_WORDS][lane * CHUNK_BLOCKS + k / BLOCK_WORDS] =
-                        u32::from_le_bytes([word[0], word[1], word[2], word[3]]);
-                }
-            }
-        }
+        self.isa.dispatch(Blocks {
+            input: &self.input,
+            take: &take,
+            out: &mut self.ring[slot],
+        });
         for lane in (0..self.lanes).filter(|l| takes[*l]) {
             let tail = (self.head[lane] + self.queued[lane]) % SLOTS;
             self.queue[lane][tail] = slot;
             self.queued[lane] += 1;
             self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
             if self.queued[lane] == 1 {
-                self.front[lane] = slot;
+                self.base[lane] = slot * SLOT_WORDS + lane * CHUNK_BLOCKS;
                 // A generator taken mid-block starts inside its first block.
                 self.pos[lane] = std::mem::take(&mut self.skip[lane]);
             }
@@ -516,15 +509,25 @@ impl TryRng for LaneRng<'_> {
 
     #[inline]
     fn try_next_u32(&mut self) -> Result<u32, Infallible> {
-        Ok(self.lanes.next_u32(self.lane))
+        Ok(match self.lanes.scalar.get_mut(self.lane) {
+            Some(rng) => rng.next_u32(),
+            None => self.lanes.next_u32(self.lane),
+        })
     }
 
     #[inline]
     fn try_next_u64(&mut self) -> Result<u64, Infallible> {
-        Ok(self.lanes.next_u64(self.lane))
+        Ok(match self.lanes.scalar.get_mut(self.lane) {
+            Some(rng) => rng.next_u64(),
+            None => self.lanes.next_u64(self.lane),
+        })
     }
 
     fn try_fill_bytes(&mut self, dst: &mut [u8]) -> Result<(), Infallible> {
+        if let Some(rng) = self.lanes.scalar.get_mut(self.lane) {
+            rng.fill_bytes(dst);
+            return Ok(());
+        }
         for chunk in dst.chunks_mut(4) {
             let word = self.lanes.next_u32(self.lane).to_le_bytes();
             chunk.copy_from_slice(&word[..chunk.len()]);
