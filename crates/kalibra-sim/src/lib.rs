@@ -15,6 +15,14 @@
 //! threads (a test checks it). Errors are deterministic too: the error of the lowest-numbered
 //! failing run is returned.
 //!
+//! # Lane-wise draws
+//! Batched studies step [`BATCH`](kalibra_filters::batch::BATCH) runs together
+//! ([`MonteCarlo::accumulate_batched`]); [`ChaCha8Lanes`] draws for them together: the runs'
+//! ChaCha8 blocks computed with SIMD, one block per vector lane, and each run reading only its
+//! own stream's words, in order, so that every run draws exactly the numbers (and
+//! [`ChaCha8Lanes::standard_normals`] exactly the ziggurat normals) its own [`ChaCha8Rng`]
+//! would give, on every instruction set. Results stay those of the one-run studies.
+//!
 //! # Example
 //! ```
 //! use kalibra_sim::MonteCarlo;
