@@ -314,11 +314,13 @@ impl ChaCha8Lanes {
     /// Fills `rows` with standard normals: `rows[r][l]` is the `r`-th draw of lane `l` in this
     /// call, bit for bit the value [`StandardNormal`] draws from the lane's [`ChaCha8Rng`] in
     /// its place. Entries of lanes past [`ChaCha8Lanes::len`] are left as they are.
+    #[inline]
     pub fn standard_normals(&mut self, rows: &mut [Lanes]) {
         if !self.scalar.is_empty() {
-            for row in rows.iter_mut() {
-                for (value, rng) in row.iter_mut().zip(&mut self.scalar) {
-                    *value = StandardNormal.sample(rng);
+            // One generator at a time, each through its rows (its buffer stays in registers).
+            for (lane, rng) in self.scalar.iter_mut().enumerate() {
+                for row in rows.iter_mut() {
+                    row[lane] = StandardNormal.sample(rng);
                 }
             }
             return;
