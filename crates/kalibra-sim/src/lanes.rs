@@ -314,17 +314,30 @@ impl ChaCha8Lanes {
     /// Fills `rows` with standard normals: `rows[r][l]` is the `r`-th draw of lane `l` in this
     /// call, bit for bit the value [`StandardNormal`] draws from the lane's [`ChaCha8Rng`] in
     /// its place. Entries of lanes past [`ChaCha8Lanes::len`] are left as they are.
-    #[inline]
+    #[inline(always)]
     pub fn standard_normals(&mut self, rows: &mut [Lanes]) {
-        if !self.scalar.is_empty() {
-            // One generator at a time, each through its rows (its buffer stays in registers).
-            for (lane, rng) in self.scalar.iter_mut().enumerate() {
-                for row in rows.iter_mut() {
-                    row[lane] = StandardNormal.sample(rng);
-                }
-            }
-            return;
+        // Inlined into the caller, where the number of rows is often a constant: the scalar
+        // mode's loops then unroll as the one-run code's do.
+        if self.scalar.is_empty() {
+            self.lane_normals(rows);
+        } else {
+            self.scalar_normals(rows);
         }
+    }
+
+    /// [`ChaCha8Lanes::standard_normals`] with [`Isa::Scalar`]: one generator at a time
+    /// through its rows, as the one-run study draws.
+    #[inline(always)]
+    fn scalar_normals(&mut self, rows: &mut [Lanes]) {
+        for (lane, rng) in self.scalar.iter_mut().enumerate() {
+            for row in rows.iter_mut() {
+                row[lane] = StandardNormal.sample(rng);
+            }
+        }
+    }
+
+    /// [`ChaCha8Lanes::standard_normals`] from the lane-wise blocks.
+    fn lane_normals(&mut self, rows: &mut [Lanes]) {
         // Row by row: consecutive draws are from different lanes, so their dependency chains
         // (each lane's read position) overlap.
         for row in rows.iter_mut() {
