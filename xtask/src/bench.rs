@@ -259,8 +259,14 @@ fn w1_bench(args: &Args) -> Result<()> {
     let (t_draws, _) = best_of(args.repeats, || {
         w1_truth_only(args.runs, args.steps, false, detected)
     })?;
+    // Lane-wise draws (`ChaCha8Lanes` on the detected ISA) or each run's own generator.
+    let draws = if w1::draws_isa(detected) == Isa::Scalar {
+        "per-run"
+    } else {
+        "lane-wise"
+    };
     println!(
-        "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the lane-wise ChaCha8 normal draws {:.3} s ({:.0}%)",
+        "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the {draws} ChaCha8 normal draws {:.3} s ({:.0}%)",
         t_truth,
         100.0 * t_truth / batched_best[0],
         t_draws,
@@ -309,9 +315,9 @@ fn w1_bench(args: &Args) -> Result<()> {
 }
 
 /// W1's batched truth alone (`simulate`), or only its draws (the initial states' from the
-/// runs' generators, the steps' lane-wise as the truth draws them), on one thread, with the
-/// blocks of the lane-wise draws computed on `isa`: the part of the batched time the filter
-/// kernel cannot touch.
+/// runs' generators, the steps' through `ChaCha8Lanes` as the batched study on `isa` draws
+/// them, `w1::draws_isa`), on one thread: the part of the batched time the filter kernel
+/// cannot touch.
 fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<f64> {
     let (f, h) = w1::models()?;
     let (m0, p0) = w1::prior();
@@ -330,7 +336,8 @@ fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<
                     m0 + l0 * normals::<4>(rng)
                 })
                 .map_err(|e| fail(e.source.to_string()))?;
-                let mut draws = ChaCha8Lanes::new(isa, rngs).map_err(|e| fail(e.to_string()))?;
+                let mut draws =
+                    ChaCha8Lanes::new(w1::draws_isa(isa), rngs).map_err(|e| fail(e.to_string()))?;
                 for _ in 0..steps {
                     truth
                         .step(&mut draws)
@@ -341,7 +348,8 @@ fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<
                 for rng in rngs.iter_mut() {
                     last += normals::<4>(rng)[0];
                 }
-                let mut draws = ChaCha8Lanes::new(isa, rngs).map_err(|e| fail(e.to_string()))?;
+                let mut draws =
+                    ChaCha8Lanes::new(w1::draws_isa(isa), rngs).map_err(|e| fail(e.to_string()))?;
                 let (mut nv, mut nw) = ([[0.0; BATCH]; 2], [[0.0; BATCH]; 4]);
                 for _ in 0..steps {
                     draws.standard_normals(&mut nv);

@@ -305,12 +305,8 @@ fn batched(
             m0 + sample_with_factor(&p0_factor, rng)
         })
         .map_err(to_study)?;
-        // The steps' draws from where the initial states left each run's stream: lane-wise on
-        // AVX-512, where that measured faster than the runs' own generators (6 M normals:
-        // 18.5 ms against 21.0 ms), through the runs' generators otherwise (AVX2 lane-wise:
-        // 23.9 ms). The numbers are the same either way.
-        let draws_isa = if isa == Isa::Avx512 { isa } else { Isa::Scalar };
-        let mut draws = ChaCha8Lanes::new(draws_isa, rngs).map_err(|e| RunFailure {
+        // The steps' draws, from where the initial states left each run's stream.
+        let mut draws = ChaCha8Lanes::new(draws_isa(isa), rngs).map_err(|e| RunFailure {
             run: first,
             source: e.into(),
         })?;
@@ -363,6 +359,15 @@ fn batched(
         }
     };
     Ok((mc, make, Box::new(group)))
+}
+
+/// The instruction set the batched study on `isa` draws its steps' normals with
+/// ([`ChaCha8Lanes`]): lane-wise on AVX-512, where that measured faster than the runs' own
+/// generators (6 M normals on one thread: 18.5 ms against 21.0 ms), through the runs' own
+/// generators ([`Isa::Scalar`]) otherwise (lane-wise on AVX2: 23.9 ms). The numbers drawn are
+/// the same either way; only the time differs.
+pub fn draws_isa(isa: Isa) -> Isa {
+    if isa == Isa::Avx512 { isa } else { Isa::Scalar }
 }
 
 /// The report of a study's accumulators.
