@@ -20,8 +20,8 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use kalibra_filters::batch::Isa;
-use kalibra_sim::{LinearTruthBatch, MonteCarlo, RunFailure};
+use kalibra_filters::batch::{BATCH, Isa};
+use kalibra_sim::{ChaCha8Lanes, LinearTruthBatch, MonteCarlo, RunFailure};
 use kalibra_studies::w1;
 use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 use rand_chacha::ChaCha8Rng;
@@ -253,10 +253,20 @@ fn w1_bench(args: &Args) -> Result<()> {
     }
     // Where the batched time goes: the truth alone (draws and truth arithmetic, accumulating
     // nothing), and the draws alone.
-    let (t_truth, _) = best_of(args.repeats, || w1_truth_only(args.runs, args.steps, true))?;
-    let (t_draws, _) = best_of(args.repeats, || w1_truth_only(args.runs, args.steps, false))?;
+    let (t_truth, _) = best_of(args.repeats, || {
+        w1_truth_only(args.runs, args.steps, true, detected)
+    })?;
+    let (t_draws, _) = best_of(args.repeats, || {
+        w1_truth_only(args.runs, args.steps, false, detected)
+    })?;
+    // Lane-wise draws (`ChaCha8Lanes` on the detected ISA) or each run's own generator.
+    let draws = if w1::draws_isa(detected) == Isa::Scalar {
+        "per-run"
+    } else {
+        "lane-wise"
+    };
     println!(
-        "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the per-run ChaCha8 normal draws {:.3} s ({:.0}%)",
+        "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the {draws} ChaCha8 normal draws {:.3} s ({:.0}%)",
         t_truth,
         100.0 * t_truth / batched_best[0],
         t_draws,
@@ -304,9 +314,11 @@ fn w1_bench(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// W1's batched truth alone (`simulate`), or only its draws, on one thread: the part of the
-/// batched time the filter kernel cannot touch.
-fn w1_truth_only(runs: usize, steps: usize, simulate: bool) -> Result<f64> {
+/// W1's batched truth alone (`simulate`), or only its draws (the initial states' from the
+/// runs' generators, the steps' through `ChaCha8Lanes` as the batched study on `isa` draws
+/// them, `w1::draws_isa`), on one thread: the part of the batched time the filter kernel
+/// cannot touch.
+fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<f64> {
     let (f, h) = w1::models()?;
     let (m0, p0) = w1::prior();
     let l0 = *kalibra_linalg::PsdMatrix::new(p0)?.factor();
@@ -324,16 +336,25 @@ fn w1_truth_only(runs: usize, steps: usize, simulate: bool) -> Result<f64> {
                     m0 + l0 * normals::<4>(rng)
                 })
                 .map_err(|e| fail(e.source.to_string()))?;
+                let mut draws =
+                    ChaCha8Lanes::new(w1::draws_isa(isa), rngs).map_err(|e| fail(e.to_string()))?;
                 for _ in 0..steps {
-                    truth.step(rngs).map_err(|e| fail(e.source.to_string()))?;
+                    truth
+                        .step(&mut draws)
+                        .map_err(|e| fail(e.source.to_string()))?;
                 }
                 last = truth.state()[0][0];
             } else {
                 for rng in rngs.iter_mut() {
                     last += normals::<4>(rng)[0];
-                    for _ in 0..steps {
-                        last += normals::<2>(rng)[0] + normals::<4>(rng)[0];
-                    }
+                }
+                let mut draws =
+                    ChaCha8Lanes::new(w1::draws_isa(isa), rngs).map_err(|e| fail(e.to_string()))?;
+                let (mut nv, mut nw) = ([[0.0; BATCH]; 2], [[0.0; BATCH]; 4]);
+                for _ in 0..steps {
+                    draws.standard_normals(&mut nv);
+                    draws.standard_normals(&mut nw);
+                    last += nv[0][0] + nw[0][0];
                 }
             }
             acc.push(0, last).map_err(|e| fail(e.to_string()))

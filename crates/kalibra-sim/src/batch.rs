@@ -8,9 +8,8 @@ use kalibra_models::{
     Dynamics, LinearGaussian, LinearObservation, Measurement, ModelError, Simulator,
 };
 use pulp::{Simd, WithSimd};
-use rand_distr::{Distribution, StandardNormal};
 
-use crate::{ChaCha8Rng, MonteCarlo, Partial, Shard, SimError, StudyId};
+use crate::{ChaCha8Lanes, ChaCha8Rng, MonteCarlo, Partial, Shard, SimError, StudyId};
 
 /// The failure of one run in a group of runs stepped together: the lowest-numbered failing
 /// run of the group, with its error.
@@ -301,13 +300,36 @@ fn write_lane<const D: usize>(out: &mut [Lanes; D], lane: usize, v: &SVector<f64
 /// ([`LinearGaussian`] dynamics, [`LinearObservation`] sensor), in the lane layout of
 /// [`KfBatch`](kalibra_filters::batch::KfBatch).
 ///
-/// Lane `i` draws from run `i`'s generator exactly the normals its scalar [`Simulator`] draws,
+/// Lane `i` draws from run `i`'s stream exactly the normals its scalar [`Simulator`] draws,
 /// in the same order (per step: the measurement noise, then the process noise), and applies
 /// them as the models do (`z = H x + L_R n_v`, `x' = F x + L_Q n_w` with the models' own
 /// factors, each product summed in column order as nalgebra's), so a lane's truth is the
 /// scalar run's, bit for bit where the compiler keeps the operation order. Unlike
-/// [`TruthBatch`], the arithmetic runs across the lanes (the compiler vectorises the loops, for the instruction set of [`LinearTruthBatch::with_isa`]) and
-/// skips the per-lane model calls; the draws stay per lane, since each generator is sequential.
+/// [`TruthBatch`], the arithmetic runs across the lanes (the compiler vectorises the loops, for
+/// the instruction set of [`LinearTruthBatch::with_isa`]) and skips the per-lane model calls,
+/// and the steps draw through [`ChaCha8Lanes`], which computes
+/// the lanes' ChaCha8 blocks together and gives each lane its own stream's normals, bit for bit.
+///
+/// ```
+/// use kalibra_filters::batch::Isa;
+/// use kalibra_linalg::{Matrix1, Vector1};
+/// use kalibra_models::{LinearGaussian, LinearObservation};
+/// use kalibra_sim::{ChaCha8Lanes, LinearTruthBatch, MonteCarlo};
+///
+/// let f = LinearGaussian::new(Matrix1::new(1.0), Matrix1::new(1.0))?;
+/// let h = LinearObservation::new(Matrix1::new(1.0), Matrix1::new(4.0))?;
+/// let mc = MonteCarlo::new(3, 1);
+/// let mut rngs: Vec<_> = (0..3).map(|run| mc.rng(run)).collect();
+/// // The initial states from the scalar generators, then the steps lane-wise.
+/// let mut truth = LinearTruthBatch::new(&f, &h, 0, &mut rngs, |_| Vector1::new(0.0))?;
+/// let mut draws = ChaCha8Lanes::new(Isa::detect(), &rngs)?;
+/// for _ in 0..10 {
+///     truth.step(&mut draws)?;
+/// }
+/// // The scalar generators continue after the steps' draws.
+/// draws.write_back(&mut rngs)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct LinearTruthBatch<const N: usize, const M: usize> {
     f: [[f64; N]; N],
@@ -463,25 +485,25 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
     /// afterwards [`LinearTruthBatch::state`] holds the `x_k` and
     /// [`LinearTruthBatch::measurement`] the `z_k` of every lane.
     ///
+    /// Lane `i` draws from lane `i` of `draws` (run `first_run + i`'s stream, taken from its
+    /// generator after the initial state's draws: [`ChaCha8Lanes::new`]): per lane, first the
+    /// `M` measurement-noise normals, then the `N` process-noise normals, as the scalar
+    /// simulator draws them.
+    ///
     /// # Errors
     /// [`ModelError::NonFinite`] for the lowest lane whose measurement or next state is not
     /// finite (a diverging truth), as [`Simulator::step`] reports it, as its run's failure;
     /// the other lanes have stepped.
     ///
     /// # Panics
-    /// If `rngs` has fewer generators than there are lanes.
-    pub fn step(&mut self, rngs: &mut [ChaCha8Rng]) -> Result<(), RunFailure<ModelError>> {
-        assert!(rngs.len() >= self.lanes, "one generator per lane");
+    /// If `draws` does not have one lane per truth lane.
+    pub fn step(&mut self, draws: &mut ChaCha8Lanes) -> Result<(), RunFailure<ModelError>> {
+        assert_eq!(draws.len(), self.lanes, "one generator lane per truth lane");
         let mut nv = [[0.0; BATCH]; M];
         let mut nw = [[0.0; BATCH]; N];
-        for (lane, rng) in rngs[..self.lanes].iter_mut().enumerate() {
-            for row in nv.iter_mut() {
-                row[lane] = StandardNormal.sample(rng);
-            }
-            for row in nw.iter_mut() {
-                row[lane] = StandardNormal.sample(rng);
-            }
-        }
+        // Per lane the same order as the scalar simulator: measurement noise, process noise.
+        draws.standard_normals(&mut nv);
+        draws.standard_normals(&mut nw);
         self.current = self.x;
         let isa = self.isa;
         isa.dispatch(Affine {

@@ -15,6 +15,14 @@
 //! threads (a test checks it). Errors are deterministic too: the error of the lowest-numbered
 //! failing run is returned.
 //!
+//! # Lane-wise draws
+//! Batched studies step [`BATCH`](kalibra_filters::batch::BATCH) runs together
+//! ([`MonteCarlo::accumulate_batched`]); [`ChaCha8Lanes`] draws for them together: the runs'
+//! ChaCha8 blocks computed with SIMD, one block per vector lane, and each run reading only its
+//! own stream's words, in order, so that every run draws exactly the numbers (and
+//! [`ChaCha8Lanes::standard_normals`] exactly the ziggurat normals) its own [`ChaCha8Rng`]
+//! would give, on every instruction set. Results stay those of the one-run studies.
+//!
 //! # Example
 //! ```
 //! use kalibra_sim::MonteCarlo;
@@ -35,10 +43,13 @@
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod batch;
+mod lanes;
 mod shard;
 mod tuning;
+mod ziggurat_tables;
 
 pub use batch::{LinearTruthBatch, RunFailure, TruthBatch};
+pub use lanes::{ChaCha8Lanes, LaneRng, LanesError};
 /// The generator of every Monte Carlo run (re-exported so callers can name it).
 pub use rand_chacha::ChaCha8Rng;
 pub use shard::{

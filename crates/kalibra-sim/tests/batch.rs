@@ -11,7 +11,7 @@ use kalibra_models::{
     Dynamics, Kinematic, LinearDynamics, LinearGaussian, LinearMeasurement, LinearObservation,
     Measurement, ModelError, ProcessNoise, Simulator, sample_with_factor,
 };
-use kalibra_sim::{LinearTruthBatch, MonteCarlo, RunFailure, SimError};
+use kalibra_sim::{ChaCha8Lanes, LinearTruthBatch, MonteCarlo, RunFailure, SimError};
 
 /// W1's model (2-D constant velocity, position measured) with a larger process noise, so that
 /// runs wander apart.
@@ -84,10 +84,11 @@ fn batched_runs(
     })
     .unwrap()
     .with_isa(isa);
+    let mut draws = ChaCha8Lanes::new(isa, &rngs).unwrap();
     let mut kf = KfBatch::new(isa, batch_model(), m0, p0).unwrap();
     let mut out = vec![Vec::new(); runs.len()];
     for k in 0..steps {
-        truth.step(&mut rngs).unwrap();
+        truth.step(&mut draws).unwrap();
         let step = if k == 0 {
             kf.update(truth.measurement(), truth.state())
         } else {
@@ -148,9 +149,10 @@ fn batched_means(mc: MonteCarlo, steps: usize, isa: Isa) -> (StepMean, StepMean)
             let mut truth =
                 LinearTruthBatch::new(&f, &h, first, rngs, |rng| m0 + sample_with_factor(&l0, rng))
                     .unwrap();
+            let mut draws = ChaCha8Lanes::new(isa, rngs).unwrap();
             let mut kf = KfBatch::new(isa, model.clone(), m0, p0).unwrap();
             for k in 0..steps {
-                truth.step(rngs).unwrap();
+                truth.step(&mut draws).unwrap();
                 let step = if k == 0 {
                     kf.update(truth.measurement(), truth.state())
                 } else {
@@ -257,7 +259,8 @@ fn a_diverging_truth_lane_is_its_runs_failure() {
         }
     })
     .unwrap();
-    let failure = truth.step(&mut rngs).unwrap_err();
+    let mut draws = ChaCha8Lanes::new(Isa::detect(), &rngs).unwrap();
+    let failure = truth.step(&mut draws).unwrap_err();
     assert_eq!(failure.run, 16 + 5);
     assert!(
         matches!(failure.source, ModelError::NonFinite { step: 1, .. }),

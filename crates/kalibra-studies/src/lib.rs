@@ -91,6 +91,10 @@ pub enum StudyError {
     /// A metric could not be computed.
     #[error(transparent)]
     Metrics(#[from] MetricsError),
+    /// Lane-wise random draws could not be set up (too many lanes, an instruction set the
+    /// CPU lacks).
+    #[error(transparent)]
+    Lanes(#[from] kalibra_sim::LanesError),
     /// A tuning helper failed (sweep grid, `P_ad`, `Q_ad`).
     #[error(transparent)]
     Tuning(#[from] kalibra_sim::TuningError),
