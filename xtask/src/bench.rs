@@ -259,8 +259,8 @@ fn w1_bench(args: &Args) -> Result<()> {
     let (t_draws, _) = best_of(args.repeats, || {
         w1_truth_only(args.runs, args.steps, false, detected)
     })?;
-    // Lane-wise draws (`ChaCha8Lanes` on the detected ISA) or each run's own generator.
-    let draws = if w1::draws_isa(detected) == Isa::Scalar {
+    // Lane-wise draws or each run's own generator, as `ChaCha8Lanes::for_batch` chooses.
+    let draws = if ChaCha8Lanes::for_batch(detected, &[])?.isa() == Isa::Scalar {
         "per-run"
     } else {
         "lane-wise"
@@ -315,8 +315,8 @@ fn w1_bench(args: &Args) -> Result<()> {
 }
 
 /// W1's batched truth alone (`simulate`), or only its draws (the initial states' from the
-/// runs' generators, the steps' through `ChaCha8Lanes` as the batched study on `isa` draws
-/// them, `w1::draws_isa`), on one thread: the part of the batched time the filter kernel
+/// runs' generators, the steps' through `ChaCha8Lanes::for_batch` as the batched study on
+/// `isa` draws them), on one thread: the part of the batched time the filter kernel
 /// cannot touch.
 fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<f64> {
     let (f, h) = w1::models()?;
@@ -337,7 +337,7 @@ fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<
                 })
                 .map_err(|e| fail(e.source.to_string()))?;
                 let mut draws =
-                    ChaCha8Lanes::new(w1::draws_isa(isa), rngs).map_err(|e| fail(e.to_string()))?;
+                    ChaCha8Lanes::for_batch(isa, rngs).map_err(|e| fail(e.to_string()))?;
                 for _ in 0..steps {
                     truth
                         .step(&mut draws)
@@ -349,7 +349,7 @@ fn w1_truth_only(runs: usize, steps: usize, simulate: bool, isa: Isa) -> Result<
                     last += normals::<4>(rng)[0];
                 }
                 let mut draws =
-                    ChaCha8Lanes::new(w1::draws_isa(isa), rngs).map_err(|e| fail(e.to_string()))?;
+                    ChaCha8Lanes::for_batch(isa, rngs).map_err(|e| fail(e.to_string()))?;
                 let (mut nv, mut nw) = ([[0.0; BATCH]; 2], [[0.0; BATCH]; 4]);
                 for _ in 0..steps {
                     draws.standard_normals(&mut nv);

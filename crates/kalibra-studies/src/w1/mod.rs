@@ -17,9 +17,7 @@
 mod run;
 mod scenario;
 
-pub use run::{
-    Acc, Band, Config, Report, draws_isa, merge, run, run_batched, run_scalar, run_shard,
-};
+pub use run::{Acc, Band, Config, Report, merge, run, run_batched, run_scalar, run_shard};
 pub use scenario::{models, prior};
 
 use crate::StudyError;

@@ -307,7 +307,7 @@ fn batched(
         .map_err(to_study)?
         .with_isa(isa);
         // The steps' draws, from where the initial states left each run's stream.
-        let mut draws = ChaCha8Lanes::new(draws_isa(isa), rngs).map_err(|e| RunFailure {
+        let mut draws = ChaCha8Lanes::for_batch(isa, rngs).map_err(|e| RunFailure {
             run: first,
             source: e.into(),
         })?;
@@ -378,15 +378,6 @@ fn batched(
         }
     };
     Ok((mc, make, Box::new(group)))
-}
-
-/// The instruction set the batched study on `isa` draws its steps' normals with
-/// ([`ChaCha8Lanes`]): lane-wise on AVX-512, where that measured faster than the runs' own
-/// generators (6 M normals on one thread: 18.5 ms against 21.0 ms), through the runs' own
-/// generators ([`Isa::Scalar`]) otherwise (lane-wise on AVX2: 23.9 ms). The numbers drawn are
-/// the same either way; only the time differs.
-pub fn draws_isa(isa: Isa) -> Isa {
-    if isa == Isa::Avx512 { isa } else { Isa::Scalar }
 }
 
 /// The report of a study's accumulators.
