@@ -26,14 +26,14 @@ const BATCH_CELLS: usize = 4096;
 const STRIP_STEPS: usize = 32;
 
 /// Feeds the cells of `runs` runs at the steps `block` to `evaluator` in strips of
-/// [`STRIP_STEPS`] steps: each strip run after run, the strips in step order. Each step still
+/// `strip_steps` steps ([`STRIP_STEPS`]; the whole block is one pass run after run): each strip run after run, the strips in step order. Each step still
 /// takes the runs in run order and each run its steps in step order, so every sum is the one
 /// a pass run after run gives, to the bit. Why strips: NCI keeps each step's errors in a
 /// vector of its own ([`kalibra_metrics::Credibility`]), so a run's pass over 128 steps stored
 /// to 256 places far apart, cell after cell, and under perf those stores stalled about a
 /// quarter of the time of a 1000 x 1000 log; a strip of 32 steps stores to 64, still reads 32
-/// cells of each array in a row, and took 15-20% less CPU time (strips of 8 and 16 read too
-/// little in a row and were slower).
+/// cells of each array in a row, and took 1.34-1.52 s of CPU per 8 calls against 1.60-1.67 s
+/// (strips of 8 and 16 read too little in a row and were slower: 1.99 s, 1.55-1.82 s).
 ///
 /// # Errors
 /// The first failing cell in the order fed (not necessarily the first run after run).
@@ -43,9 +43,10 @@ fn feed_in_strips(
     log: &FilterLog<'_>,
     runs: usize,
     block: &std::ops::Range<usize>,
+    strip_steps: usize,
 ) -> Result<(), CellError> {
-    for start in block.clone().step_by(STRIP_STEPS) {
-        let strip = start..(start + STRIP_STEPS).min(block.end);
+    for start in block.clone().step_by(strip_steps) {
+        let strip = start..(start + strip_steps).min(block.end);
         for run in 0..runs {
             for step in strip.clone() {
                 evaluator
@@ -224,20 +225,22 @@ impl Evaluation {
                     // The blocks run in parallel with each other: each feeds its cells on its
                     // own thread, one at a time.
                     let mut scratch = evaluator.scratch();
-                    let fed = feed_in_strips(&mut evaluator, &mut scratch, log, runs, &range);
+                    let fed = feed_in_strips(
+                        &mut evaluator,
+                        &mut scratch,
+                        log,
+                        runs,
+                        &range,
+                        STRIP_STEPS,
+                    );
                     if fed.is_err() {
                         // The strips meet the cells in another order than one pass: the
                         // error to report is that of the first failing cell run after run.
                         let mut evaluator =
                             self.evaluator(log.contents()).map_err(|e| ((0, 0), e))?;
                         let mut scratch = evaluator.scratch();
-                        for run in 0..runs {
-                            for step in range.clone() {
-                                evaluator
-                                    .push_with(run, step, &log.cell(run, step), &mut scratch)
-                                    .map_err(|e| ((run, step), e))?;
-                            }
-                        }
+                        let whole = range.len();
+                        feed_in_strips(&mut evaluator, &mut scratch, log, runs, &range, whole)?;
                     }
                     fed?;
                     return Ok(evaluator);
