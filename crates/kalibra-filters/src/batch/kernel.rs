@@ -290,6 +290,127 @@ fn health<S: Simd>(simd: S, acc: S::f64s, v: S::f64s) -> S::f64s {
     simd.mul_add_e_f64s(v, simd.splat_f64s(0.0), acc)
 }
 
+/// The half of a KF step that no measurement enters: with `PREDICT`, the prior
+/// `P- = (F P) F^T + Q` symmetrised (else `P` as it is), `S = H (P- H^T) + R` symmetrised and
+/// its factor, the gain `K` by a solve with it, and the Joseph posterior
+/// `(I - K H) P- (I - K H)^T + (K R) K^T` symmetrised (`KalmanCore::predict` and `update`).
+/// The per-lane kernel and [`CovarianceSchedule`] both call it, so a schedule's entries are
+/// the values every lane of the kernel computes.
+pub(super) struct Covariance<S: Simd, const N: usize, const M: usize> {
+    /// `P-` (or `P` without prediction).
+    pub prior: [[S::f64s; N]; N],
+    /// `F P F^T`, the propagated part of the prior (the J terms' `A_k`); `P` without
+    /// prediction.
+    pub propagated: [[S::f64s; N]; N],
+    /// The Cholesky factor of `S` and the reciprocals of its diagonal.
+    pub ls: ([[S::f64s; M]; M], [S::f64s; M]),
+    /// `K`.
+    pub gain: [[S::f64s; M]; N],
+    /// `P+`.
+    pub posterior: [[S::f64s; N]; N],
+}
+
+#[inline(always)]
+pub(super) fn covariance<S: Simd, const N: usize, const M: usize, const PREDICT: bool>(
+    simd: S,
+    f: &impl Entries<S, N, N>,
+    q: &impl Entries<S, N, N>,
+    h: &impl Entries<S, M, N>,
+    r: &impl Entries<S, M, M>,
+    p: [[S::f64s; N]; N],
+) -> Covariance<S, N, M> {
+    let zero = simd.splat_f64s(0.0);
+    let one = simd.splat_f64s(1.0);
+    let mut p = p;
+    let mut propagated = p;
+    if PREDICT {
+        let fp = mul(simd, f, &p);
+        propagated = mul_t(simd, &fp, f);
+        p = add(simd, &propagated, q);
+        symmetrize(simd, &mut p);
+    }
+    // P H^T, S = H (P H^T) + R symmetrised, its factor (KalmanCore::update).
+    let pht = mul_t(simd, &p, h);
+    let mut s = add(simd, &mul(simd, h, &pht), r);
+    symmetrize(simd, &mut s);
+    let ls = cholesky(simd, &s);
+    // K = (S^-1 (P H^T)^T)^T, one column of (P H^T)^T (a row of P H^T) at a time.
+    let mut gain = [[zero; M]; N];
+    for i in 0..N {
+        gain[i] = backward(simd, &ls, &forward(simd, &ls, &pht[i]));
+    }
+    // Joseph: (I - K H) P (I - K H)^T + (K R) K^T, symmetrised.
+    let mut ikh = mul(simd, &gain, h);
+    for i in 0..N {
+        for j in 0..N {
+            ikh[i][j] = simd.neg_f64s(ikh[i][j]);
+        }
+        ikh[i][i] = simd.add_f64s(ikh[i][i], one);
+    }
+    let ikhp = mul(simd, &ikh, &p);
+    let kr = mul(simd, &gain, r);
+    let mut posterior = add(simd, &mul_t(simd, &ikhp, &ikh), &mul_t(simd, &kr, &gain));
+    symmetrize(simd, &mut posterior);
+    Covariance {
+        prior: p,
+        propagated,
+        ls,
+        gain,
+        posterior,
+    }
+}
+
+/// `nu = z - H x` for the lanes of chunk `c`, and the health of the measurement (0 if finite).
+#[inline(always)]
+fn innovate<S: Simd, const N: usize, const M: usize>(
+    simd: S,
+    h: &impl Entries<S, M, N>,
+    x: &[S::f64s; N],
+    zs: &[Lanes; M],
+    c: usize,
+) -> ([S::f64s; M], S::f64s) {
+    let mut hz = simd.splat_f64s(0.0);
+    let mut nu = [hz; M];
+    let hx = mul_vec(simd, h, x);
+    for i in 0..M {
+        let zi = load::<S>(&zs[i], c);
+        hz = health(simd, hz, zi);
+        nu[i] = simd.sub_f64s(zi, hx[i]);
+    }
+    (nu, hz)
+}
+
+/// `x + K nu`.
+#[inline(always)]
+fn corrected<S: Simd, const N: usize, const M: usize>(
+    simd: S,
+    gain: &impl Entries<S, N, M>,
+    x: &[S::f64s; N],
+    nu: &[S::f64s; M],
+) -> [S::f64s; N] {
+    let knu = mul_vec(simd, gain, nu);
+    let mut x_post = *x;
+    for i in 0..N {
+        x_post[i] = simd.add_f64s(x[i], knu[i]);
+    }
+    x_post
+}
+
+/// `truth - x+` for the lanes of chunk `c`.
+#[inline(always)]
+fn errors<S: Simd, const N: usize>(
+    simd: S,
+    truth: &[Lanes; N],
+    c: usize,
+    x_post: &[S::f64s; N],
+) -> [S::f64s; N] {
+    let mut e = *x_post;
+    for i in 0..N {
+        e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x_post[i]);
+    }
+    e
+}
+
 impl<const N: usize, const M: usize, const PREDICT: bool, F, Q, H, R> WithSimd
     for Kernel<'_, N, M, PREDICT, F, Q, H, R>
 where
@@ -317,7 +438,6 @@ where
             mut terms,
         } = self;
         let zero = simd.splat_f64s(0.0);
-        let one = simd.splat_f64s(1.0);
         for c in 0..BATCH / S::F64_LANES {
             // The model for these lanes, read where it is used.
             let f = Model { op: &fs, simd, c };
@@ -332,68 +452,35 @@ where
                     p[i][j] = load::<S>(&ps[i][j], c);
                 }
             }
-            // F P F^T, the propagated part of the prior (the J terms' A_k).
-            let mut propagated = p;
-            if PREDICT {
-                // x- = F x (the KF; the EKF's caller wrote f(x)); P- = (F P) F^T + Q,
-                // symmetrised (KalmanCore::predict). The prediction is kept even if the update
-                // fails (the selection below keeps `x` and `p`, now the prior), as in the
-                // scalar filter.
-                if innovation.is_none() {
-                    x = mul_vec(simd, &f, &x);
-                }
-                let fp = mul(simd, &f, &p);
-                propagated = mul_t(simd, &fp, &f);
-                p = add(simd, &propagated, &q);
-                symmetrize(simd, &mut p);
+            // x- = F x (the KF; the EKF's caller wrote f(x)).
+            if PREDICT && innovation.is_none() {
+                x = mul_vec(simd, &f, &x);
             }
-            // P H^T, S = H (P H^T) + R symmetrised, its factor (KalmanCore::update).
-            let pht = mul_t(simd, &p, &h);
-            let mut s = add(simd, &mul(simd, &h, &pht), &r);
-            symmetrize(simd, &mut s);
-            let ls = cholesky(simd, &s);
-            // K = (S^-1 (P H^T)^T)^T, one column of (P H^T)^T (a row of P H^T) at a time.
-            let mut gain = [[zero; M]; N];
-            for i in 0..N {
-                gain[i] = backward(simd, &ls, &forward(simd, &ls, &pht[i]));
-            }
+            // The prior, S's factor, the gain and the Joseph posterior: no measurement enters.
+            // The prediction is kept even if the update fails (the selection below keeps `x`
+            // and `p`, now the prior), as in the scalar filter.
+            let Covariance {
+                prior: p,
+                propagated,
+                ls,
+                gain,
+                posterior: p_post,
+            } = covariance::<S, N, M, PREDICT>(simd, &f, &q, &h, &r, p);
             // nu = z - H x (or the caller's), the health of the measurement in it; x+ = x + K nu.
-            let mut hz = zero;
-            let mut nu = [zero; M];
-            match innovation {
-                None => {
-                    let hx = mul_vec(simd, &h, &x);
-                    for i in 0..M {
-                        let zi = load::<S>(&zs[i], c);
-                        hz = health(simd, hz, zi);
-                        nu[i] = simd.sub_f64s(zi, hx[i]);
-                    }
-                }
+            let (nu, hz) = match innovation {
+                None => innovate(simd, &h, &x, zs, c),
                 Some(given) => {
+                    let mut hz = zero;
+                    let mut nu = [zero; M];
                     for i in 0..M {
                         hz = health(simd, hz, load::<S>(&zs[i], c));
                         nu[i] = load::<S>(&given[i], c);
                         hz = health(simd, hz, nu[i]);
                     }
+                    (nu, hz)
                 }
-            }
-            let knu = mul_vec(simd, &gain, &nu);
-            let mut x_post = [zero; N];
-            for i in 0..N {
-                x_post[i] = simd.add_f64s(x[i], knu[i]);
-            }
-            // Joseph: (I - K H) P (I - K H)^T + (K R) K^T, symmetrised.
-            let mut ikh = mul(simd, &gain, &h);
-            for i in 0..N {
-                for j in 0..N {
-                    ikh[i][j] = simd.neg_f64s(ikh[i][j]);
-                }
-                ikh[i][i] = simd.add_f64s(ikh[i][i], one);
-            }
-            let ikhp = mul(simd, &ikh, &p);
-            let kr = mul(simd, &gain, &r);
-            let mut p_post = add(simd, &mul_t(simd, &ikhp, &ikh), &mul_t(simd, &kr, &gain));
-            symmetrize(simd, &mut p_post);
+            };
+            let x_post = corrected(simd, &gain, &x, &nu);
             // NIS through the factor of S.
             let nis = norm_squared(simd, &forward(simd, &ls, &nu));
             // Health: 0 if the measurement, the NIS (so S's factor) and the posterior are all
@@ -441,10 +528,7 @@ where
                 }
             }
             // NEES of the truth against the posterior, through P+'s factor.
-            let mut e = [zero; N];
-            for i in 0..N {
-                e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x_post[i]);
-            }
+            let e = errors(simd, truth, c, &x_post);
             let lp = cholesky(simd, &p_post);
             let nees = norm_squared(simd, &forward(simd, &lp, &e));
             store::<S>(&mut out.nis, c, nis);
@@ -541,4 +625,242 @@ fn j_terms<S: Simd, const N: usize, const M: usize>(
     store::<S>(&mut t.j2, c, j2);
     store::<S>(&mut t.tr_n, c, tr_n);
     store::<S>(&mut t.tr_b, c, tr_b);
+}
+
+/// One update of a [`KfSchedule`](super::KfSchedule): what [`covariance`] and the factor of
+/// `P+` give every lane that starts the update from the schedule's covariance, as plain
+/// numbers (broadcast again where they are used).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct ScheduleStep<const N: usize, const M: usize> {
+    /// Whether the update was preceded by a prediction.
+    pub predicted: bool,
+    /// `P-` (or `P` without prediction): what a lane whose update fails keeps.
+    pub prior: [[f64; N]; N],
+    /// `K`.
+    pub gain: [[f64; M]; N],
+    /// The factor of `S` and the reciprocals of its diagonal.
+    pub ls: ([[f64; M]; M], [f64; M]),
+    /// `P+`.
+    pub posterior: [[f64; N]; N],
+    /// The factor of `P+` (for the NEES) and the reciprocals of its diagonal; NaN where `P+`
+    /// has none, as the kernel's.
+    pub lp: ([[f64; N]; N], [f64; N]),
+}
+
+impl<const N: usize, const M: usize> ScheduleStep<N, M> {
+    /// Whether a lane's update from this step's covariance can fail only through its own
+    /// measurement: the prior, gain, factor of `S` and posterior are all finite (the NEES
+    /// factor may be NaN: the kernel's NEES is then NaN for every lane, an error of the NEES
+    /// alone).
+    fn is_finite(&self) -> bool {
+        let matrix = |m: &[[f64; N]; N]| m.iter().flatten().all(|v| v.is_finite());
+        matrix(&self.prior)
+            && matrix(&self.posterior)
+            && self.gain.iter().flatten().all(|v| v.is_finite())
+            && self
+                .ls
+                .0
+                .iter()
+                .flatten()
+                .chain(&self.ls.1)
+                .all(|v| v.is_finite())
+    }
+}
+
+/// Lane 0 of a vector.
+#[inline(always)]
+fn first<S: Simd>(v: S::f64s) -> f64 {
+    let mut lanes = [0.0; BATCH];
+    store::<S>(&mut lanes, 0, v);
+    lanes[0]
+}
+
+#[inline(always)]
+fn first_matrix<S: Simd, const R: usize, const C: usize>(m: &[[S::f64s; C]; R]) -> [[f64; C]; R] {
+    let mut out = [[0.0; C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            out[i][j] = first::<S>(m[i][j]);
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn first_vector<S: Simd, const D: usize>(v: &[S::f64s; D]) -> [f64; D] {
+    let mut out = [0.0; D];
+    for i in 0..D {
+        out[i] = first::<S>(v[i]);
+    }
+    out
+}
+
+/// Every entry of `m` broadcast.
+#[inline(always)]
+fn splat_matrix<S: Simd, const R: usize, const C: usize>(
+    simd: S,
+    m: &[[f64; C]; R],
+) -> [[S::f64s; C]; R] {
+    let mut out = [[simd.splat_f64s(0.0); C]; R];
+    for i in 0..R {
+        for j in 0..C {
+            out[i][j] = simd.splat_f64s(m[i][j]);
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn splat_vector<S: Simd, const D: usize>(simd: S, v: &[f64; D]) -> [S::f64s; D] {
+    let mut out = [simd.splat_f64s(0.0); D];
+    for i in 0..D {
+        out[i] = simd.splat_f64s(v[i]);
+    }
+    out
+}
+
+/// Builds a schedule: an update from `P0`, then predictions and updates, through
+/// [`covariance`] on one vector of the instruction set (every lane holds the same numbers),
+/// stopping before the first step whose covariance is not finite.
+pub(super) struct BuildSchedule<'a, const N: usize, const M: usize> {
+    pub f: &'a [[f64; N]; N],
+    pub q: &'a [[f64; N]; N],
+    pub h: &'a [[f64; N]; M],
+    pub r: &'a [[f64; M]; M],
+    pub p0: &'a [[f64; N]; N],
+    pub updates: usize,
+    pub out: &'a mut Vec<ScheduleStep<N, M>>,
+}
+
+impl<const N: usize, const M: usize> WithSimd for BuildSchedule<'_, N, M> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let f = Model {
+            op: &self.f,
+            simd,
+            c: 0,
+        };
+        let q = Model {
+            op: &self.q,
+            simd,
+            c: 0,
+        };
+        let h = Model {
+            op: &self.h,
+            simd,
+            c: 0,
+        };
+        let r = Model {
+            op: &self.r,
+            simd,
+            c: 0,
+        };
+        let mut p = splat_matrix(simd, self.p0);
+        for k in 0..self.updates {
+            let cov = if k == 0 {
+                covariance::<S, N, M, false>(simd, &f, &q, &h, &r, p)
+            } else {
+                covariance::<S, N, M, true>(simd, &f, &q, &h, &r, p)
+            };
+            let (lp, lp_inv) = cholesky(simd, &cov.posterior);
+            let step = ScheduleStep {
+                predicted: k > 0,
+                prior: first_matrix::<S, N, N>(&cov.prior),
+                gain: first_matrix::<S, N, M>(&cov.gain),
+                ls: (
+                    first_matrix::<S, M, M>(&cov.ls.0),
+                    first_vector::<S, M>(&cov.ls.1),
+                ),
+                posterior: first_matrix::<S, N, N>(&cov.posterior),
+                lp: (first_matrix::<S, N, N>(&lp), first_vector::<S, N>(&lp_inv)),
+            };
+            if !step.is_finite() {
+                break;
+            }
+            self.out.push(step);
+            p = cov.posterior;
+        }
+    }
+}
+
+/// A KF step of lanes that start it from a schedule's covariance: only the means are the
+/// lanes' own (`x- = F x`, `nu = z - H x`, `x+ = x + K nu`, the NIS and NEES through the
+/// schedule's factors), computed by the same functions in the same order as [`Kernel`], so
+/// every lane's numbers are the kernel's to the bit.
+pub(super) struct Scheduled<'a, const N: usize, const M: usize, const PREDICT: bool> {
+    pub f: &'a [[f64; N]; N],
+    pub h: &'a [[f64; N]; M],
+    pub step: &'a ScheduleStep<N, M>,
+    pub x: &'a mut [Lanes; N],
+    pub z: &'a [Lanes; M],
+    pub truth: &'a [Lanes; N],
+    pub out: &'a mut BatchStep<N>,
+}
+
+impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
+    for Scheduled<'_, N, M, PREDICT>
+{
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Scheduled {
+            f: fs,
+            h: hs,
+            step,
+            x: xs,
+            z: zs,
+            truth,
+            out,
+        } = self;
+        let zero = simd.splat_f64s(0.0);
+        let gain = splat_matrix(simd, &step.gain);
+        let ls = (
+            splat_matrix(simd, &step.ls.0),
+            splat_vector(simd, &step.ls.1),
+        );
+        let lp = (
+            splat_matrix(simd, &step.lp.0),
+            splat_vector(simd, &step.lp.1),
+        );
+        for c in 0..BATCH / S::F64_LANES {
+            let f = Model { op: &fs, simd, c };
+            let h = Model { op: &hs, simd, c };
+            let mut x = [zero; N];
+            for i in 0..N {
+                x[i] = load::<S>(&xs[i], c);
+            }
+            if PREDICT {
+                x = mul_vec(simd, &f, &x);
+            }
+            let (nu, hz) = innovate(simd, &h, &x, zs, c);
+            let x_post = corrected(simd, &gain, &x, &nu);
+            let nis = norm_squared(simd, &forward(simd, &ls, &nu));
+            // The kernel's health test without P+'s entries, which the schedule holds only
+            // finite: 0 or NaN as the kernel's.
+            let mut sums = [hz, zero, zero, zero];
+            sums[1] = health(simd, sums[1], nis);
+            for i in 0..N {
+                sums[(2 + i) % 4] = health(simd, sums[(2 + i) % 4], x_post[i]);
+            }
+            let ok = simd.add_f64s(
+                simd.add_f64s(sums[0], sums[1]),
+                simd.add_f64s(sums[2], sums[3]),
+            );
+            let keep = simd.equal_f64s(ok, zero);
+            for i in 0..N {
+                store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
+            }
+            let e = errors(simd, truth, c, &x_post);
+            let nees = norm_squared(simd, &forward(simd, &lp, &e));
+            store::<S>(&mut out.nis, c, nis);
+            store::<S>(&mut out.nees, c, nees);
+            store::<S>(&mut out.health, c, ok);
+            for i in 0..N {
+                store::<S>(&mut out.error[i], c, e[i]);
+            }
+        }
+    }
 }

@@ -59,6 +59,7 @@
 //! ```
 
 use std::str::FromStr;
+use std::sync::Arc;
 
 mod ekf;
 mod kernel;
@@ -66,7 +67,7 @@ mod ukf;
 
 pub use ekf::{EkfBatch, JLanes};
 pub use kalibra_models::lanes::{LaneDynamics, LaneMeasurement, LaneSigmaMeasurement, PerLane};
-use kernel::Kernel;
+use kernel::{BuildSchedule, Kernel, ScheduleStep, Scheduled};
 pub use ukf::UkfBatch;
 
 use kalibra_linalg::{Definiteness, SMatrix, SVector, check_covariance, check_finite};
@@ -554,9 +555,14 @@ pub struct KfBatch<const N: usize, const M: usize> {
     model: BatchModel<N, M>,
     k: usize,
     x: [Lanes; N],
+    // While the batch follows a schedule (`schedule` is `Some`), `p` and `gain` are not
+    // written: every lane's are the schedule's after its first `at` updates
+    // ([`KfBatch::leave_schedule`] writes them back).
     p: [[Lanes; N]; N],
     gain: [[Lanes; M]; N],
     out: BatchStep<N>,
+    schedule: Option<Arc<KfSchedule<N, M>>>,
+    at: usize,
 }
 
 impl<const N: usize, const M: usize> KfBatch<N, M> {
@@ -581,7 +587,73 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
             p,
             gain: [[[0.0; BATCH]; M]; N],
             out: BatchStep::new(),
+            schedule: None,
+            at: 0,
         })
+    }
+
+    /// [`BATCH`] filters at step 0 from the estimate `(x0, P0)` of `schedule` (its model, prior
+    /// and instruction set), which follow the schedule's covariances instead of computing them:
+    /// every number is the one [`KfBatch::new`] with the same arguments gives, to the bit, but
+    /// an update computes only the lanes' means, NIS and NEES. A batch leaves the schedule, and
+    /// from then on computes its lanes' covariances itself, when a lane's update fails (its
+    /// covariance then differs from the others'), when [`KfBatch::set_lane`] restarts a lane,
+    /// when it predicts where the schedule did not (or not where it did), or past the
+    /// schedule's end.
+    ///
+    /// # Errors
+    /// [`FilterError::Initial`] if `x0` is not finite.
+    pub fn scheduled(
+        schedule: Arc<KfSchedule<N, M>>,
+        x0: SVector<f64, N>,
+    ) -> Result<Self, FilterError> {
+        check_finite(&x0, "initial mean").map_err(FilterError::Initial)?;
+        Ok(Self {
+            isa: schedule.isa,
+            model: schedule.model.clone(),
+            k: 0,
+            x: std::array::from_fn(|i| [x0[i]; BATCH]),
+            p: std::array::from_fn(|i| std::array::from_fn(|j| [schedule.p0[i][j]; BATCH])),
+            gain: [[[0.0; BATCH]; M]; N],
+            out: BatchStep::new(),
+            schedule: Some(schedule),
+            at: 0,
+        })
+    }
+
+    /// Whether the batch still follows a schedule ([`KfBatch::scheduled`]).
+    pub fn is_scheduled(&self) -> bool {
+        self.schedule.is_some()
+    }
+
+    /// The schedule's update the batch made last, while it follows one (`None` before its
+    /// first update: `p` and `gain` still hold `P0` and zeros then).
+    fn schedule_step(&self) -> Option<&ScheduleStep<N, M>> {
+        let schedule = self.schedule.as_ref()?;
+        self.at.checked_sub(1).map(|k| &schedule.steps[k])
+    }
+
+    /// Stops following the schedule: every lane's covariance and gain become the schedule's
+    /// after the updates made, but those of the lanes in `failed`, whose last update failed
+    /// and which keep the prior.
+    fn leave_schedule(&mut self, failed: [bool; BATCH]) {
+        if let Some(step) = self.schedule_step() {
+            let (prior, posterior, gain) = (step.prior, step.posterior, step.gain);
+            for (lane, failed) in failed.into_iter().enumerate() {
+                let p = if failed { &prior } else { &posterior };
+                for (row, p_row) in self.p.iter_mut().zip(p) {
+                    for (entry, value) in row.iter_mut().zip(p_row) {
+                        entry[lane] = *value;
+                    }
+                }
+                for (row, k_row) in self.gain.iter_mut().zip(&gain) {
+                    for (entry, value) in row.iter_mut().zip(k_row) {
+                        entry[lane] = *value;
+                    }
+                }
+            }
+        }
+        self.schedule = None;
     }
 
     /// Restarts lane `lane` from its own estimate `(x, P)` (for instance runs with their own
@@ -599,6 +671,13 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         p: SMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
         check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
+        // Checked before the batch leaves its schedule, so that a refused estimate changes
+        // nothing.
+        let p = kalibra_linalg::PsdMatrix::named(p, "initial covariance")
+            .map_err(FilterError::Initial)?
+            .matrix()
+            .clone_owned();
+        self.leave_schedule([false; BATCH]);
         set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
     }
 
@@ -625,7 +704,11 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
     /// # Panics
     /// If `lane >= BATCH`.
     pub fn cov(&self, lane: usize) -> SMatrix<f64, N, N> {
-        SMatrix::from_fn(|i, j| self.p[i][j][lane])
+        assert!(lane < BATCH, "lane {lane} of a batch of {BATCH}");
+        match self.schedule_step() {
+            Some(step) => SMatrix::from_fn(|i, j| step.posterior[i][j]),
+            None => SMatrix::from_fn(|i, j| self.p[i][j][lane]),
+        }
     }
 
     /// Updates every lane at the current step with its measurement `z[i][lane]` and computes
@@ -645,6 +728,31 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
 
     fn run<const PREDICT: bool>(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
         let isa = self.isa;
+        if let Some(schedule) = self.schedule.clone() {
+            match schedule.steps.get(self.at) {
+                Some(step) if step.predicted == PREDICT => {
+                    isa.dispatch(Scheduled::<N, M, PREDICT> {
+                        f: &self.model.f,
+                        h: &self.model.h,
+                        step,
+                        x: &mut self.x,
+                        z,
+                        truth,
+                        out: &mut self.out,
+                    });
+                    self.at += 1;
+                    let failed = self.out.health.map(|h| h != 0.0);
+                    if failed.contains(&true) {
+                        // A failed lane keeps its prior: the lanes' covariances differ now.
+                        // (`finish` reads `p` only for failed lanes, so it is written first.)
+                        self.leave_schedule(failed);
+                    }
+                    self.out.finish(self.k, z, &self.x, &self.p);
+                    return &self.out;
+                }
+                _ => self.leave_schedule([false; BATCH]),
+            }
+        }
         isa.dispatch(Kernel::<N, M, PREDICT, _, _, _, _> {
             f: &self.model.f,
             q: &self.model.q,
@@ -669,7 +777,131 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
     /// # Panics
     /// If `lane >= BATCH`.
     pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
-        SMatrix::from_fn(|i, j| self.gain[i][j][lane])
+        assert!(lane < BATCH, "lane {lane} of a batch of {BATCH}");
+        match self.schedule_step() {
+            Some(step) => SMatrix::from_fn(|i, j| step.gain[i][j]),
+            None => SMatrix::from_fn(|i, j| self.gain[i][j][lane]),
+        }
+    }
+}
+
+/// The covariances of a Kalman filter on one [`BatchModel`] from one prior `P0`: an update at
+/// step 0, then a prediction and an update at each later step, computed once for every batch
+/// that follows it ([`KfBatch::scheduled`]).
+///
+/// A linear filter's `P-`, `S`, `K` and `P+` depend on the model and `P0` alone, never on the
+/// measurements, so a Monte Carlo study whose runs share both computes the same covariance
+/// sequence in every run. A schedule holds it (computed by the batched kernel's own code on
+/// one vector of the instruction set), and a batch that follows it computes only what differs
+/// between runs: the means, the innovations, the NIS and the NEES. Every number is the one the
+/// batch computes without a schedule, to the bit (on the same instruction set); a batch leaves
+/// the schedule where its lanes' covariances would part (see [`KfBatch::scheduled`]).
+///
+/// Memory: per update, `3 N^2 + N M + M^2 + N + M` numbers (66 for `N = 4`, `M = 2`: 528
+/// bytes).
+///
+/// ```
+/// use std::sync::Arc;
+/// use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch, KfSchedule};
+/// use kalibra_linalg::{Matrix1, Matrix2, Vector2};
+/// use nalgebra::SMatrix;
+///
+/// let f = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+/// let h = SMatrix::<f64, 1, 2>::new(1.0, 0.0);
+/// let model = BatchModel::new(f, Matrix2::identity() * 0.01, h, Matrix1::new(1.0))?;
+/// let p0 = Matrix2::identity();
+/// let schedule = Arc::new(KfSchedule::new(Isa::detect(), model.clone(), p0, 10)?);
+/// let mut fast = KfBatch::scheduled(schedule, Vector2::zeros())?;
+/// let mut full = KfBatch::new(Isa::detect(), model, Vector2::zeros(), p0)?;
+/// let (z, truth) = ([[0.5; BATCH]; 1], [[0.0; BATCH]; 2]);
+/// assert_eq!(fast.update(&z, &truth), full.update(&z, &truth));
+/// assert_eq!(fast.predict_update(&z, &truth), full.predict_update(&z, &truth));
+/// assert_eq!(fast.cov(0), full.cov(0));
+/// assert!(fast.is_scheduled());
+/// # Ok::<(), kalibra_filters::FilterError>(())
+/// ```
+#[derive(Clone, PartialEq)]
+pub struct KfSchedule<const N: usize, const M: usize> {
+    isa: Isa,
+    model: BatchModel<N, M>,
+    p0: [[f64; N]; N],
+    steps: Vec<ScheduleStep<N, M>>,
+}
+
+impl<const N: usize, const M: usize> std::fmt::Debug for KfSchedule<N, M> {
+    /// The instruction set, model, prior and length; not every step's matrices.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("KfSchedule")
+            .field("isa", &self.isa)
+            .field("model", &self.model)
+            .field("p0", &self.p0)
+            .field("updates", &self.steps.len())
+            .finish()
+    }
+}
+
+impl<const N: usize, const M: usize> KfSchedule<N, M> {
+    /// The covariances of `updates` updates (the first at step 0, each later one after a
+    /// prediction) from `P0` on `model`, computed on instruction set `isa`. It holds fewer if a
+    /// step's prior, gain, factor of `S` or posterior is not finite: a batch computes that step
+    /// and the later ones itself, and fails where [`KfBatch::new`]'s batch fails.
+    ///
+    /// # Errors
+    /// [`FilterError::Unsupported`] if the CPU does not run `isa`; [`FilterError::Initial`] if
+    /// `P0` is not symmetric positive semi-definite (the scalar check);
+    /// [`FilterError::InvalidParameter`] if the memory for `updates` steps cannot be had.
+    pub fn new(
+        isa: Isa,
+        model: BatchModel<N, M>,
+        p0: SMatrix<f64, N, N>,
+        updates: usize,
+    ) -> Result<Self, FilterError> {
+        let isa = isa.checked()?;
+        let (_, p) = initial_lanes(&SVector::zeros(), p0)?;
+        let p0: [[f64; N]; N] = std::array::from_fn(|i| std::array::from_fn(|j| p[i][j][0]));
+        let mut steps = Vec::new();
+        steps
+            .try_reserve_exact(updates)
+            .map_err(|_| FilterError::InvalidParameter {
+                name: "updates",
+                value: updates as f64,
+            })?;
+        isa.dispatch(BuildSchedule {
+            f: &model.f,
+            q: &model.q,
+            h: &model.h,
+            r: &model.r,
+            p0: &p0,
+            updates,
+            out: &mut steps,
+        });
+        Ok(Self {
+            isa,
+            model,
+            p0,
+            steps,
+        })
+    }
+
+    /// The number of updates the schedule holds.
+    pub fn len(&self) -> usize {
+        self.steps.len()
+    }
+
+    /// Whether it holds none.
+    pub fn is_empty(&self) -> bool {
+        self.steps.is_empty()
+    }
+
+    /// The instruction set it was computed on (and its batches run on).
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    /// `P+` after update `k` (`None` past the schedule).
+    pub fn posterior(&self, k: usize) -> Option<SMatrix<f64, N, N>> {
+        let step = self.steps.get(k)?;
+        Some(SMatrix::from_fn(|i, j| step.posterior[i][j]))
     }
 }
 

@@ -17,7 +17,9 @@
 mod run;
 mod scenario;
 
-pub use run::{Acc, Band, Config, Report, merge, run, run_batched, run_scalar, run_shard};
+pub use run::{
+    Acc, Band, Config, Report, merge, run, run_batched, run_batched_per_lane, run_scalar, run_shard,
+};
 pub use scenario::{models, prior};
 
 use crate::StudyError;

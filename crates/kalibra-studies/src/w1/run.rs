@@ -1,6 +1,8 @@
 //! The W1 run: Monte Carlo over the scenario, per-step ANEES, NIS and RMSE.
 
-use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch};
+use std::sync::Arc;
+
+use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch, KfSchedule};
 use kalibra_filters::{Filter, Kf};
 use kalibra_metrics::{ChiSquareBand, SquaredErrors, StepMean, time_average};
 use kalibra_models::Dynamics;
@@ -197,9 +199,31 @@ pub fn run_scalar(config: &Config) -> Result<Report, StudyError> {
 /// [`FilterError::Unsupported`](kalibra_filters::FilterError::Unsupported) if the CPU does not
 /// run `isa`.
 pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
-    let (mc, make, group) = batched(config, isa)?;
+    let (mc, make, group) = batched(config, isa, Covariances::Scheduled)?;
     let (nees_acc, nis_acc, err_acc) = mc.accumulate_batched(make, group)?;
     report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// [`run_batched`] with every batch computing its lanes' covariances itself
+/// ([`KfBatch::new`]) instead of following the covariance schedule the runs share: the same
+/// report, to the bit, at the cost of the dense per-lane kernel (for the bench, which times
+/// both).
+///
+/// # Errors
+/// As [`run_batched`].
+pub fn run_batched_per_lane(config: &Config, isa: Isa) -> Result<Report, StudyError> {
+    let (mc, make, group) = batched(config, isa, Covariances::PerLane)?;
+    let (nees_acc, nis_acc, err_acc) = mc.accumulate_batched(make, group)?;
+    report(config, nees_acc, nis_acc, err_acc)
+}
+
+/// Where a batch's covariances come from.
+#[derive(Clone, Copy, PartialEq)]
+enum Covariances {
+    /// A [`KfSchedule`] computed once for every group.
+    Scheduled,
+    /// Each batch's own kernel.
+    PerLane,
 }
 
 /// Runs shard `shard` of the batched study on `config.simd` (or the detected instruction
@@ -214,7 +238,7 @@ pub fn run_batched(config: &Config, isa: Isa) -> Result<Report, StudyError> {
 /// As [`run_batched`].
 pub fn run_shard(config: &Config, shard: Shard) -> Result<Partial<Acc>, StudyError> {
     let isa = config.simd.unwrap_or_else(Isa::detect);
-    let (mc, make, group) = batched(config, isa)?;
+    let (mc, make, group) = batched(config, isa, Covariances::Scheduled)?;
     Ok(mc.accumulate_batched_shard(shard, &shard_id(config, &mc, isa)?, make, group)?)
 }
 
@@ -277,6 +301,7 @@ type Group = dyn Fn(std::ops::Range<usize>, &mut [ChaCha8Rng], &mut Acc) -> Resu
 fn batched(
     config: &Config,
     isa: Isa,
+    covariances: Covariances,
 ) -> Result<(MonteCarlo, impl Fn() -> Acc + Sync + Send, Box<Group>), StudyError> {
     check(config)?;
     let (f, h) = models()?;
@@ -288,8 +313,16 @@ fn batched(
         h.matrix(0),
         h.noise_cov(0, &m0),
     )?;
+    // Every run starts from the same prior on the same linear model, so every run's
+    // covariances are the same sequence: computed once here, for every group to follow.
+    // (Without one, a schedule of no updates: each batch computes every step itself.)
+    let updates = match covariances {
+        Covariances::Scheduled => config.steps,
+        Covariances::PerLane => 0,
+    };
+    let schedule = Arc::new(KfSchedule::new(isa, model, p0, updates)?);
     // Checked once here rather than in every group.
-    KfBatch::new(isa, model.clone(), m0, p0)?;
+    KfBatch::scheduled(schedule.clone(), m0)?;
     let steps = config.steps;
     let mc = MonteCarlo::new(config.runs, config.seed).threads(config.threads);
     let make = move || empty(steps);
@@ -311,7 +344,7 @@ fn batched(
             run: first,
             source: e.into(),
         })?;
-        let mut kf = KfBatch::new(isa, model.clone(), m0, p0).map_err(|e| RunFailure {
+        let mut kf = KfBatch::scheduled(schedule.clone(), m0).map_err(|e| RunFailure {
             run: first,
             source: e.into(),
         })?;
