@@ -728,7 +728,8 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
 
     fn run<const PREDICT: bool>(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
         let isa = self.isa;
-        if let Some(schedule) = self.schedule.clone() {
+        // (Borrowed, not cloned: an `Arc` clone per step is two atomic operations.)
+        if let Some(schedule) = &self.schedule {
             match schedule.steps.get(self.at) {
                 Some(step) if step.predicted == PREDICT => {
                     isa.dispatch(Scheduled::<N, M, PREDICT> {
