@@ -19,6 +19,11 @@
 //! lanes together; the per-lane Jacobians are then loaded into the kernel in place of the
 //! broadcast matrices, and the covariance algebra is the KF's, vector by vector.
 //!
+//! A linear KF's covariances (`P-`, `S`, `K`, `P+`) depend on the model and the prior alone, so
+//! a study whose runs share both computes them once, as a [`KfSchedule`], and its batches
+//! follow it ([`KfBatch::scheduled`]): each step then computes only the lanes' means, NIS and
+//! NEES, with the same numbers to the bit.
+//!
 //! It is not a general filter API: the scalar filters are the reference and the interface for
 //! one filter; this is how studies step many.
 //!
