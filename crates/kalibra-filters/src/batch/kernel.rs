@@ -802,10 +802,11 @@ pub(super) struct Scheduled<'a, const N: usize, const M: usize, const PREDICT: b
 impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
     for Scheduled<'_, N, M, PREDICT>
 {
-    type Output = ();
+    /// Whether every lane's update succeeded.
+    type Output = bool;
 
     #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
+    fn with_simd<S: Simd>(self, simd: S) -> bool {
         let Scheduled {
             f: fs,
             h: hs,
@@ -825,6 +826,7 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
             splat_matrix(simd, &step.lp.0),
             splat_vector(simd, &step.lp.1),
         );
+        let mut all_kept = true;
         for c in 0..BATCH / S::F64_LANES {
             let f = Model { op: &fs, simd, c };
             let h = Model { op: &hs, simd, c };
@@ -853,6 +855,8 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
             for i in 0..N {
                 store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
             }
+            let failing = simd.xor_m64s(keep, simd.equal_f64s(zero, zero));
+            all_kept &= simd.first_true_m64s(failing) == S::F64_LANES;
             let e = errors(simd, truth, c, &x_post);
             let nees = norm_squared(simd, &forward(simd, &lp, &e));
             store::<S>(&mut out.nis, c, nis);
@@ -862,5 +866,6 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
                 store::<S>(&mut out.error[i], c, e[i]);
             }
         }
+        all_kept
     }
 }

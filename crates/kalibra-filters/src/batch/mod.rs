@@ -737,7 +737,7 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         if let Some(schedule) = &self.schedule {
             match schedule.steps.get(self.at) {
                 Some(step) if step.predicted == PREDICT => {
-                    isa.dispatch(Scheduled::<N, M, PREDICT> {
+                    let all_kept = isa.dispatch(Scheduled::<N, M, PREDICT> {
                         f: &self.model.f,
                         h: &self.model.h,
                         step,
@@ -747,11 +747,10 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
                         out: &mut self.out,
                     });
                     self.at += 1;
-                    let failed = self.out.health.map(|h| h != 0.0);
-                    if failed.contains(&true) {
+                    if !all_kept {
                         // A failed lane keeps its prior: the lanes' covariances differ now.
                         // (`finish` reads `p` only for failed lanes, so it is written first.)
-                        self.leave_schedule(failed);
+                        self.leave_schedule(self.out.health.map(|h| h != 0.0));
                     }
                     self.out.finish(self.k, z, &self.x, &self.p);
                     return &self.out;
