@@ -356,13 +356,27 @@ struct Affine<'a, const N: usize, const M: usize> {
 }
 
 impl<const N: usize, const M: usize> WithSimd for Affine<'_, N, M> {
-    type Output = ();
+    /// Whether every lane's measurement and state are finite.
+    type Output = bool;
 
     #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
+    fn with_simd<S: Simd>(self, simd: S) -> bool {
         let t = self.truth;
         affine(simd, &t.h, &t.current, &t.lr, self.nv, &mut t.z);
         affine(simd, &t.f, &t.current, &t.lq, self.nw, &mut t.x);
+        // `v * 0` is 0 for a finite `v` and NaN otherwise: one sum per vector of lanes over
+        // the rows, then one comparison tells whether any lane needs its own test.
+        let zero = simd.splat_f64s(0.0);
+        let mut finite = true;
+        for c in 0..BATCH / S::F64_LANES {
+            let mut sum = zero;
+            for row in t.z.iter().chain(t.x.iter()) {
+                sum = simd.add_f64s(sum, simd.mul_f64s(S::as_simd_f64s(row).0[c], zero));
+            }
+            let bad = simd.xor_m64s(simd.equal_f64s(sum, zero), simd.equal_f64s(zero, zero));
+            finite &= simd.first_true_m64s(bad) == S::F64_LANES;
+        }
+        finite
     }
 }
 
@@ -506,13 +520,16 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
         draws.standard_normals(&mut nw);
         self.current = self.x;
         let isa = self.isa;
-        isa.dispatch(Affine {
+        let finite = isa.dispatch(Affine {
             truth: self,
             nv: &nv,
             nw: &nw,
         });
         let k = self.k;
         self.k += 1;
+        if finite {
+            return Ok(());
+        }
         for lane in 0..self.lanes {
             let what = if !lane_finite(&self.z, lane) {
                 ("simulated measurement", k)
