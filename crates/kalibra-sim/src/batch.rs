@@ -362,6 +362,9 @@ impl<const N: usize, const M: usize> WithSimd for Affine<'_, N, M> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) -> bool {
         let t = self.truth;
+        // Here rather than before the dispatch: compiled for the baseline, the 256-byte copy
+        // of W1's state was a call to memcpy every step.
+        t.current = t.x;
         affine(simd, &t.h, &t.current, &t.lr, self.nv, &mut t.z);
         affine(simd, &t.f, &t.current, &t.lq, self.nw, &mut t.x);
         // `v * 0` is 0 for a finite `v` and NaN otherwise: one sum per vector of lanes over
@@ -518,7 +521,6 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
         // Per lane the same order as the scalar simulator: measurement noise, process noise.
         draws.standard_normals(&mut nv);
         draws.standard_normals(&mut nw);
-        self.current = self.x;
         let isa = self.isa;
         let finite = isa.dispatch(Affine {
             truth: self,
