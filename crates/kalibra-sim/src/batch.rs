@@ -351,9 +351,15 @@ pub struct LinearTruthBatch<const N: usize, const M: usize> {
 /// (Rust never fuses them), so every instruction set gives the same numbers.
 struct Affine<'a, const N: usize, const M: usize> {
     truth: &'a mut LinearTruthBatch<N, M>,
-    nv: &'a [Lanes; M],
-    nw: &'a [Lanes; N],
+    /// `M` rows of measurement noise.
+    nv: &'a [Lanes],
+    /// `N` rows of process noise.
+    nw: &'a [Lanes],
 }
+
+/// Rows of normals a step draws in one call when its `M + N` fit (W1: 6): one pass over the
+/// lanes' buffers instead of two.
+const JOINT_ROWS: usize = 8;
 
 impl<const N: usize, const M: usize> WithSimd for Affine<'_, N, M> {
     /// Whether every lane's measurement and state are finite.
@@ -403,7 +409,7 @@ fn affine<S: Simd, const R: usize, const C: usize, const D: usize>(
     a: &[[f64; C]; R],
     v: &[Lanes; C],
     l: &[[f64; D]; R],
-    n: &[Lanes; D],
+    n: &[Lanes],
     out: &mut [Lanes; R],
 ) {
     for c in 0..BATCH / S::F64_LANES {
@@ -516,16 +522,26 @@ impl<const N: usize, const M: usize> LinearTruthBatch<N, M> {
     /// If `draws` does not have one lane per truth lane.
     pub fn step(&mut self, draws: &mut ChaCha8Lanes) -> Result<(), RunFailure<ModelError>> {
         assert_eq!(draws.len(), self.lanes, "one generator lane per truth lane");
+        // Per lane the same order as the scalar simulator: measurement noise, process noise
+        // (row `r` of a call is each lane's `r`-th draw, so one call of `M + N` rows draws
+        // what two calls of `M` and `N` do).
+        let mut joint = [[0.0; BATCH]; JOINT_ROWS];
         let mut nv = [[0.0; BATCH]; M];
         let mut nw = [[0.0; BATCH]; N];
-        // Per lane the same order as the scalar simulator: measurement noise, process noise.
-        draws.standard_normals(&mut nv);
-        draws.standard_normals(&mut nw);
+        let (nv, nw): (&[Lanes], &[Lanes]) = if M + N <= JOINT_ROWS {
+            draws.standard_normals(&mut joint[..M + N]);
+            let (v, w) = joint.split_at(M);
+            (v, w)
+        } else {
+            draws.standard_normals(&mut nv);
+            draws.standard_normals(&mut nw);
+            (&nv, &nw)
+        };
         let isa = self.isa;
         let finite = isa.dispatch(Affine {
             truth: self,
-            nv: &nv,
-            nw: &nw,
+            nv,
+            nw,
         });
         let k = self.k;
         self.k += 1;
