@@ -3,7 +3,8 @@
 //! one of 4 per step) lane-wise on every instruction set the CPU has and through the runs' own
 //! generators ([`Isa::Scalar`]), then 6 million `u64` the same ways, alternating the modes and
 //! keeping the best of the repeats:
-//! `cargo run --release -p kalibra-sim --example lane_normals -- [repeats] [avx512,avx2,scalar]`.
+//! `cargo run --release -p kalibra-sim --example lane_normals -- [repeats] [avx512,avx2,scalar]
+//! [normals|u64]` (both kinds without the last argument).
 
 // An example reports what it measured on standard output.
 #![allow(clippy::print_stdout)]
@@ -61,17 +62,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let repeats: usize = args.next().map_or(Ok(9), |a| a.parse())?;
     let isas: Vec<Isa> = match args.next() {
-        Some(list) => list
-            .split(',')
-            .map(str::parse)
-            .collect::<Result<_, _>>()?,
+        Some(list) => list.split(',').map(str::parse).collect::<Result<_, _>>()?,
         None => Isa::available(),
     };
+    let only = args.next();
     let mc = MonteCarlo::new(RUNS, 2012);
     for (what, f) in [
         ("normals", normals as fn(&MonteCarlo, Isa) -> (f64, f64)),
         ("u64", words),
     ] {
+        if only.as_ref().is_some_and(|o| o != what) {
+            continue;
+        }
         let mut best = vec![f64::INFINITY; isas.len()];
         let mut sums = vec![0.0; isas.len()];
         for _ in 0..repeats {

@@ -41,6 +41,9 @@
 //! compare 10^5 and more normals per lane, tails and wedges included, to the bit, on every
 //! instruction set the CPU has.
 
+#[cfg(target_arch = "x86_64")]
+mod gather;
+
 use std::convert::Infallible;
 
 use kalibra_filters::FilterError;
@@ -59,17 +62,18 @@ const BLOCK_WORDS: usize = 16;
 const CHUNK_BLOCKS: usize = 4;
 /// Words each lane receives per refill (a chunk).
 const CHUNK: usize = CHUNK_BLOCKS * BLOCK_WORDS;
-/// Chunk slots in the ring: a lane that has drawn less than the others (lanes drift apart
-/// through the ziggurat's rare extra draws) keeps up to this many chunks unread.
-const SLOTS: usize = 4;
+/// Words of each lane's ring: a lane that has drawn less than the others (lanes drift apart
+/// through the ziggurat's rare extra draws) keeps up to this many words unread (4 chunks).
+const RING: usize = 4 * CHUNK;
 /// Blocks per refill, over all lanes: a multiple of every instruction set's u32 lane count
 /// (16, 8, 4, 1), so the kernel has no remainder. Column `lane * CHUNK_BLOCKS + b` is block
 /// `b` of the chunk of lane `lane`.
 const GEN: usize = CHUNK_BLOCKS * BATCH;
-/// One chunk slot: word `w` of every column (the kernel's output as it is).
+/// The kernel's output: word `w` of every column.
 type Slot = [[u32; GEN]; BLOCK_WORDS];
-/// Words per slot.
-const SLOT_WORDS: usize = GEN * BLOCK_WORDS;
+/// The lanes' rings, one after the other, and one word more, so that two words read from
+/// any index below `BATCH * RING` are inside.
+const WORDS: usize = BATCH * RING + 1;
 /// ChaCha8: four double rounds.
 const DOUBLE_ROUNDS: usize = 4;
 /// "expand 32-byte k", ChaCha's first four state words.
@@ -150,25 +154,20 @@ pub struct ChaCha8Lanes {
     stream: [u64; BATCH],
     /// The next block each lane's refill computes.
     block: [u64; BATCH],
-    /// Words of its first block a lane skips (a generator taken mid-block).
-    skip: [usize; BATCH],
     /// State words 4..16 of every column (key, counter, stream): only the counters change.
     input: [[u32; GEN]; 12],
-    /// The ring of chunk slots the kernel writes into; a refill writes slot `next_slot`.
-    ring: [Slot; SLOTS],
-    next_slot: usize,
-    /// Lane `l`'s unread chunks, oldest first: slots `queue[l][(head[l] + i) % SLOTS]` for
-    /// `i < queued[l]`; it has read `pos[l]` words of the oldest (`CHUNK` when none is queued).
-    queue: [[usize; SLOTS]; BATCH],
-    head: [usize; BATCH],
-    /// Where lane `l`'s column of its oldest chunk starts in the flattened ring:
-    /// `queue[l][head[l]] * SLOT_WORDS + l * CHUNK_BLOCKS` (kept for the fast path).
-    base: [usize; BATCH],
+    /// The kernel's output, copied into the lanes' rings.
+    out: Slot,
+    /// Lane `l`'s words in stream order: its `v`-th word (counted from word 0 of the block its
+    /// first refill computed) at `words[l * RING + v % RING]`.
+    words: [u32; WORDS],
+    /// The words each lane has read (it starts at the generator's offset in its block) and
+    /// has received, counted as `v` above: words `read..end` are unread.
+    read: [u64; BATCH],
+    end: [u64; BATCH],
     /// With [`Isa::Scalar`], the lanes' own generators, which every draw goes through (the
-    /// ring is unused); empty otherwise.
+    /// rings are unused); empty otherwise.
     scalar: Vec<ChaCha8Rng>,
-    queued: [usize; BATCH],
-    pos: [usize; BATCH],
 }
 
 impl std::fmt::Debug for ChaCha8Lanes {
@@ -206,15 +205,11 @@ impl ChaCha8Lanes {
             key: [[0; 8]; BATCH],
             stream: [0; BATCH],
             block: [0; BATCH],
-            skip: [0; BATCH],
             input: [[0; GEN]; 12],
-            ring: [[[0; GEN]; BLOCK_WORDS]; SLOTS],
-            next_slot: 0,
-            queue: [[0; SLOTS]; BATCH],
-            head: [0; BATCH],
-            base: [0; BATCH],
-            queued: [0; BATCH],
-            pos: [CHUNK; BATCH],
+            out: [[0; GEN]; BLOCK_WORDS],
+            words: [0; WORDS],
+            read: [0; BATCH],
+            end: [0; BATCH],
             scalar: Vec::new(),
         };
         for (lane, rng) in rngs.iter().enumerate() {
@@ -226,7 +221,8 @@ impl ChaCha8Lanes {
             let pos = rng.get_word_pos() % WORD_POS_MOD;
             // pos < 2^68, so the block index fits the 64-bit counter.
             out.block[lane] = (pos / BLOCK_WORDS as u128) as u64;
-            out.skip[lane] = (pos % BLOCK_WORDS as u128) as usize;
+            // A generator taken mid-block starts inside its first block.
+            out.read[lane] = (pos % BLOCK_WORDS as u128) as u64;
             for b in 0..CHUNK_BLOCKS {
                 let col = lane * CHUNK_BLOCKS + b;
                 for (k, key) in out.key[lane].iter().enumerate() {
@@ -278,10 +274,11 @@ impl ChaCha8Lanes {
             return Some(rng.get_word_pos() % WORD_POS_MOD);
         }
         (lane < self.lanes).then(|| {
-            let generated = u128::from(self.block[lane]) * BLOCK_WORDS as u128;
-            let unread = (self.queued[lane] * CHUNK).saturating_sub(self.pos[lane]) as u128;
-            // A wrapped block counter is below its unread words: add the period first.
-            (generated + WORD_POS_MOD + self.skip[lane] as u128 - unread) % WORD_POS_MOD
+            // Word `end` is word 0 of block `block`; a wrapped block counter is below the
+            // words received: add the period first.
+            let next = u128::from(self.block[lane]) * BLOCK_WORDS as u128;
+            let (read, end) = (u128::from(self.read[lane]), u128::from(self.end[lane]));
+            (next + WORD_POS_MOD - end + read) % WORD_POS_MOD
         })
     }
 
@@ -350,8 +347,23 @@ impl ChaCha8Lanes {
         }
     }
 
-    /// [`ChaCha8Lanes::standard_normals`] from the lane-wise blocks.
+    /// [`ChaCha8Lanes::standard_normals`] from the lane-wise blocks: the fast path across
+    /// lanes with gathers on AVX-512 and AVX2 (`gather.rs`), per lane otherwise.
     fn lane_normals(&mut self, rows: &mut [Lanes]) {
+        #[cfg(target_arch = "x86_64")]
+        match self.isa {
+            Isa::Avx512 => {
+                if let Some(simd) = pulp::x86::V4::try_new() {
+                    return self.normals_v4(simd, rows);
+                }
+            }
+            Isa::Avx2 => {
+                if let Some(simd) = pulp::x86::V3::try_new() {
+                    return self.normals_v3(simd, rows);
+                }
+            }
+            _ => {}
+        }
         // Row by row: consecutive draws are from different lanes, so their dependency chains
         // (each lane's read position) overlap.
         for row in rows.iter_mut() {
@@ -387,41 +399,27 @@ impl ChaCha8Lanes {
         StandardNormal.sample(&mut rng)
     }
 
-    /// Word `k` of lane `lane`'s oldest chunk.
+    /// Word `v` of lane `lane` (received and not overwritten).
     #[inline(always)]
-    fn word(&self, lane: usize, k: usize) -> u32 {
-        self.ring.as_flattened().as_flattened()
-            [self.base[lane] + (k % BLOCK_WORDS) * GEN + k / BLOCK_WORDS]
+    fn word(&self, lane: usize, v: u64) -> u32 {
+        self.words[lane * RING + (v % RING as u64) as usize]
     }
 
     /// Lane `lane`'s next two words, low first, as `ChaCha8Rng::next_u64` reads them.
     #[inline(always)]
     fn next_u64(&mut self, lane: usize) -> u64 {
-        let k = self.pos[lane];
-        // At an even word of the oldest chunk (`pos` is `CHUNK` when there is none), both
-        // words are in one block: rows `k % 16` and the next of the lane's column.
-        if k.is_multiple_of(2) && k < CHUNK {
-            self.pos[lane] = k + 2;
-            let ring = self.ring.as_flattened().as_flattened();
-            let at = self.base[lane] + (k % BLOCK_WORDS) * GEN + k / BLOCK_WORDS;
-            let (lo, hi) = (ring[at], ring[at + GEN]);
-            return (u64::from(hi) << 32) | u64::from(lo);
+        let v = self.read[lane];
+        if v + 2 <= self.end[lane] {
+            self.read[lane] = v + 2;
+            return (u64::from(self.word(lane, v + 1)) << 32) | u64::from(self.word(lane, v));
         }
         self.next_u64_across(lane)
     }
 
-    /// [`ChaCha8Lanes::next_u64`] when the words are not both in the oldest chunk.
+    /// [`ChaCha8Lanes::next_u64`] when the lane has fewer than two words: word by word,
+    /// refilling between them as needed.
     #[inline(never)]
     fn next_u64_across(&mut self, lane: usize) -> u64 {
-        if self.pos[lane] == CHUNK {
-            // The oldest chunk is used up at a word boundary: the next chunk (refilling if
-            // there is none) starts at an even word, unless this lane's generator started
-            // mid-block at an odd word.
-            self.next_chunk(lane);
-            if self.pos[lane].is_multiple_of(2) {
-                return self.next_u64(lane);
-            }
-        }
         let lo = self.next_u32(lane);
         let hi = self.next_u32(lane);
         (u64::from(hi) << 32) | u64::from(lo)
@@ -430,49 +428,25 @@ impl ChaCha8Lanes {
     /// Lane `lane`'s next word.
     #[inline(always)]
     fn next_u32(&mut self, lane: usize) -> u32 {
-        if self.pos[lane] >= CHUNK {
-            self.next_chunk(lane);
-        }
-        let k = self.pos[lane];
-        self.pos[lane] = k + 1;
-        self.word(lane, k)
-    }
-
-    /// Moves lane `lane` past its finished oldest chunk, refilling when it has no other.
-    #[inline(never)]
-    fn next_chunk(&mut self, lane: usize) {
-        self.drop_finished(lane);
-        if self.queued[lane] == 0 {
+        if self.read[lane] >= self.end[lane] {
             self.refill();
         }
+        let v = self.read[lane];
+        self.read[lane] = v + 1;
+        self.word(lane, v)
     }
 
-    /// Drops lane `lane`'s oldest chunk if it has read all of it.
-    fn drop_finished(&mut self, lane: usize) {
-        if self.queued[lane] > 0 && self.pos[lane] >= CHUNK {
-            self.head[lane] = (self.head[lane] + 1) % SLOTS;
-            self.base[lane] = self.queue[lane][self.head[lane]] * SLOT_WORDS + lane * CHUNK_BLOCKS;
-            self.queued[lane] -= 1;
-            self.pos[lane] = if self.queued[lane] > 0 { 0 } else { CHUNK };
-        }
-    }
-
-    /// Computes the next [`CHUNK_BLOCKS`] blocks of every lane that takes them into ring slot
-    /// `next_slot`. A lane takes them unless it still has unread words in that slot (it has
-    /// drawn [`SLOTS`] - 1 chunks fewer than the lane asking); such a lane keeps its words
-    /// (the kernel leaves its columns as they are) and its counter, so it computes these
-    /// blocks at a later refill. Called when a lane has no chunk left, so that lane takes.
+    /// Computes the next [`CHUNK_BLOCKS`] blocks of every lane that has room for them in its
+    /// ring and appends them there. A lane with more than `RING - CHUNK` words unread (it has
+    /// drawn 3 chunks fewer than the lane asking) keeps its counter, so it computes these
+    /// blocks at a later refill. Called when a lane has too few words left, so that lane takes.
     #[inline(never)]
     fn refill(&mut self) {
-        let slot = self.next_slot;
-        self.next_slot = (slot + 1) % SLOTS;
         let mut take = [0u32; GEN];
         let mut takes = [false; BATCH];
         for (lane, takes) in takes.iter_mut().enumerate().take(self.lanes) {
-            self.drop_finished(lane);
-            let held = (0..self.queued[lane])
-                .any(|i| self.queue[lane][(self.head[lane] + i) % SLOTS] == slot);
-            if held {
+            let unread = self.end[lane].saturating_sub(self.read[lane]) as usize;
+            if unread + CHUNK > RING {
                 continue;
             }
             *takes = true;
@@ -487,18 +461,19 @@ impl ChaCha8Lanes {
         self.isa.dispatch(Blocks {
             input: &self.input,
             take: &take,
-            out: &mut self.ring[slot],
+            out: &mut self.out,
         });
         for lane in (0..self.lanes).filter(|l| takes[*l]) {
-            let tail = (self.head[lane] + self.queued[lane]) % SLOTS;
-            self.queue[lane][tail] = slot;
-            self.queued[lane] += 1;
-            self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
-            if self.queued[lane] == 1 {
-                self.base[lane] = slot * SLOT_WORDS + lane * CHUNK_BLOCKS;
-                // A generator taken mid-block starts inside its first block.
-                self.pos[lane] = std::mem::take(&mut self.skip[lane]);
+            // `end` is a multiple of CHUNK, so the chunk lies whole in the ring.
+            let at = lane * RING + (self.end[lane] % RING as u64) as usize;
+            let ring = &mut self.words[at..at + CHUNK];
+            for (b, block) in ring.chunks_exact_mut(BLOCK_WORDS).enumerate() {
+                for (w, word) in block.iter_mut().enumerate() {
+                    *word = self.out[w][lane * CHUNK_BLOCKS + b];
+                }
             }
+            self.end[lane] += CHUNK as u64;
+            self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
         }
     }
 }

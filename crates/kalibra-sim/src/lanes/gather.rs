@@ -1,0 +1,343 @@
+//! The ziggurat's fast path across lanes on x86: for each row, every lane whose next `u64` is
+//! wholly in its oldest chunk at an even word (the common case) reads its two words, chooses
+//! its box and tries it in one vector (AVX-512: the 8 lanes in one zmm; AVX2: two ymm halves
+//! of 4); the other lanes, and the lanes whose try is rejected, go through the per-lane code
+//! of `lanes.rs` (a rejected lane through [`ChaCha8Lanes::standard_normal_slow`] with the same
+//! box, value and try, its position already past the `u64`, as the per-lane code leaves it).
+//! The same words in the same order per lane and the same IEEE operations (one subtraction,
+//! one multiplication, a comparison of magnitudes), so every value is the per-lane one to the
+//! bit; the tests compare them on every instruction set the CPU has.
+//!
+//! # Why `unsafe`
+//! The words of the ring and the ziggurat's `X[i]`, `X[i + 1]` are read with gathers, which
+//! pulp 0.22 exposes only as `unsafe` functions of raw pointers (the rest of the arithmetic
+//! goes through pulp's safe wrappers, whose target features the `V4` / `V3` token proves).
+//! Measured on the shared 2-core AVX-512 machine (example `lane_normals`, 6 M normals, best
+//! of 9, alternating): per lane AVX-512 18.7 ms, AVX2 22.3 ms; these gathers AVX-512 TODO ms,
+//! AVX2 TODO ms. Every index is masked into its array just before the gather (see the
+//! `SAFETY` comments), so no lane, whatever its state, reads outside.
+#![allow(unsafe_code)]
+
+use std::arch::x86_64::{__m256d, __m256i, __m512i, _CMP_LT_OQ};
+
+use kalibra_filters::batch::{BATCH, Lanes};
+use pulp::x86::{V3, V4};
+use pulp::{NullaryFnOnce, cast};
+
+use super::{ChaCha8Lanes, RING, WORDS};
+use crate::ziggurat_tables::ZIG_NORM_X;
+
+/// Indices into the rings are masked with this: `BATCH * RING` is a power of two, and two
+/// words read from below it are inside `words` (one word of padding).
+const INDEX_MASK: u64 = (BATCH * RING) as u64 - 1;
+const _: () = assert!((BATCH * RING).is_power_of_two() && WORDS > BATCH * RING);
+/// The ziggurat's boxes: `i = bits & BOX_MASK`, and `X` has an entry at `i + 1`.
+const BOX_MASK: u64 = 0xff;
+const _: () = assert!(ZIG_NORM_X.len() > BOX_MASK as usize + 1);
+/// Bits of a `u64` that place a value's 52 fraction bits in `[2, 4)` (exponent 1).
+const EXP_ONE: u64 = 1024 << 52;
+
+impl ChaCha8Lanes {
+    /// [`ChaCha8Lanes::standard_normals`] with AVX-512 gathers (`simd` proves the CPU has it).
+    pub(super) fn normals_v4(&mut self, simd: V4, rows: &mut [Lanes]) {
+        self.start_rows(rows.len());
+        simd.vectorize(RowsV4 {
+            simd,
+            lanes: self,
+            rows,
+        });
+    }
+
+    /// [`ChaCha8Lanes::standard_normals`] with AVX2 gathers (`simd` proves the CPU has it).
+    pub(super) fn normals_v3(&mut self, simd: V3, rows: &mut [Lanes]) {
+        self.start_rows(rows.len());
+        simd.vectorize(RowsV3 {
+            simd,
+            lanes: self,
+            rows,
+        });
+    }
+
+    /// Before the vector pass over `rows` rows: if a lane has fewer words than the rows' fast
+    /// tries take, a refill now (which it would ask for a few draws later; the words do not
+    /// depend on when they are computed), so that the pass can go on.
+    #[inline(always)]
+    fn start_rows(&mut self, rows: usize) {
+        let short = (0..self.lanes).any(|l| self.read[l] + 2 * rows as u64 > self.end[l]);
+        if short {
+            self.refill();
+        }
+    }
+
+    /// The live lanes (below [`ChaCha8Lanes::len`]) as bits.
+    #[inline(always)]
+    fn live(&self) -> u8 {
+        ((1u16 << self.lanes) - 1) as u8
+    }
+
+    /// After the vector pass: each lane of `failed` left it at row `from[lane]`, rejected
+    /// there in box `tries.i[lane]` with `tries.u[lane]`, `tries.x[lane]` if it is in `tried`
+    /// (its position past that `u64`), not tried otherwise (its position at that row's draw);
+    /// it draws that row and the rest per lane.
+    #[cold]
+    #[inline(never)]
+    fn finish_rows(&mut self, rows: &mut [Lanes], failed: u8, tried: u8, tries: Tries) {
+        for lane in bits(failed) {
+            let from = tries.from[lane] as usize;
+            rows[from][lane] = if tried & (1 << lane) != 0 {
+                let (i, u, x) = (tries.i[lane] as usize, tries.u[lane], tries.x[lane]);
+                self.standard_normal_slow(lane, i, u, x)
+            } else {
+                self.standard_normal(lane)
+            };
+            for row in &mut rows[from + 1..] {
+                row[lane] = self.standard_normal(lane);
+            }
+        }
+    }
+}
+
+/// Where each lane left the vector pass, and its rejected try there.
+struct Tries {
+    from: [u64; BATCH],
+    i: [u64; BATCH],
+    u: [f64; BATCH],
+    x: [f64; BATCH],
+}
+
+/// The set bits of `mask`, lowest first.
+#[inline(always)]
+fn bits(mut mask: u8) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            lane
+        })
+    })
+}
+
+/// The rows of one call on AVX-512, inside the token's target features.
+struct RowsV4<'a> {
+    simd: V4,
+    lanes: &'a mut ChaCha8Lanes,
+    rows: &'a mut [Lanes],
+}
+
+impl NullaryFnOnce for RowsV4<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn call(self) {
+        let Self { simd, lanes, rows } = self;
+        let f = simd.avx512f;
+        let live = lanes.live();
+        let full = lanes.lanes == BATCH;
+        let splat = |v: u64| f._mm512_set1_epi64(v as i64);
+        let (two, ring_mask, index_mask) = (splat(2), splat(RING as u64 - 1), splat(INDEX_MASK));
+        let box_mask = splat(BOX_MASK);
+        let exp_one = splat(EXP_ONE);
+        let three = f._mm512_set1_pd(3.0);
+        let starts = f._mm512_setr_epi64(
+            0,
+            RING as i64,
+            2 * RING as i64,
+            3 * RING as i64,
+            4 * RING as i64,
+            5 * RING as i64,
+            6 * RING as i64,
+            7 * RING as i64,
+        );
+        let words = &lanes.words;
+        let end: __m512i = cast(lanes.end);
+        let mut read: __m512i = cast(lanes.read);
+        // Lanes still on the vector path, those rejected on it, the row each left it at, its
+        // position then and the try it was rejected with. `read` goes on as if every try were
+        // accepted, so that a row's words need not wait for the previous row's table
+        // look-ups; a lane that left keeps the position it left with.
+        let (mut ok, mut tried) = (live, 0u8);
+        let (mut from, mut left_at, mut ti) = (splat(0), read, splat(0));
+        let (mut tu, mut tx) = (f._mm512_set1_pd(0.0), f._mm512_set1_pd(0.0));
+        for (r, row) in rows.iter_mut().enumerate() {
+            // Two words received, and not the last of the ring with the first.
+            let take = live
+                & f._mm512_cmple_epu64_mask(f._mm512_add_epi64(read, two), end)
+                & f._mm512_cmpneq_epi64_mask(f._mm512_and_si512(read, ring_mask), ring_mask);
+            let at = f._mm512_and_si512(
+                f._mm512_add_epi64(starts, f._mm512_and_si512(read, ring_mask)),
+                index_mask,
+            );
+            // SAFETY: every index is masked to below BATCH * RING, and `words` has a word more
+            // (asserted at compile time), so the 8 bytes read at 4 * index are inside it;
+            // AVX-512F is present since `simd` is a V4 token, which exists only on a CPU that
+            // has it, and this runs inside its `vectorize`.
+            let word = unsafe { f._mm512_i64gather_epi64::<4>(at, words.as_ptr().cast()) };
+            let i = f._mm512_and_si512(word, box_mask);
+            let u = f._mm512_sub_pd(
+                f._mm512_castsi512_pd(f._mm512_or_si512(f._mm512_srli_epi64::<12>(word), exp_one)),
+                three,
+            );
+            // SAFETY: `i` is masked to at most BOX_MASK, and `ZIG_NORM_X` has entries at
+            // BOX_MASK and BOX_MASK + 1 (asserted at compile time): `X[1..]` read at `i` is
+            // `X[i + 1]`. 8-byte elements (scale 8) of `[f64]`; AVX-512F as above.
+            let (xi, xi1) = unsafe {
+                (
+                    f._mm512_i64gather_pd::<8>(i, ZIG_NORM_X.as_ptr()),
+                    f._mm512_i64gather_pd::<8>(i, ZIG_NORM_X[1..].as_ptr()),
+                )
+            };
+            let x = f._mm512_mul_pd(u, xi);
+            let accept = f._mm512_mask_cmplt_pd_mask(ok & take, f._mm512_abs_pd(x), xi1);
+            // A full batch stores the whole row (the lanes that left the vector path are
+            // written again by `finish_rows`); a partial one must leave the lanes past it.
+            *row = cast(if full {
+                x
+            } else {
+                f._mm512_mask_blend_pd(accept, cast(*row), x)
+            });
+            read = f._mm512_mask_add_epi64(read, take, read, two);
+            let rejected = ok & take & !accept;
+            ti = f._mm512_mask_mov_epi64(ti, rejected, i);
+            tu = f._mm512_mask_mov_pd(tu, rejected, u);
+            tx = f._mm512_mask_mov_pd(tx, rejected, x);
+            tried |= rejected;
+            let left = ok & !accept;
+            from = f._mm512_mask_mov_epi64(from, left, splat(r as u64));
+            left_at = f._mm512_mask_mov_epi64(left_at, left, read);
+            ok = accept;
+        }
+        lanes.read = cast(f._mm512_mask_mov_epi64(left_at, ok, read));
+        let failed = live & !ok;
+        if failed != 0 {
+            let tries = Tries {
+                from: cast(from),
+                i: cast(ti),
+                u: cast(tu),
+                x: cast(tx),
+            };
+            lanes.finish_rows(rows, failed, tried, tries);
+        }
+    }
+}
+
+/// The rows of one call on AVX2, inside the token's target features.
+struct RowsV3<'a> {
+    simd: V3,
+    lanes: &'a mut ChaCha8Lanes,
+    rows: &'a mut [Lanes],
+}
+
+/// Half a batch: the lanes of one ymm.
+const HALF: usize = BATCH / 2;
+
+impl NullaryFnOnce for RowsV3<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn call(self) {
+        let Self { simd, lanes, rows } = self;
+        let (a, a2) = (simd.avx, simd.avx2);
+        let live = lanes.live();
+        let splat = |v: u64| a._mm256_set1_epi64x(v as i64);
+        let (two, zero) = (splat(2), splat(0));
+        let (ring_mask, index_mask) = (splat(RING as u64 - 1), splat(INDEX_MASK));
+        let box_mask = splat(BOX_MASK);
+        let exp_one = splat(EXP_ONE);
+        let magnitude = a._mm256_castsi256_pd(splat(i64::MAX as u64));
+        let three = a._mm256_set1_pd(3.0);
+        let bits_of = |m: __m256i| a._mm256_movemask_pd(a._mm256_castsi256_pd(m)) as u8;
+        let r = RING as i64;
+        let starts = [
+            a._mm256_setr_epi64x(0, r, 2 * r, 3 * r),
+            a._mm256_setr_epi64x(4 * r, 5 * r, 6 * r, 7 * r),
+        ];
+        let words = &lanes.words;
+        // Positions are below 2^63: signed compares are exact. Flipping the sign bit would
+        // be needed above; a lane reads fewer than 2^63 words.
+        let end: [__m256i; 2] = cast(lanes.end);
+        let mut read: [__m256i; 2] = cast(lanes.read);
+        // As on AVX-512, with masks as vectors (all ones in a lane for true), per half.
+        let count = splat(lanes.lanes as u64);
+        let alive = [
+            a2._mm256_cmpgt_epi64(count, a._mm256_setr_epi64x(0, 1, 2, 3)),
+            a2._mm256_cmpgt_epi64(count, a._mm256_setr_epi64x(4, 5, 6, 7)),
+        ];
+        let mut ok = alive;
+        let mut tried = [zero; 2];
+        let (mut from, mut left_at, mut ti) = ([zero; 2], read, [zero; 2]);
+        let (mut tu, mut tx) = (
+            [a._mm256_castsi256_pd(zero); 2],
+            [a._mm256_castsi256_pd(zero); 2],
+        );
+        for (r, row) in rows.iter_mut().enumerate() {
+            let mut values: [__m256d; 2] = cast(*row);
+            for h in 0..2 {
+                let v = read[h];
+                let in_ring = a2._mm256_and_si256(v, ring_mask);
+                // Two words received, and not the last of the ring with the first.
+                let take = a2._mm256_andnot_si256(
+                    a2._mm256_or_si256(
+                        a2._mm256_cmpgt_epi64(a2._mm256_add_epi64(v, two), end[h]),
+                        a2._mm256_cmpeq_epi64(in_ring, ring_mask),
+                    ),
+                    alive[h],
+                );
+                let at = a2._mm256_and_si256(a2._mm256_add_epi64(starts[h], in_ring), index_mask);
+                // SAFETY: every index is masked to below BATCH * RING, and `words` has a word
+                // more (asserted at compile time), so the 8 bytes read at 4 * index are inside
+                // it; AVX2 is present since `simd` is a V3 token, which exists only on a CPU
+                // that has it, and this runs inside its `vectorize`.
+                let word = unsafe { a2._mm256_i64gather_epi64::<4>(words.as_ptr().cast(), at) };
+                let i = a2._mm256_and_si256(word, box_mask);
+                let u = a._mm256_sub_pd(
+                    a._mm256_castsi256_pd(
+                        a2._mm256_or_si256(a2._mm256_srli_epi64::<12>(word), exp_one),
+                    ),
+                    three,
+                );
+                // SAFETY: `i` is masked to at most BOX_MASK, and `ZIG_NORM_X` has entries at
+                // BOX_MASK and BOX_MASK + 1 (asserted at compile time): `X[1..]` read at `i`
+                // is `X[i + 1]`. 8-byte elements (scale 8) of `[f64]`; AVX2 as above.
+                let (xi, xi1) = unsafe {
+                    (
+                        a2._mm256_i64gather_pd::<8>(ZIG_NORM_X.as_ptr(), i),
+                        a2._mm256_i64gather_pd::<8>(ZIG_NORM_X[1..].as_ptr(), i),
+                    )
+                };
+                let x = a._mm256_mul_pd(u, xi);
+                let accept = a._mm256_castpd_si256(a._mm256_and_pd(
+                    a._mm256_cmp_pd::<_CMP_LT_OQ>(a._mm256_and_pd(x, magnitude), xi1),
+                    a._mm256_castsi256_pd(a2._mm256_and_si256(ok[h], take)),
+                ));
+                values[h] = a._mm256_blendv_pd(values[h], x, a._mm256_castsi256_pd(accept));
+                read[h] = a2._mm256_add_epi64(v, a2._mm256_and_si256(take, two));
+                let rejected = a2._mm256_andnot_si256(accept, a2._mm256_and_si256(ok[h], take));
+                ti[h] = a2._mm256_blendv_epi8(ti[h], i, rejected);
+                let rejected_pd = a._mm256_castsi256_pd(rejected);
+                tu[h] = a._mm256_blendv_pd(tu[h], u, rejected_pd);
+                tx[h] = a._mm256_blendv_pd(tx[h], x, rejected_pd);
+                tried[h] = a2._mm256_or_si256(tried[h], rejected);
+                let left = a2._mm256_andnot_si256(accept, ok[h]);
+                from[h] = a2._mm256_blendv_epi8(from[h], splat(r as u64), left);
+                left_at[h] = a2._mm256_blendv_epi8(left_at[h], read[h], left);
+                ok[h] = accept;
+            }
+            *row = cast(values);
+        }
+        for h in 0..2 {
+            read[h] = a2._mm256_blendv_epi8(left_at[h], read[h], ok[h]);
+        }
+        lanes.read = cast(read);
+        let failed = live & !(bits_of(ok[0]) | (bits_of(ok[1]) << HALF));
+        if failed != 0 {
+            let tried = bits_of(tried[0]) | (bits_of(tried[1]) << HALF);
+            let tries = Tries {
+                from: cast(from),
+                i: cast(ti),
+                u: cast(tu),
+                x: cast(tx),
+            };
+            lanes.finish_rows(rows, failed, tried, tries);
+        }
+    }
+}
