@@ -69,11 +69,12 @@ const RING: usize = 4 * CHUNK;
 /// (16, 8, 4, 1), so the kernel has no remainder. Column `lane * CHUNK_BLOCKS + b` is block
 /// `b` of the chunk of lane `lane`.
 const GEN: usize = CHUNK_BLOCKS * BATCH;
-/// The kernel's output: word `w` of every column.
+/// One chunk slot: word `w` of every column (the kernel's output as it is).
 type Slot = [[u32; GEN]; BLOCK_WORDS];
-/// The lanes' rings, one after the other, and one word more, so that two words read from
-/// any index below `BATCH * RING` are inside.
-const WORDS: usize = BATCH * RING + 1;
+/// Chunk slots in the ring: lane `l`'s `k`-th chunk is in slot `k % SLOTS`, its columns.
+const SLOTS: usize = RING / CHUNK;
+/// Words in the ring.
+const RING_WORDS: usize = SLOTS * BLOCK_WORDS * GEN;
 /// ChaCha8: four double rounds.
 const DOUBLE_ROUNDS: usize = 4;
 /// "expand 32-byte k", ChaCha's first four state words.
@@ -156,11 +157,11 @@ pub struct ChaCha8Lanes {
     block: [u64; BATCH],
     /// State words 4..16 of every column (key, counter, stream): only the counters change.
     input: [[u32; GEN]; 12],
-    /// The kernel's output, copied into the lanes' rings.
-    out: Slot,
-    /// Lane `l`'s words in stream order: its `v`-th word (counted from word 0 of the block its
-    /// first refill computed) at `words[l * RING + v % RING]`.
-    words: [u32; WORDS],
+    /// The ring the kernel writes into: lane `l`'s `v`-th word (counted from word 0 of the
+    /// block its first refill computed) at [`word_index`]`(l, v)` of the flattened ring, in
+    /// slot `v / CHUNK % SLOTS`, the lane's own columns. A lane's chunks follow one another
+    /// in its slots whatever the other lanes have read.
+    ring: [Slot; SLOTS],
     /// The words each lane has read (it starts at the generator's offset in its block) and
     /// has received, counted as `v` above: words `read..end` are unread.
     read: [u64; BATCH],
@@ -206,8 +207,7 @@ impl ChaCha8Lanes {
             stream: [0; BATCH],
             block: [0; BATCH],
             input: [[0; GEN]; 12],
-            out: [[0; GEN]; BLOCK_WORDS],
-            words: [0; WORDS],
+            ring: [[[0; GEN]; BLOCK_WORDS]; SLOTS],
             read: [0; BATCH],
             end: [0; BATCH],
             scalar: Vec::new(),
@@ -402,7 +402,7 @@ impl ChaCha8Lanes {
     /// Word `v` of lane `lane` (received and not overwritten).
     #[inline(always)]
     fn word(&self, lane: usize, v: u64) -> u32 {
-        self.words[lane * RING + (v % RING as u64) as usize]
+        self.ring.as_flattened().as_flattened()[word_index(lane, v)]
     }
 
     /// Lane `lane`'s next two words, low first, as `ChaCha8Rng::next_u64` reads them.
@@ -458,24 +458,44 @@ impl ChaCha8Lanes {
                 take[col] = 1;
             }
         }
-        self.isa.dispatch(Blocks {
-            input: &self.input,
-            take: &take,
-            out: &mut self.out,
-        });
-        for lane in (0..self.lanes).filter(|l| takes[*l]) {
-            // `end` is a multiple of CHUNK, so the chunk lies whole in the ring.
-            let at = lane * RING + (self.end[lane] % RING as u64) as usize;
-            let ring = &mut self.words[at..at + CHUNK];
-            for (b, block) in ring.chunks_exact_mut(BLOCK_WORDS).enumerate() {
-                for (w, word) in block.iter_mut().enumerate() {
-                    *word = self.out[w][lane * CHUNK_BLOCKS + b];
+        // Each lane's chunk goes to its next slot: one kernel call per slot asked for (one
+        // unless a lane has skipped a refill).
+        for slot in 0..SLOTS {
+            let mut in_slot = take;
+            let mut any = false;
+            for lane in 0..self.lanes {
+                let here =
+                    takes[lane] && self.end[lane] / CHUNK as u64 % SLOTS as u64 == slot as u64;
+                any |= here;
+                if !here {
+                    in_slot[lane * CHUNK_BLOCKS..(lane + 1) * CHUNK_BLOCKS].fill(0);
                 }
             }
+            if any {
+                self.isa.dispatch(Blocks {
+                    input: &self.input,
+                    take: &in_slot,
+                    out: &mut self.ring[slot],
+                });
+            }
+        }
+        for lane in (0..self.lanes).filter(|l| takes[*l]) {
             self.end[lane] += CHUNK as u64;
             self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
         }
     }
+}
+
+/// Where word `v` of lane `lane` is in [`ChaCha8Lanes`]' flattened ring: slot
+/// `v / CHUNK % SLOTS`, row `v % 16` (the word in its block), column of block
+/// `v % CHUNK / 16` of the lane's chunk.
+#[inline(always)]
+fn word_index(lane: usize, v: u64) -> usize {
+    let v = v as usize;
+    let slot = v / CHUNK % SLOTS;
+    let block = v / BLOCK_WORDS % CHUNK_BLOCKS;
+    let word = v % BLOCK_WORDS;
+    (slot * BLOCK_WORDS + word) * GEN + lane * CHUNK_BLOCKS + block
 }
 
 /// rand_distr's ziggurat fast try from one `u64`: the low 8 bits choose the box `i`, the top

@@ -24,13 +24,28 @@ use kalibra_filters::batch::{BATCH, Lanes};
 use pulp::x86::{V3, V4};
 use pulp::{NullaryFnOnce, cast};
 
-use super::{ChaCha8Lanes, RING, WORDS};
+use super::{BLOCK_WORDS, CHUNK, CHUNK_BLOCKS, ChaCha8Lanes, GEN, RING_WORDS, SLOTS};
 use crate::ziggurat_tables::ZIG_NORM_X;
 
-/// Indices into the rings are masked with this: `BATCH * RING` is a power of two, and two
-/// words read from below it are inside `words` (one word of padding).
-const INDEX_MASK: u64 = (BATCH * RING) as u64 - 1;
-const _: () = assert!((BATCH * RING).is_power_of_two() && WORDS > BATCH * RING);
+/// Indices into the ring are masked with this: `RING_WORDS` is a power of two.
+const INDEX_MASK: u64 = RING_WORDS as u64 - 1;
+/// `word_index` as shifts and masks: the slot, the word in its block (the row) and the block
+/// of word `v`; the index is rows of GEN words and the lane's column of the block.
+const ROW_MASK: u64 = BLOCK_WORDS as u64 - 1;
+const ROW_STRIDE: u32 = GEN.trailing_zeros();
+const BLOCK_SHIFT: u32 = BLOCK_WORDS.trailing_zeros();
+const BLOCK_MASK: u64 = CHUNK_BLOCKS as u64 - 1;
+const SLOT_SHIFT: u32 = CHUNK.trailing_zeros();
+const SLOT_MASK: u64 = SLOTS as u64 - 1;
+const SLOT_ROWS: u32 = BLOCK_WORDS.trailing_zeros();
+const _: () = assert!(
+    RING_WORDS.is_power_of_two()
+        && CHUNK.is_power_of_two()
+        && SLOTS.is_power_of_two()
+        && GEN.is_power_of_two()
+        && BLOCK_WORDS.is_power_of_two()
+        && CHUNK_BLOCKS.is_power_of_two()
+);
 /// The ziggurat's boxes: `i = bits & BOX_MASK`, and `X` has an entry at `i + 1`.
 const BOX_MASK: u64 = 0xff;
 const _: () = assert!(ZIG_NORM_X.len() > BOX_MASK as usize + 1);
@@ -40,7 +55,6 @@ const EXP_ONE: u64 = 1024 << 52;
 impl ChaCha8Lanes {
     /// [`ChaCha8Lanes::standard_normals`] with AVX-512 gathers (`simd` proves the CPU has it).
     pub(super) fn normals_v4(&mut self, simd: V4, rows: &mut [Lanes]) {
-        self.start_rows(rows.len());
         simd.vectorize(RowsV4 {
             simd,
             lanes: self,
@@ -50,23 +64,11 @@ impl ChaCha8Lanes {
 
     /// [`ChaCha8Lanes::standard_normals`] with AVX2 gathers (`simd` proves the CPU has it).
     pub(super) fn normals_v3(&mut self, simd: V3, rows: &mut [Lanes]) {
-        self.start_rows(rows.len());
         simd.vectorize(RowsV3 {
             simd,
             lanes: self,
             rows,
         });
-    }
-
-    /// Before the vector pass over `rows` rows: if a lane has fewer words than the rows' fast
-    /// tries take, a refill now (which it would ask for a few draws later; the words do not
-    /// depend on when they are computed), so that the pass can go on.
-    #[inline(always)]
-    fn start_rows(&mut self, rows: usize) {
-        let short = (0..self.lanes).any(|l| self.read[l] + 2 * rows as u64 > self.end[l]);
-        if short {
-            self.refill();
-        }
     }
 
     /// The live lanes (below [`ChaCha8Lanes::len`]) as bits.
@@ -134,23 +136,26 @@ impl NullaryFnOnce for RowsV4<'_> {
         let live = lanes.live();
         let full = lanes.lanes == BATCH;
         let splat = |v: u64| f._mm512_set1_epi64(v as i64);
-        let (two, ring_mask, index_mask) = (splat(2), splat(RING as u64 - 1), splat(INDEX_MASK));
+        let (one, two, index_mask) = (splat(1), splat(2), splat(INDEX_MASK));
+        let (slot_mask, row_mask, block_mask) =
+            (splat(SLOT_MASK), splat(ROW_MASK), splat(BLOCK_MASK));
+        let gen_words = splat(GEN as u64);
         let box_mask = splat(BOX_MASK);
         let exp_one = splat(EXP_ONE);
         let three = f._mm512_set1_pd(3.0);
-        let starts = f._mm512_setr_epi64(
-            0,
-            RING as i64,
-            2 * RING as i64,
-            3 * RING as i64,
-            4 * RING as i64,
-            5 * RING as i64,
-            6 * RING as i64,
-            7 * RING as i64,
-        );
-        let words = &lanes.words;
-        let end: __m512i = cast(lanes.end);
+        let c = CHUNK_BLOCKS as i64;
+        let starts = f._mm512_setr_epi64(0, c, 2 * c, 3 * c, 4 * c, 5 * c, 6 * c, 7 * c);
+        let mut end: __m512i = cast(lanes.end);
         let mut read: __m512i = cast(lanes.read);
+        // A lane with fewer words than the rows' fast tries take: a refill now (the lane
+        // would ask for it a few draws later; the words do not depend on when they are
+        // computed), so that the pass can go on.
+        let needed = f._mm512_add_epi64(read, splat(2 * rows.len() as u64));
+        if live & f._mm512_cmpgt_epu64_mask(needed, end) != 0 {
+            lanes.refill();
+            end = cast(lanes.end);
+        }
+        let ring = lanes.ring.as_flattened().as_flattened();
         // Lanes still on the vector path, those rejected on it, the row each left it at, its
         // position then and the try it was rejected with. `read` goes on as if every try were
         // accepted, so that a row's words need not wait for the previous row's table
@@ -159,19 +164,38 @@ impl NullaryFnOnce for RowsV4<'_> {
         let (mut from, mut left_at, mut ti) = (splat(0), read, splat(0));
         let (mut tu, mut tx) = (f._mm512_set1_pd(0.0), f._mm512_set1_pd(0.0));
         for (r, row) in rows.iter_mut().enumerate() {
-            // Two words received, and not the last of the ring with the first.
+            // At an even word (both in one pair), and two words received.
             let take = live
-                & f._mm512_cmple_epu64_mask(f._mm512_add_epi64(read, two), end)
-                & f._mm512_cmpneq_epi64_mask(f._mm512_and_si512(read, ring_mask), ring_mask);
-            let at = f._mm512_and_si512(
-                f._mm512_add_epi64(starts, f._mm512_and_si512(read, ring_mask)),
-                index_mask,
+                & f._mm512_testn_epi64_mask(read, one)
+                & f._mm512_cmple_epu64_mask(f._mm512_add_epi64(read, two), end);
+            // `word_index`: slot, row and block of the word, and the lane's first column; the
+            // high word (an even word: the same block) is a row further.
+            let slot = f._mm512_and_si512(f._mm512_srli_epi64::<SLOT_SHIFT>(read), slot_mask);
+            let row_of = f._mm512_add_epi64(
+                f._mm512_slli_epi64::<SLOT_ROWS>(slot),
+                f._mm512_and_si512(read, row_mask),
             );
-            // SAFETY: every index is masked to below BATCH * RING, and `words` has a word more
-            // (asserted at compile time), so the 8 bytes read at 4 * index are inside it;
-            // AVX-512F is present since `simd` is a V4 token, which exists only on a CPU that
-            // has it, and this runs inside its `vectorize`.
-            let word = unsafe { f._mm512_i64gather_epi64::<4>(at, words.as_ptr().cast()) };
+            let block = f._mm512_and_si512(f._mm512_srli_epi64::<BLOCK_SHIFT>(read), block_mask);
+            let at = f._mm512_add_epi64(
+                f._mm512_slli_epi64::<ROW_STRIDE>(row_of),
+                f._mm512_add_epi64(starts, block),
+            );
+            let lo_at = f._mm512_and_si512(at, index_mask);
+            let hi_at = f._mm512_and_si512(f._mm512_add_epi64(at, gen_words), index_mask);
+            // SAFETY: every index is masked to below RING_WORDS, the length of `ring`
+            // (asserted at compile time to be a power of two), read as 4-byte elements (scale
+            // 4) of a `[u32]`; AVX-512F is present since `simd` is a V4 token, which exists
+            // only on a CPU that has it, and this runs inside its `vectorize`.
+            let (lo, hi) = unsafe {
+                (
+                    f._mm512_i64gather_epi32::<4>(lo_at, ring.as_ptr().cast()),
+                    f._mm512_i64gather_epi32::<4>(hi_at, ring.as_ptr().cast()),
+                )
+            };
+            let word = f._mm512_or_si512(
+                f._mm512_cvtepu32_epi64(lo),
+                f._mm512_slli_epi64::<32>(f._mm512_cvtepu32_epi64(hi)),
+            );
             let i = f._mm512_and_si512(word, box_mask);
             let u = f._mm512_sub_pd(
                 f._mm512_castsi512_pd(f._mm512_or_si512(f._mm512_srli_epi64::<12>(word), exp_one)),
@@ -206,9 +230,12 @@ impl NullaryFnOnce for RowsV4<'_> {
             left_at = f._mm512_mask_mov_epi64(left_at, left, read);
             ok = accept;
         }
-        lanes.read = cast(f._mm512_mask_mov_epi64(left_at, ok, read));
+        // Stored as if every lane stayed on the vector path, so that the next call's positions
+        // do not wait for this call's table look-ups (the branch below is rarely taken).
+        lanes.read = cast(read);
         let failed = live & !ok;
         if failed != 0 {
+            lanes.read = cast(f._mm512_mask_mov_epi64(left_at, ok, read));
             let tries = Tries {
                 from: cast(from),
                 i: cast(ti),
@@ -239,23 +266,36 @@ impl NullaryFnOnce for RowsV3<'_> {
         let (a, a2) = (simd.avx, simd.avx2);
         let live = lanes.live();
         let splat = |v: u64| a._mm256_set1_epi64x(v as i64);
-        let (two, zero) = (splat(2), splat(0));
-        let (ring_mask, index_mask) = (splat(RING as u64 - 1), splat(INDEX_MASK));
+        let (one, two, zero) = (splat(1), splat(2), splat(0));
+        let index_mask = splat(INDEX_MASK);
+        let (slot_mask, row_mask, block_mask) =
+            (splat(SLOT_MASK), splat(ROW_MASK), splat(BLOCK_MASK));
+        let gen_words = splat(GEN as u64);
         let box_mask = splat(BOX_MASK);
         let exp_one = splat(EXP_ONE);
         let magnitude = a._mm256_castsi256_pd(splat(i64::MAX as u64));
         let three = a._mm256_set1_pd(3.0);
         let bits_of = |m: __m256i| a._mm256_movemask_pd(a._mm256_castsi256_pd(m)) as u8;
-        let r = RING as i64;
+        let c = CHUNK_BLOCKS as i64;
         let starts = [
-            a._mm256_setr_epi64x(0, r, 2 * r, 3 * r),
-            a._mm256_setr_epi64x(4 * r, 5 * r, 6 * r, 7 * r),
+            a._mm256_setr_epi64x(0, c, 2 * c, 3 * c),
+            a._mm256_setr_epi64x(4 * c, 5 * c, 6 * c, 7 * c),
         ];
-        let words = &lanes.words;
         // Positions are below 2^63: signed compares are exact. Flipping the sign bit would
         // be needed above; a lane reads fewer than 2^63 words.
-        let end: [__m256i; 2] = cast(lanes.end);
+        let mut end: [__m256i; 2] = cast(lanes.end);
         let mut read: [__m256i; 2] = cast(lanes.read);
+        // A lane with fewer words than the rows' fast tries take: a refill now, as on
+        // AVX-512.
+        let rows_words = splat(2 * rows.len() as u64);
+        let short = |h: usize| {
+            bits_of(a2._mm256_cmpgt_epi64(a2._mm256_add_epi64(read[h], rows_words), end[h]))
+        };
+        if live & (short(0) | (short(1) << HALF)) != 0 {
+            lanes.refill();
+            end = cast(lanes.end);
+        }
+        let ring = lanes.ring.as_flattened().as_flattened();
         // As on AVX-512, with masks as vectors (all ones in a lane for true), per half.
         let count = splat(lanes.lanes as u64);
         let alive = [
@@ -273,21 +313,46 @@ impl NullaryFnOnce for RowsV3<'_> {
             let mut values: [__m256d; 2] = cast(*row);
             for h in 0..2 {
                 let v = read[h];
-                let in_ring = a2._mm256_and_si256(v, ring_mask);
-                // Two words received, and not the last of the ring with the first.
+                // At an even word (both in one pair), and two words received.
                 let take = a2._mm256_andnot_si256(
                     a2._mm256_or_si256(
                         a2._mm256_cmpgt_epi64(a2._mm256_add_epi64(v, two), end[h]),
-                        a2._mm256_cmpeq_epi64(in_ring, ring_mask),
+                        a2._mm256_cmpeq_epi64(a2._mm256_and_si256(v, one), one),
                     ),
                     alive[h],
                 );
-                let at = a2._mm256_and_si256(a2._mm256_add_epi64(starts[h], in_ring), index_mask);
-                // SAFETY: every index is masked to below BATCH * RING, and `words` has a word
-                // more (asserted at compile time), so the 8 bytes read at 4 * index are inside
-                // it; AVX2 is present since `simd` is a V3 token, which exists only on a CPU
-                // that has it, and this runs inside its `vectorize`.
-                let word = unsafe { a2._mm256_i64gather_epi64::<4>(words.as_ptr().cast(), at) };
+                // `word_index`: slot, row and block of the word, and the lane's first column;
+                // the high word (an even word: the same block) is a row further.
+                let slot = a2
+                    ._mm256_and_si256(a2._mm256_srli_epi64::<{ SLOT_SHIFT as i32 }>(v), slot_mask);
+                let row_of = a2._mm256_add_epi64(
+                    a2._mm256_slli_epi64::<{ SLOT_ROWS as i32 }>(slot),
+                    a2._mm256_and_si256(v, row_mask),
+                );
+                let block = a2._mm256_and_si256(
+                    a2._mm256_srli_epi64::<{ BLOCK_SHIFT as i32 }>(v),
+                    block_mask,
+                );
+                let at = a2._mm256_add_epi64(
+                    a2._mm256_slli_epi64::<{ ROW_STRIDE as i32 }>(row_of),
+                    a2._mm256_add_epi64(starts[h], block),
+                );
+                let lo_at = a2._mm256_and_si256(at, index_mask);
+                let hi_at = a2._mm256_and_si256(a2._mm256_add_epi64(at, gen_words), index_mask);
+                // SAFETY: every index is masked to below RING_WORDS, the length of `ring`
+                // (asserted at compile time to be a power of two), read as 4-byte elements
+                // (scale 4) of a `[u32]`; AVX2 is present since `simd` is a V3 token, which
+                // exists only on a CPU that has it, and this runs inside its `vectorize`.
+                let (lo, hi) = unsafe {
+                    (
+                        a2._mm256_i64gather_epi32::<4>(ring.as_ptr().cast(), lo_at),
+                        a2._mm256_i64gather_epi32::<4>(ring.as_ptr().cast(), hi_at),
+                    )
+                };
+                let word = a2._mm256_or_si256(
+                    a2._mm256_cvtepu32_epi64(lo),
+                    a2._mm256_slli_epi64::<32>(a2._mm256_cvtepu32_epi64(hi)),
+                );
                 let i = a2._mm256_and_si256(word, box_mask);
                 let u = a._mm256_sub_pd(
                     a._mm256_castsi256_pd(
@@ -324,12 +389,14 @@ impl NullaryFnOnce for RowsV3<'_> {
             }
             *row = cast(values);
         }
-        for h in 0..2 {
-            read[h] = a2._mm256_blendv_epi8(left_at[h], read[h], ok[h]);
-        }
+        // Stored as if every lane stayed on the vector path, as on AVX-512.
         lanes.read = cast(read);
         let failed = live & !(bits_of(ok[0]) | (bits_of(ok[1]) << HALF));
         if failed != 0 {
+            for h in 0..2 {
+                read[h] = a2._mm256_blendv_epi8(left_at[h], read[h], ok[h]);
+            }
+            lanes.read = cast(read);
             let tried = bits_of(tried[0]) | (bits_of(tried[1]) << HALF);
             let tries = Tries {
                 from: cast(from),
