@@ -18,7 +18,7 @@
 //! `SAFETY` comments), so no lane, whatever its state, reads outside.
 #![allow(unsafe_code)]
 
-use std::arch::x86_64::{__m256d, __m256i, __m512i, _CMP_LT_OQ};
+use std::arch::x86_64::{__m256i, __m512i, _CMP_LT_OQ};
 
 use kalibra_filters::batch::{BATCH, Lanes};
 use pulp::x86::{V3, V4};
@@ -309,10 +309,12 @@ impl NullaryFnOnce for RowsV3<'_> {
             [a._mm256_castsi256_pd(zero); 2],
             [a._mm256_castsi256_pd(zero); 2],
         );
-        for (r, row) in rows.iter_mut().enumerate() {
-            let mut values: [__m256d; 2] = cast(*row);
-            for h in 0..2 {
-                let v = read[h];
+        let full = lanes.lanes == BATCH;
+        // Half by half over the rows: one half's state fits the 16 registers.
+        for h in 0..2 {
+            let (mut read_h, mut ok_h) = (read[h], ok[h]);
+            for (r, row) in rows.iter_mut().enumerate() {
+                let v = read_h;
                 // At an even word (both in one pair), and two words received.
                 let take = a2._mm256_andnot_si256(
                     a2._mm256_or_si256(
@@ -372,22 +374,29 @@ impl NullaryFnOnce for RowsV3<'_> {
                 let x = a._mm256_mul_pd(u, xi);
                 let accept = a._mm256_castpd_si256(a._mm256_and_pd(
                     a._mm256_cmp_pd::<_CMP_LT_OQ>(a._mm256_and_pd(x, magnitude), xi1),
-                    a._mm256_castsi256_pd(a2._mm256_and_si256(ok[h], take)),
+                    a._mm256_castsi256_pd(a2._mm256_and_si256(ok_h, take)),
                 ));
-                values[h] = a._mm256_blendv_pd(values[h], x, a._mm256_castsi256_pd(accept));
-                read[h] = a2._mm256_add_epi64(v, a2._mm256_and_si256(take, two));
-                let rejected = a2._mm256_andnot_si256(accept, a2._mm256_and_si256(ok[h], take));
+                // A full batch stores the whole half (as on AVX-512); a partial one leaves the
+                // lanes past it.
+                let half = &mut row.as_chunks_mut::<HALF>().0[h];
+                *half = cast(if full {
+                    x
+                } else {
+                    a._mm256_blendv_pd(cast(*half), x, a._mm256_castsi256_pd(accept))
+                });
+                read_h = a2._mm256_add_epi64(v, a2._mm256_and_si256(take, two));
+                let rejected = a2._mm256_andnot_si256(accept, a2._mm256_and_si256(ok_h, take));
                 ti[h] = a2._mm256_blendv_epi8(ti[h], i, rejected);
                 let rejected_pd = a._mm256_castsi256_pd(rejected);
                 tu[h] = a._mm256_blendv_pd(tu[h], u, rejected_pd);
                 tx[h] = a._mm256_blendv_pd(tx[h], x, rejected_pd);
                 tried[h] = a2._mm256_or_si256(tried[h], rejected);
-                let left = a2._mm256_andnot_si256(accept, ok[h]);
+                let left = a2._mm256_andnot_si256(accept, ok_h);
                 from[h] = a2._mm256_blendv_epi8(from[h], splat(r as u64), left);
-                left_at[h] = a2._mm256_blendv_epi8(left_at[h], read[h], left);
-                ok[h] = accept;
+                left_at[h] = a2._mm256_blendv_epi8(left_at[h], read_h, left);
+                ok_h = accept;
             }
-            *row = cast(values);
+            (read[h], ok[h]) = (read_h, ok_h);
         }
         // Stored as if every lane stayed on the vector path, as on AVX-512.
         lanes.read = cast(read);
