@@ -18,10 +18,10 @@
 //! `SAFETY` comments), so no lane, whatever its state, reads outside.
 #![allow(unsafe_code)]
 
-use std::arch::x86_64::{__m256i, __m512i, _CMP_LT_OQ};
+use std::arch::x86_64::__m512i;
 
 use kalibra_filters::batch::{BATCH, Lanes};
-use pulp::x86::{V3, V4};
+use pulp::x86::V4;
 use pulp::{NullaryFnOnce, cast};
 
 use super::{BLOCK_WORDS, CHUNK, CHUNK_BLOCKS, ChaCha8Lanes, GEN, RING_WORDS, SLOTS};
@@ -56,15 +56,6 @@ impl ChaCha8Lanes {
     /// [`ChaCha8Lanes::standard_normals`] with AVX-512 gathers (`simd` proves the CPU has it).
     pub(super) fn normals_v4(&mut self, simd: V4, rows: &mut [Lanes]) {
         simd.vectorize(RowsV4 {
-            simd,
-            lanes: self,
-            rows,
-        });
-    }
-
-    /// [`ChaCha8Lanes::standard_normals`] with AVX2 gathers (`simd` proves the CPU has it).
-    pub(super) fn normals_v3(&mut self, simd: V3, rows: &mut [Lanes]) {
-        simd.vectorize(RowsV3 {
             simd,
             lanes: self,
             rows,
@@ -236,177 +227,6 @@ impl NullaryFnOnce for RowsV4<'_> {
         let failed = live & !ok;
         if failed != 0 {
             lanes.read = cast(f._mm512_mask_mov_epi64(left_at, ok, read));
-            let tries = Tries {
-                from: cast(from),
-                i: cast(ti),
-                u: cast(tu),
-                x: cast(tx),
-            };
-            lanes.finish_rows(rows, failed, tried, tries);
-        }
-    }
-}
-
-/// The rows of one call on AVX2, inside the token's target features.
-struct RowsV3<'a> {
-    simd: V3,
-    lanes: &'a mut ChaCha8Lanes,
-    rows: &'a mut [Lanes],
-}
-
-/// Half a batch: the lanes of one ymm.
-const HALF: usize = BATCH / 2;
-
-impl NullaryFnOnce for RowsV3<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn call(self) {
-        let Self { simd, lanes, rows } = self;
-        let (a, a2) = (simd.avx, simd.avx2);
-        let live = lanes.live();
-        let splat = |v: u64| a._mm256_set1_epi64x(v as i64);
-        let (one, two, zero) = (splat(1), splat(2), splat(0));
-        let index_mask = splat(INDEX_MASK);
-        let (slot_mask, row_mask, block_mask) =
-            (splat(SLOT_MASK), splat(ROW_MASK), splat(BLOCK_MASK));
-        let gen_words = splat(GEN as u64);
-        let box_mask = splat(BOX_MASK);
-        let exp_one = splat(EXP_ONE);
-        let magnitude = a._mm256_castsi256_pd(splat(i64::MAX as u64));
-        let three = a._mm256_set1_pd(3.0);
-        let bits_of = |m: __m256i| a._mm256_movemask_pd(a._mm256_castsi256_pd(m)) as u8;
-        let c = CHUNK_BLOCKS as i64;
-        let starts = [
-            a._mm256_setr_epi64x(0, c, 2 * c, 3 * c),
-            a._mm256_setr_epi64x(4 * c, 5 * c, 6 * c, 7 * c),
-        ];
-        // Positions are below 2^63: signed compares are exact. Flipping the sign bit would
-        // be needed above; a lane reads fewer than 2^63 words.
-        let mut end: [__m256i; 2] = cast(lanes.end);
-        let mut read: [__m256i; 2] = cast(lanes.read);
-        // A lane with fewer words than the rows' fast tries take: a refill now, as on
-        // AVX-512.
-        let rows_words = splat(2 * rows.len() as u64);
-        let short = |h: usize| {
-            bits_of(a2._mm256_cmpgt_epi64(a2._mm256_add_epi64(read[h], rows_words), end[h]))
-        };
-        if live & (short(0) | (short(1) << HALF)) != 0 {
-            lanes.refill();
-            end = cast(lanes.end);
-        }
-        let ring = lanes.ring.as_flattened().as_flattened();
-        // As on AVX-512, with masks as vectors (all ones in a lane for true), per half.
-        let count = splat(lanes.lanes as u64);
-        let alive = [
-            a2._mm256_cmpgt_epi64(count, a._mm256_setr_epi64x(0, 1, 2, 3)),
-            a2._mm256_cmpgt_epi64(count, a._mm256_setr_epi64x(4, 5, 6, 7)),
-        ];
-        let mut ok = alive;
-        let mut tried = [zero; 2];
-        let (mut from, mut left_at, mut ti) = ([zero; 2], read, [zero; 2]);
-        let (mut tu, mut tx) = (
-            [a._mm256_castsi256_pd(zero); 2],
-            [a._mm256_castsi256_pd(zero); 2],
-        );
-        let full = lanes.lanes == BATCH;
-        // Half by half over the rows: one half's state fits the 16 registers.
-        for h in 0..2 {
-            let (mut read_h, mut ok_h) = (read[h], ok[h]);
-            for (r, row) in rows.iter_mut().enumerate() {
-                let v = read_h;
-                // At an even word (both in one pair), and two words received.
-                let take = a2._mm256_andnot_si256(
-                    a2._mm256_or_si256(
-                        a2._mm256_cmpgt_epi64(a2._mm256_add_epi64(v, two), end[h]),
-                        a2._mm256_cmpeq_epi64(a2._mm256_and_si256(v, one), one),
-                    ),
-                    alive[h],
-                );
-                // `word_index`: slot, row and block of the word, and the lane's first column;
-                // the high word (an even word: the same block) is a row further.
-                let slot = a2
-                    ._mm256_and_si256(a2._mm256_srli_epi64::<{ SLOT_SHIFT as i32 }>(v), slot_mask);
-                let row_of = a2._mm256_add_epi64(
-                    a2._mm256_slli_epi64::<{ SLOT_ROWS as i32 }>(slot),
-                    a2._mm256_and_si256(v, row_mask),
-                );
-                let block = a2._mm256_and_si256(
-                    a2._mm256_srli_epi64::<{ BLOCK_SHIFT as i32 }>(v),
-                    block_mask,
-                );
-                let at = a2._mm256_add_epi64(
-                    a2._mm256_slli_epi64::<{ ROW_STRIDE as i32 }>(row_of),
-                    a2._mm256_add_epi64(starts[h], block),
-                );
-                let lo_at = a2._mm256_and_si256(at, index_mask);
-                let hi_at = a2._mm256_and_si256(a2._mm256_add_epi64(at, gen_words), index_mask);
-                // SAFETY: every index is masked to below RING_WORDS, the length of `ring`
-                // (asserted at compile time to be a power of two), read as 4-byte elements
-                // (scale 4) of a `[u32]`; AVX2 is present since `simd` is a V3 token, which
-                // exists only on a CPU that has it, and this runs inside its `vectorize`.
-                let (lo, hi) = unsafe {
-                    (
-                        a2._mm256_i64gather_epi32::<4>(ring.as_ptr().cast(), lo_at),
-                        a2._mm256_i64gather_epi32::<4>(ring.as_ptr().cast(), hi_at),
-                    )
-                };
-                let word = a2._mm256_or_si256(
-                    a2._mm256_cvtepu32_epi64(lo),
-                    a2._mm256_slli_epi64::<32>(a2._mm256_cvtepu32_epi64(hi)),
-                );
-                let i = a2._mm256_and_si256(word, box_mask);
-                let u = a._mm256_sub_pd(
-                    a._mm256_castsi256_pd(
-                        a2._mm256_or_si256(a2._mm256_srli_epi64::<12>(word), exp_one),
-                    ),
-                    three,
-                );
-                // SAFETY: `i` is masked to at most BOX_MASK, and `ZIG_NORM_X` has entries at
-                // BOX_MASK and BOX_MASK + 1 (asserted at compile time): `X[1..]` read at `i`
-                // is `X[i + 1]`. 8-byte elements (scale 8) of `[f64]`; AVX2 as above.
-                let (xi, xi1) = unsafe {
-                    (
-                        a2._mm256_i64gather_pd::<8>(ZIG_NORM_X.as_ptr(), i),
-                        a2._mm256_i64gather_pd::<8>(ZIG_NORM_X[1..].as_ptr(), i),
-                    )
-                };
-                let x = a._mm256_mul_pd(u, xi);
-                let accept = a._mm256_castpd_si256(a._mm256_and_pd(
-                    a._mm256_cmp_pd::<_CMP_LT_OQ>(a._mm256_and_pd(x, magnitude), xi1),
-                    a._mm256_castsi256_pd(a2._mm256_and_si256(ok_h, take)),
-                ));
-                // A full batch stores the whole half (as on AVX-512); a partial one leaves the
-                // lanes past it.
-                let half = &mut row.as_chunks_mut::<HALF>().0[h];
-                *half = cast(if full {
-                    x
-                } else {
-                    a._mm256_blendv_pd(cast(*half), x, a._mm256_castsi256_pd(accept))
-                });
-                read_h = a2._mm256_add_epi64(v, a2._mm256_and_si256(take, two));
-                let rejected = a2._mm256_andnot_si256(accept, a2._mm256_and_si256(ok_h, take));
-                ti[h] = a2._mm256_blendv_epi8(ti[h], i, rejected);
-                let rejected_pd = a._mm256_castsi256_pd(rejected);
-                tu[h] = a._mm256_blendv_pd(tu[h], u, rejected_pd);
-                tx[h] = a._mm256_blendv_pd(tx[h], x, rejected_pd);
-                tried[h] = a2._mm256_or_si256(tried[h], rejected);
-                let left = a2._mm256_andnot_si256(accept, ok_h);
-                from[h] = a2._mm256_blendv_epi8(from[h], splat(r as u64), left);
-                left_at[h] = a2._mm256_blendv_epi8(left_at[h], read_h, left);
-                ok_h = accept;
-            }
-            (read[h], ok[h]) = (read_h, ok_h);
-        }
-        // Stored as if every lane stayed on the vector path, as on AVX-512.
-        lanes.read = cast(read);
-        let failed = live & !(bits_of(ok[0]) | (bits_of(ok[1]) << HALF));
-        if failed != 0 {
-            for h in 0..2 {
-                read[h] = a2._mm256_blendv_epi8(left_at[h], read[h], ok[h]);
-            }
-            lanes.read = cast(read);
-            let tried = bits_of(tried[0]) | (bits_of(tried[1]) << HALF);
             let tries = Tries {
                 from: cast(from),
                 i: cast(ti),
