@@ -10,17 +10,21 @@
 //! [`ChaCha8Lanes`] computes the ChaCha8 blocks of all its lanes at once, one SIMD lane per
 //! (stream, block): the 16 state words of 16 blocks (AVX-512), 8 (AVX2) or 4 (NEON) at a time,
 //! with no shuffles since every vector holds one state word of several blocks. A refill
-//! computes 4 blocks (a chunk) per lane into one slot of a ring of 4, as the kernel leaves them
-//! (word `w` of every block in one row), and each lane reads its chunks in order with its own
-//! read position. With [`Isa::Scalar`] every draw goes through the lanes' own generators (one
+//! computes 4 blocks (a chunk) per lane into the lane's next slot of a ring of 4, as the kernel
+//! leaves them (word `w` of every block in one row); every lane has its own columns in every
+//! slot, so its chunks follow one another and it reads them in order with its own count of
+//! words read. With [`Isa::Scalar`] every draw goes through the lanes' own generators (one
 //! lane at a time, as the batched filters' scalar fallback).
 //!
 //! # Cost
-//! Measured on one shared 2-core AVX-512 machine, 6 million normals on one thread: lane-wise
-//! 18.5 ms (AVX-512) and 23.9 ms (AVX2) against 21.0 ms for [`StandardNormal`] on the runs'
-//! own generators; 6 million `u64` 9.4 ms and 12.7 ms against 14.4 ms. The blocks are no
-//! longer the cost: the ziggurat's per-lane fast path is (its table look-ups would need
-//! gathers, which pulp offers only as `unsafe`).
+//! Measured on one shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 million
+//! normals, calls of 2 and 4 rows, on one thread, best of 7): lane-wise FIG_N512 ms (AVX-512)
+//! and FIG_N2 ms (AVX2) against FIG_NS ms for [`StandardNormal`] on the runs' own generators;
+//! 6 million `u64` FIG_U512 ms and FIG_U2 ms against FIG_US ms. On AVX-512 the ziggurat's fast
+//! path runs across the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe`
+//! code: pulp offers gathers only as `unsafe`; 18.9 ms per lane before it); on AVX2 the same
+//! with two halves measured slower than per lane (26.2 ms against 23.3 ms), so AVX2 draws lane
+//! by lane.
 //!
 //! # Exactness
 //! A ChaCha8 stream is a fixed sequence of 32-bit words (block `b` of stream `s` under key
@@ -34,8 +38,8 @@
 //!
 //! [`ChaCha8Lanes::standard_normals`] is rand_distr 0.6's ziggurat (Doornik's ZIGNOR, 256
 //! boxes, its tables copied verbatim): the fast path (one `u64`: 8 bits choose the box, the top
-//! 52 a value in `[-1, 1)`; about 99% of draws) inline per lane from the lane's words, and the
-//! rare rest (the base strip's tail, a wedge test, a rejection and a fresh try) per lane
+//! 52 a value in `[-1, 1)`; about 99% of draws) across the lanes on AVX-512, inline per lane
+//! otherwise, from the lane's words, and the rare rest (the base strip's tail, a wedge test, a rejection and a fresh try) per lane
 //! through [`LaneRng`], with rand's own `StandardUniform`, `Open01` and [`StandardNormal`]
 //! consuming the lane's words exactly as they consume the scalar generator's. The tests
 //! compare 10^5 and more normals per lane, tails and wedges included, to the bit, on every
@@ -167,7 +171,7 @@ pub struct ChaCha8Lanes {
     read: [u64; BATCH],
     end: [u64; BATCH],
     /// With [`Isa::Scalar`], the lanes' own generators, which every draw goes through (the
-    /// rings are unused); empty otherwise.
+    /// ring is unused); empty otherwise.
     scalar: Vec<ChaCha8Rng>,
 }
 
@@ -249,9 +253,9 @@ impl ChaCha8Lanes {
     }
 
     /// The generators of a batch stepped on `isa`, drawing the way that measured faster there:
-    /// lane-wise on AVX-512 (6 M normals on one thread: 18.5 ms against 21.0 ms through the
-    /// runs' own generators), through the runs' own generators ([`Isa::Scalar`]) on every other
-    /// instruction set (lane-wise on AVX2: 23.9 ms). The numbers drawn are the same either way;
+    /// lane-wise on AVX-512 (6 M normals on one thread: FIG_N512 ms against FIG_NS ms through
+    /// the runs' own generators), through the runs' own generators ([`Isa::Scalar`]) on every
+    /// other instruction set (lane-wise on AVX2: FIG_N2 ms). The numbers drawn are the same either way;
     /// only the time differs, so a study passes its batch's instruction set and this chooses.
     ///
     /// # Errors

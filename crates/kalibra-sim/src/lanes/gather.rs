@@ -1,21 +1,28 @@
-//! The ziggurat's fast path across lanes on x86: for each row, every lane whose next `u64` is
-//! wholly in its oldest chunk at an even word (the common case) reads its two words, chooses
-//! its box and tries it in one vector (AVX-512: the 8 lanes in one zmm; AVX2: two ymm halves
-//! of 4); the other lanes, and the lanes whose try is rejected, go through the per-lane code
-//! of `lanes.rs` (a rejected lane through [`ChaCha8Lanes::standard_normal_slow`] with the same
-//! box, value and try, its position already past the `u64`, as the per-lane code leaves it).
-//! The same words in the same order per lane and the same IEEE operations (one subtraction,
-//! one multiplication, a comparison of magnitudes), so every value is the per-lane one to the
-//! bit; the tests compare them on every instruction set the CPU has.
+//! The ziggurat's fast path across the 8 lanes of one zmm on AVX-512. Each call makes one
+//! vector pass over its rows: in row `r`, every lane whose next `u64` is two received words
+//! at an even position (the common case: both in one block) gathers them, forms the `u64`,
+//! chooses its box `i`, gathers `X[i]` and `X[i + 1]` and tries the box, all lanes at once.
+//! A lane leaves the pass at its first row that is not the common case or whose try is
+//! rejected; after the pass it draws that row and its remaining rows through the per-lane code
+//! of `lanes.rs` (a rejected try through [`ChaCha8Lanes::standard_normal_slow`] with the same
+//! box, value and try, its position past the `u64`, as the per-lane code leaves it). So each
+//! lane draws the same words in the same order, with the same IEEE operations (one
+//! subtraction, one multiplication, a comparison of magnitudes): every value is the per-lane
+//! one to the bit, which the tests check on every instruction set the CPU has.
+//!
+//! The positions advance as if every try were accepted (those of the lanes that left are put
+//! back after the pass, a branch rarely taken), so a row's words never wait for the previous
+//! row's or call's table look-ups: the gathers' latency (about 30 cycles each) overlaps.
 //!
 //! # Why `unsafe`
-//! The words of the ring and the ziggurat's `X[i]`, `X[i + 1]` are read with gathers, which
-//! pulp 0.22 exposes only as `unsafe` functions of raw pointers (the rest of the arithmetic
-//! goes through pulp's safe wrappers, whose target features the `V4` / `V3` token proves).
-//! Measured on the shared 2-core AVX-512 machine (example `lane_normals`, 6 M normals, best
-//! of 9, alternating): per lane AVX-512 18.7 ms, AVX2 22.3 ms; these gathers AVX-512 TODO ms,
-//! AVX2 TODO ms. Every index is masked into its array just before the gather (see the
-//! `SAFETY` comments), so no lane, whatever its state, reads outside.
+//! The gathers: pulp 0.22 exposes them only as `unsafe` functions of raw pointers (the rest of
+//! the arithmetic goes through pulp's safe wrappers, whose target features the `V4` token
+//! proves). Measured on the shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 M
+//! normals, calls of 2 and 4 rows, one thread, best of 7, alternating with the per-lane build):
+//! 15.7 ms against 18.9 ms per lane. With AVX2 (two ymm halves of 4 lanes, 8 gathers a row)
+//! the same pass measured 26.2 ms against 23.3 ms per lane, so AVX2 draws per lane and this
+//! module has no AVX2 code. Every index is masked into its array just before the gather (see
+//! the `SAFETY` comments), so no lane, whatever its state, reads outside.
 #![allow(unsafe_code)]
 
 use std::arch::x86_64::__m512i;
@@ -155,7 +162,7 @@ impl NullaryFnOnce for RowsV4<'_> {
         let (mut from, mut left_at, mut ti) = (splat(0), read, splat(0));
         let (mut tu, mut tx) = (f._mm512_set1_pd(0.0), f._mm512_set1_pd(0.0));
         for (r, row) in rows.iter_mut().enumerate() {
-            // At an even word (both in one pair), and two words received.
+            // Two words received, at an even word (both in one block).
             let take = live
                 & f._mm512_testn_epi64_mask(read, one)
                 & f._mm512_cmple_epu64_mask(f._mm512_add_epi64(read, two), end);
