@@ -18,13 +18,13 @@
 //!
 //! # Cost
 //! Measured on one shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 million
-//! normals, calls of 2 and 4 rows, on one thread, best of 7): lane-wise FIG_N512 ms (AVX-512)
-//! and FIG_N2 ms (AVX2) against FIG_NS ms for [`StandardNormal`] on the runs' own generators;
-//! 6 million `u64` FIG_U512 ms and FIG_U2 ms against FIG_US ms. On AVX-512 the ziggurat's fast
-//! path runs across the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe`
-//! code: pulp offers gathers only as `unsafe`; 18.9 ms per lane before it); on AVX2 the same
-//! with two halves measured slower than per lane (26.2 ms against 23.3 ms), so AVX2 draws lane
-//! by lane.
+//! normals, calls of 2 and 4 rows, on one thread, best of 7, three runs): lane-wise 15.5 ms
+//! (AVX-512) and 22.7 ms (AVX2) against 23.8 ms for [`StandardNormal`] on the runs' own
+//! generators; 6 million `u64` 12.0 ms and 15.2 ms against 14.4 ms. On AVX-512 the ziggurat's
+//! fast path runs across the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe`
+//! code: pulp offers gathers only as `unsafe`; 18.7 ms lane by lane before it); on AVX2 the
+//! same with two halves measured slower than lane by lane (26.2 ms against 23.3 ms), so AVX2
+//! draws lane by lane.
 //!
 //! # Exactness
 //! A ChaCha8 stream is a fixed sequence of 32-bit words (block `b` of stream `s` under key
@@ -253,9 +253,11 @@ impl ChaCha8Lanes {
     }
 
     /// The generators of a batch stepped on `isa`, drawing the way that measured faster there:
-    /// lane-wise on AVX-512 (6 M normals on one thread: FIG_N512 ms against FIG_NS ms through
-    /// the runs' own generators), through the runs' own generators ([`Isa::Scalar`]) on every
-    /// other instruction set (lane-wise on AVX2: FIG_N2 ms). The numbers drawn are the same either way;
+    /// lane-wise on AVX-512 (6 M normals on one thread: 15.5 ms against 23.8 ms through the
+    /// runs' own generators; W1's batched study 0.053-0.056 s against 0.058 s lane by lane),
+    /// through the runs' own generators ([`Isa::Scalar`]) on every other instruction set (on
+    /// AVX2, lane-wise draws alone took 22.7 ms, but W1's batched AVX2 study took the same
+    /// 0.067 s either way, its draws 0.023 s lane-wise against 0.024 s). The numbers drawn are the same either way;
     /// only the time differs, so a study passes its batch's instruction set and this chooses.
     ///
     /// # Errors

@@ -18,8 +18,10 @@
 //! The gathers: pulp 0.22 exposes them only as `unsafe` functions of raw pointers (the rest of
 //! the arithmetic goes through pulp's safe wrappers, whose target features the `V4` token
 //! proves). Measured on the shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 M
-//! normals, calls of 2 and 4 rows, one thread, best of 7, alternating with the per-lane build):
-//! 15.7 ms against 18.9 ms per lane. With AVX2 (two ymm halves of 4 lanes, 8 gathers a row)
+//! normals, calls of 2 and 4 rows, one thread, best of 7, three runs alternating with the
+//! per-lane build): 15.5-16.5 ms against 18.7-19.4 ms per lane; `cargo xtask bench w1`, three
+//! runs alternating: the draws 0.016 s against 0.019-0.020 s, the batched AVX-512 study
+//! 0.053-0.056 s against 0.058 s. With AVX2 (two ymm halves of 4 lanes, 8 gathers a row)
 //! the same pass measured 26.2 ms against 23.3 ms per lane, so AVX2 draws per lane and this
 //! module has no AVX2 code. Every index is masked into its array just before the gather (see
 //! the `SAFETY` comments), so no lane, whatever its state, reads outside.
