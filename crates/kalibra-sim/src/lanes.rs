@@ -39,9 +39,10 @@
 //! [`ChaCha8Lanes::standard_normals`] is rand_distr 0.6's ziggurat (Doornik's ZIGNOR, 256
 //! boxes, its tables copied verbatim): the fast path (one `u64`: 8 bits choose the box, the top
 //! 52 a value in `[-1, 1)`; about 99% of draws) across the lanes on AVX-512, inline per lane
-//! otherwise, from the lane's words, and the rare rest (the base strip's tail, a wedge test, a rejection and a fresh try) per lane
-//! through [`LaneRng`], with rand's own `StandardUniform`, `Open01` and [`StandardNormal`]
-//! consuming the lane's words exactly as they consume the scalar generator's. The tests
+//! otherwise, from the lane's words, and the rare rest (the base strip's tail, a wedge test,
+//! a rejection and a fresh try) per lane through [`LaneRng`], with rand's own
+//! `StandardUniform`, `Open01` and [`StandardNormal`] consuming the lane's words exactly as
+//! they consume the scalar generator's. The tests
 //! compare 10^5 and more normals per lane, tails and wedges included, to the bit, on every
 //! instruction set the CPU has.
 
@@ -257,8 +258,9 @@ impl ChaCha8Lanes {
     /// runs' own generators; W1's batched study 0.053-0.056 s against 0.058 s lane by lane),
     /// through the runs' own generators ([`Isa::Scalar`]) on every other instruction set (on
     /// AVX2, lane-wise draws alone took 22.7 ms, but W1's batched AVX2 study took the same
-    /// 0.067 s either way, its draws 0.023 s lane-wise against 0.024 s). The numbers drawn are the same either way;
-    /// only the time differs, so a study passes its batch's instruction set and this chooses.
+    /// 0.067 s either way, its draws 0.023 s lane-wise against 0.024 s). The numbers drawn are
+    /// the same either way; only the time differs, so a study passes its batch's instruction
+    /// set and this chooses.
     ///
     /// # Errors
     /// As [`ChaCha8Lanes::new`].
