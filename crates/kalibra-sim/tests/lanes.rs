@@ -254,14 +254,15 @@ fn mixed_rows_lanes_in_different_states_in_the_same_call() {
                 }
                 // Slow path on the first draw.
                 4 => before_a_slow_draw(seed, stream, 0),
-                // Slow path on the third draw, one u64 before the end of the ring (4 chunks).
+                // A slow draw two draws in (unless an earlier one is slow), near the end of the
+                // ring's 4 chunks.
                 5 => {
                     let slow = before_a_slow_draw(seed, stream, 256 - 2);
                     let mut rng = slow.clone();
                     rng.set_word_pos(slow.get_word_pos() - 4);
                     rng
                 }
-                // Slow path on the second draw, odd start.
+                // A slow draw one draw in, after a single word drawn (`next_u32`) to get there.
                 6 => {
                     let slow = before_a_slow_draw(seed, stream, 1001);
                     let mut rng = slow.clone();
