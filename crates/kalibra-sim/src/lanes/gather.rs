@@ -12,7 +12,10 @@
 //!
 //! The positions advance as if every try were accepted (those of the lanes that left are put
 //! back after the pass, a branch rarely taken), so a row's words never wait for the previous
-//! row's or call's table look-ups: the gathers' latency (about 30 cycles each) overlaps.
+//! row's or call's table look-ups: the gathers' latency (about 30 cycles each) overlaps. What
+//! remains costly is leaving: with the leaving lanes skipped (wrong values, timing only) the
+//! 6 M normals below took 11 ms instead of 15.5 ms (the rejections, 1% of draws, the branch to
+//! them, known only after the look-ups, and the rows drawn per lane after them).
 //!
 //! # Why `unsafe`
 //! The gathers: pulp 0.22 exposes them only as `unsafe` functions of raw pointers (the rest of
