@@ -10,17 +10,21 @@
 //! [`ChaCha8Lanes`] computes the ChaCha8 blocks of all its lanes at once, one SIMD lane per
 //! (stream, block): the 16 state words of 16 blocks (AVX-512), 8 (AVX2) or 4 (NEON) at a time,
 //! with no shuffles since every vector holds one state word of several blocks. A refill
-//! computes 4 blocks (a chunk) per lane into one slot of a ring of 4, as the kernel leaves them
-//! (word `w` of every block in one row), and each lane reads its chunks in order with its own
-//! read position. With [`Isa::Scalar`] every draw goes through the lanes' own generators (one
+//! computes 4 blocks (a chunk) per lane into the lane's next slot of a ring of 4, as the kernel
+//! leaves them (word `w` of every block in one row); every lane has its own columns in every
+//! slot, so its chunks follow one another and it reads them in order with its own count of
+//! words read. With [`Isa::Scalar`] every draw goes through the lanes' own generators (one
 //! lane at a time, as the batched filters' scalar fallback).
 //!
 //! # Cost
-//! Measured on one shared 2-core AVX-512 machine, 6 million normals on one thread: lane-wise
-//! 18.5 ms (AVX-512) and 23.9 ms (AVX2) against 21.0 ms for [`StandardNormal`] on the runs'
-//! own generators; 6 million `u64` 9.4 ms and 12.7 ms against 14.4 ms. The blocks are no
-//! longer the cost: the ziggurat's per-lane fast path is (its table look-ups would need
-//! gathers, which pulp offers only as `unsafe`).
+//! Measured on one shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 million
+//! normals, calls of 2 and 4 rows, on one thread, best of 7, three runs): lane-wise 15.5 ms
+//! (AVX-512) and 22.7 ms (AVX2) against 23.8 ms for [`StandardNormal`] on the runs' own
+//! generators; 6 million `u64` 12.0 ms and 15.2 ms against 14.4 ms. On AVX-512 the ziggurat's
+//! fast path runs across the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe`
+//! code: pulp offers gathers only as `unsafe`; 18.7 ms lane by lane before it); on AVX2 the
+//! same with two halves measured slower than lane by lane (26.2 ms against 23.3 ms), so AVX2
+//! draws lane by lane.
 //!
 //! # Exactness
 //! A ChaCha8 stream is a fixed sequence of 32-bit words (block `b` of stream `s` under key
@@ -34,12 +38,16 @@
 //!
 //! [`ChaCha8Lanes::standard_normals`] is rand_distr 0.6's ziggurat (Doornik's ZIGNOR, 256
 //! boxes, its tables copied verbatim): the fast path (one `u64`: 8 bits choose the box, the top
-//! 52 a value in `[-1, 1)`; about 99% of draws) inline per lane from the lane's words, and the
-//! rare rest (the base strip's tail, a wedge test, a rejection and a fresh try) per lane
-//! through [`LaneRng`], with rand's own `StandardUniform`, `Open01` and [`StandardNormal`]
-//! consuming the lane's words exactly as they consume the scalar generator's. The tests
+//! 52 a value in `[-1, 1)`; about 99% of draws) across the lanes on AVX-512, inline per lane
+//! otherwise, from the lane's words, and the rare rest (the base strip's tail, a wedge test,
+//! a rejection and a fresh try) per lane through [`LaneRng`], with rand's own
+//! `StandardUniform`, `Open01` and [`StandardNormal`] consuming the lane's words exactly as
+//! they consume the scalar generator's. The tests
 //! compare 10^5 and more normals per lane, tails and wedges included, to the bit, on every
 //! instruction set the CPU has.
+
+#[cfg(target_arch = "x86_64")]
+mod gather;
 
 use std::convert::Infallible;
 
@@ -59,17 +67,19 @@ const BLOCK_WORDS: usize = 16;
 const CHUNK_BLOCKS: usize = 4;
 /// Words each lane receives per refill (a chunk).
 const CHUNK: usize = CHUNK_BLOCKS * BLOCK_WORDS;
-/// Chunk slots in the ring: a lane that has drawn less than the others (lanes drift apart
-/// through the ziggurat's rare extra draws) keeps up to this many chunks unread.
-const SLOTS: usize = 4;
+/// Words of each lane's ring: a lane that has drawn less than the others (lanes drift apart
+/// through the ziggurat's rare extra draws) keeps up to this many words unread (4 chunks).
+const RING: usize = 4 * CHUNK;
 /// Blocks per refill, over all lanes: a multiple of every instruction set's u32 lane count
 /// (16, 8, 4, 1), so the kernel has no remainder. Column `lane * CHUNK_BLOCKS + b` is block
 /// `b` of the chunk of lane `lane`.
 const GEN: usize = CHUNK_BLOCKS * BATCH;
 /// One chunk slot: word `w` of every column (the kernel's output as it is).
 type Slot = [[u32; GEN]; BLOCK_WORDS];
-/// Words per slot.
-const SLOT_WORDS: usize = GEN * BLOCK_WORDS;
+/// Chunk slots in the ring: lane `l`'s `k`-th chunk is in slot `k % SLOTS`, its columns.
+const SLOTS: usize = RING / CHUNK;
+/// Words in the ring.
+const RING_WORDS: usize = SLOTS * BLOCK_WORDS * GEN;
 /// ChaCha8: four double rounds.
 const DOUBLE_ROUNDS: usize = 4;
 /// "expand 32-byte k", ChaCha's first four state words.
@@ -150,25 +160,20 @@ pub struct ChaCha8Lanes {
     stream: [u64; BATCH],
     /// The next block each lane's refill computes.
     block: [u64; BATCH],
-    /// Words of its first block a lane skips (a generator taken mid-block).
-    skip: [usize; BATCH],
     /// State words 4..16 of every column (key, counter, stream): only the counters change.
     input: [[u32; GEN]; 12],
-    /// The ring of chunk slots the kernel writes into; a refill writes slot `next_slot`.
+    /// The ring the kernel writes into: lane `l`'s `v`-th word (counted from word 0 of the
+    /// block its first refill computed) at [`word_index`]`(l, v)` of the flattened ring, in
+    /// slot `v / CHUNK % SLOTS`, the lane's own columns. A lane's chunks follow one another
+    /// in its slots whatever the other lanes have read.
     ring: [Slot; SLOTS],
-    next_slot: usize,
-    /// Lane `l`'s unread chunks, oldest first: slots `queue[l][(head[l] + i) % SLOTS]` for
-    /// `i < queued[l]`; it has read `pos[l]` words of the oldest (`CHUNK` when none is queued).
-    queue: [[usize; SLOTS]; BATCH],
-    head: [usize; BATCH],
-    /// Where lane `l`'s column of its oldest chunk starts in the flattened ring:
-    /// `queue[l][head[l]] * SLOT_WORDS + l * CHUNK_BLOCKS` (kept for the fast path).
-    base: [usize; BATCH],
+    /// The words each lane has read (it starts at the generator's offset in its block) and
+    /// has received, counted as `v` above: words `read..end` are unread.
+    read: [u64; BATCH],
+    end: [u64; BATCH],
     /// With [`Isa::Scalar`], the lanes' own generators, which every draw goes through (the
     /// ring is unused); empty otherwise.
     scalar: Vec<ChaCha8Rng>,
-    queued: [usize; BATCH],
-    pos: [usize; BATCH],
 }
 
 impl std::fmt::Debug for ChaCha8Lanes {
@@ -206,15 +211,10 @@ impl ChaCha8Lanes {
             key: [[0; 8]; BATCH],
             stream: [0; BATCH],
             block: [0; BATCH],
-            skip: [0; BATCH],
             input: [[0; GEN]; 12],
             ring: [[[0; GEN]; BLOCK_WORDS]; SLOTS],
-            next_slot: 0,
-            queue: [[0; SLOTS]; BATCH],
-            head: [0; BATCH],
-            base: [0; BATCH],
-            queued: [0; BATCH],
-            pos: [CHUNK; BATCH],
+            read: [0; BATCH],
+            end: [0; BATCH],
             scalar: Vec::new(),
         };
         for (lane, rng) in rngs.iter().enumerate() {
@@ -226,7 +226,8 @@ impl ChaCha8Lanes {
             let pos = rng.get_word_pos() % WORD_POS_MOD;
             // pos < 2^68, so the block index fits the 64-bit counter.
             out.block[lane] = (pos / BLOCK_WORDS as u128) as u64;
-            out.skip[lane] = (pos % BLOCK_WORDS as u128) as usize;
+            // A generator taken mid-block starts inside its first block.
+            out.read[lane] = (pos % BLOCK_WORDS as u128) as u64;
             for b in 0..CHUNK_BLOCKS {
                 let col = lane * CHUNK_BLOCKS + b;
                 for (k, key) in out.key[lane].iter().enumerate() {
@@ -253,10 +254,13 @@ impl ChaCha8Lanes {
     }
 
     /// The generators of a batch stepped on `isa`, drawing the way that measured faster there:
-    /// lane-wise on AVX-512 (6 M normals on one thread: 18.5 ms against 21.0 ms through the
-    /// runs' own generators), through the runs' own generators ([`Isa::Scalar`]) on every other
-    /// instruction set (lane-wise on AVX2: 23.9 ms). The numbers drawn are the same either way;
-    /// only the time differs, so a study passes its batch's instruction set and this chooses.
+    /// lane-wise on AVX-512 (6 M normals on one thread: 15.5 ms against 23.8 ms through the
+    /// runs' own generators; W1's batched study 0.053-0.056 s against 0.058 s lane by lane),
+    /// through the runs' own generators ([`Isa::Scalar`]) on every other instruction set (on
+    /// AVX2, lane-wise draws alone took 22.7 ms, but W1's batched AVX2 study took the same
+    /// 0.067 s either way, its draws 0.023 s lane-wise against 0.024 s). The numbers drawn are
+    /// the same either way; only the time differs, so a study passes its batch's instruction
+    /// set and this chooses.
     ///
     /// # Errors
     /// As [`ChaCha8Lanes::new`].
@@ -278,10 +282,11 @@ impl ChaCha8Lanes {
             return Some(rng.get_word_pos() % WORD_POS_MOD);
         }
         (lane < self.lanes).then(|| {
-            let generated = u128::from(self.block[lane]) * BLOCK_WORDS as u128;
-            let unread = (self.queued[lane] * CHUNK).saturating_sub(self.pos[lane]) as u128;
-            // A wrapped block counter is below its unread words: add the period first.
-            (generated + WORD_POS_MOD + self.skip[lane] as u128 - unread) % WORD_POS_MOD
+            // Word `end` is word 0 of block `block`; a wrapped block counter is below the
+            // words received: add the period first.
+            let next = u128::from(self.block[lane]) * BLOCK_WORDS as u128;
+            let (read, end) = (u128::from(self.read[lane]), u128::from(self.end[lane]));
+            (next + WORD_POS_MOD - end + read) % WORD_POS_MOD
         })
     }
 
@@ -350,8 +355,16 @@ impl ChaCha8Lanes {
         }
     }
 
-    /// [`ChaCha8Lanes::standard_normals`] from the lane-wise blocks.
+    /// [`ChaCha8Lanes::standard_normals`] from the lane-wise blocks: the fast path across
+    /// lanes with gathers on AVX-512 (`gather.rs`), per lane otherwise.
     fn lane_normals(&mut self, rows: &mut [Lanes]) {
+        // AVX-512 only: with AVX2's gathers (two ymm halves) it measured slower than per lane.
+        #[cfg(target_arch = "x86_64")]
+        if self.isa == Isa::Avx512
+            && let Some(simd) = pulp::x86::V4::try_new()
+        {
+            return self.normals_v4(simd, rows);
+        }
         // Row by row: consecutive draws are from different lanes, so their dependency chains
         // (each lane's read position) overlap.
         for row in rows.iter_mut() {
@@ -387,41 +400,27 @@ impl ChaCha8Lanes {
         StandardNormal.sample(&mut rng)
     }
 
-    /// Word `k` of lane `lane`'s oldest chunk.
+    /// Word `v` of lane `lane` (received and not overwritten).
     #[inline(always)]
-    fn word(&self, lane: usize, k: usize) -> u32 {
-        self.ring.as_flattened().as_flattened()
-            [self.base[lane] + (k % BLOCK_WORDS) * GEN + k / BLOCK_WORDS]
+    fn word(&self, lane: usize, v: u64) -> u32 {
+        self.ring.as_flattened().as_flattened()[word_index(lane, v)]
     }
 
     /// Lane `lane`'s next two words, low first, as `ChaCha8Rng::next_u64` reads them.
     #[inline(always)]
     fn next_u64(&mut self, lane: usize) -> u64 {
-        let k = self.pos[lane];
-        // At an even word of the oldest chunk (`pos` is `CHUNK` when there is none), both
-        // words are in one block: rows `k % 16` and the next of the lane's column.
-        if k.is_multiple_of(2) && k < CHUNK {
-            self.pos[lane] = k + 2;
-            let ring = self.ring.as_flattened().as_flattened();
-            let at = self.base[lane] + (k % BLOCK_WORDS) * GEN + k / BLOCK_WORDS;
-            let (lo, hi) = (ring[at], ring[at + GEN]);
-            return (u64::from(hi) << 32) | u64::from(lo);
+        let v = self.read[lane];
+        if v + 2 <= self.end[lane] {
+            self.read[lane] = v + 2;
+            return (u64::from(self.word(lane, v + 1)) << 32) | u64::from(self.word(lane, v));
         }
         self.next_u64_across(lane)
     }
 
-    /// [`ChaCha8Lanes::next_u64`] when the words are not both in the oldest chunk.
+    /// [`ChaCha8Lanes::next_u64`] when the lane has fewer than two words: word by word,
+    /// refilling between them as needed.
     #[inline(never)]
     fn next_u64_across(&mut self, lane: usize) -> u64 {
-        if self.pos[lane] == CHUNK {
-            // The oldest chunk is used up at a word boundary: the next chunk (refilling if
-            // there is none) starts at an even word, unless this lane's generator started
-            // mid-block at an odd word.
-            self.next_chunk(lane);
-            if self.pos[lane].is_multiple_of(2) {
-                return self.next_u64(lane);
-            }
-        }
         let lo = self.next_u32(lane);
         let hi = self.next_u32(lane);
         (u64::from(hi) << 32) | u64::from(lo)
@@ -430,49 +429,25 @@ impl ChaCha8Lanes {
     /// Lane `lane`'s next word.
     #[inline(always)]
     fn next_u32(&mut self, lane: usize) -> u32 {
-        if self.pos[lane] >= CHUNK {
-            self.next_chunk(lane);
-        }
-        let k = self.pos[lane];
-        self.pos[lane] = k + 1;
-        self.word(lane, k)
-    }
-
-    /// Moves lane `lane` past its finished oldest chunk, refilling when it has no other.
-    #[inline(never)]
-    fn next_chunk(&mut self, lane: usize) {
-        self.drop_finished(lane);
-        if self.queued[lane] == 0 {
+        if self.read[lane] >= self.end[lane] {
             self.refill();
         }
+        let v = self.read[lane];
+        self.read[lane] = v + 1;
+        self.word(lane, v)
     }
 
-    /// Drops lane `lane`'s oldest chunk if it has read all of it.
-    fn drop_finished(&mut self, lane: usize) {
-        if self.queued[lane] > 0 && self.pos[lane] >= CHUNK {
-            self.head[lane] = (self.head[lane] + 1) % SLOTS;
-            self.base[lane] = self.queue[lane][self.head[lane]] * SLOT_WORDS + lane * CHUNK_BLOCKS;
-            self.queued[lane] -= 1;
-            self.pos[lane] = if self.queued[lane] > 0 { 0 } else { CHUNK };
-        }
-    }
-
-    /// Computes the next [`CHUNK_BLOCKS`] blocks of every lane that takes them into ring slot
-    /// `next_slot`. A lane takes them unless it still has unread words in that slot (it has
-    /// drawn [`SLOTS`] - 1 chunks fewer than the lane asking); such a lane keeps its words
-    /// (the kernel leaves its columns as they are) and its counter, so it computes these
-    /// blocks at a later refill. Called when a lane has no chunk left, so that lane takes.
+    /// Computes the next [`CHUNK_BLOCKS`] blocks of every lane that has room for them in its
+    /// ring and appends them there. A lane with more than `RING - CHUNK` words unread (it has
+    /// drawn 3 chunks fewer than the lane asking) keeps its counter, so it computes these
+    /// blocks at a later refill. Called when a lane has too few words left, so that lane takes.
     #[inline(never)]
     fn refill(&mut self) {
-        let slot = self.next_slot;
-        self.next_slot = (slot + 1) % SLOTS;
         let mut take = [0u32; GEN];
         let mut takes = [false; BATCH];
         for (lane, takes) in takes.iter_mut().enumerate().take(self.lanes) {
-            self.drop_finished(lane);
-            let held = (0..self.queued[lane])
-                .any(|i| self.queue[lane][(self.head[lane] + i) % SLOTS] == slot);
-            if held {
+            let unread = self.end[lane].saturating_sub(self.read[lane]) as usize;
+            if unread + CHUNK > RING {
                 continue;
             }
             *takes = true;
@@ -484,23 +459,44 @@ impl ChaCha8Lanes {
                 take[col] = 1;
             }
         }
-        self.isa.dispatch(Blocks {
-            input: &self.input,
-            take: &take,
-            out: &mut self.ring[slot],
-        });
-        for lane in (0..self.lanes).filter(|l| takes[*l]) {
-            let tail = (self.head[lane] + self.queued[lane]) % SLOTS;
-            self.queue[lane][tail] = slot;
-            self.queued[lane] += 1;
-            self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
-            if self.queued[lane] == 1 {
-                self.base[lane] = slot * SLOT_WORDS + lane * CHUNK_BLOCKS;
-                // A generator taken mid-block starts inside its first block.
-                self.pos[lane] = std::mem::take(&mut self.skip[lane]);
+        // Each lane's chunk goes to its next slot: one kernel call per slot asked for (one
+        // unless a lane has skipped a refill).
+        for slot in 0..SLOTS {
+            let mut in_slot = take;
+            let mut any = false;
+            for lane in 0..self.lanes {
+                let here =
+                    takes[lane] && self.end[lane] / CHUNK as u64 % SLOTS as u64 == slot as u64;
+                any |= here;
+                if !here {
+                    in_slot[lane * CHUNK_BLOCKS..(lane + 1) * CHUNK_BLOCKS].fill(0);
+                }
+            }
+            if any {
+                self.isa.dispatch(Blocks {
+                    input: &self.input,
+                    take: &in_slot,
+                    out: &mut self.ring[slot],
+                });
             }
         }
+        for lane in (0..self.lanes).filter(|l| takes[*l]) {
+            self.end[lane] += CHUNK as u64;
+            self.block[lane] = self.block[lane].wrapping_add(CHUNK_BLOCKS as u64);
+        }
     }
+}
+
+/// Where word `v` of lane `lane` is in [`ChaCha8Lanes`]' flattened ring: slot
+/// `v / CHUNK % SLOTS`, row `v % 16` (the word in its block), column of block
+/// `v % CHUNK / 16` of the lane's chunk.
+#[inline(always)]
+fn word_index(lane: usize, v: u64) -> usize {
+    let v = v as usize;
+    let slot = v / CHUNK % SLOTS;
+    let block = v / BLOCK_WORDS % CHUNK_BLOCKS;
+    let word = v % BLOCK_WORDS;
+    (slot * BLOCK_WORDS + word) * GEN + lane * CHUNK_BLOCKS + block
 }
 
 /// rand_distr's ziggurat fast try from one `u64`: the low 8 bits choose the box `i`, the top

@@ -203,3 +203,121 @@ fn misuse_is_a_typed_error() {
         ));
     }
 }
+
+/// A generator of `seed` (stream `stream`) at the first even word position from `from` on
+/// whose next standard normal takes the ziggurat's slow path (more than one `u64`).
+fn before_a_slow_draw(seed: u64, stream: u64, from: u128) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(stream);
+    let mut pos = from + from % 2;
+    loop {
+        rng.set_word_pos(pos);
+        let mut probe = rng.clone();
+        let _: f64 = StandardNormal.sample(&mut probe);
+        if probe.get_word_pos() - pos > 2 {
+            return rng;
+        }
+        pos += 2;
+    }
+}
+
+/// Lanes in every state at once, in the same calls: at odd word positions, one `u64` before
+/// the end of a 64-word chunk or of the ring, one word before it, about to take the slow path
+/// in the first row or a few rows in, fresh; calls of 1, 2, 4 and 6 rows, with single words
+/// drawn from some lanes between calls (so positions turn odd and even again mid-stream).
+/// Every value and every position against the scalar generators, on every instruction set the
+/// CPU has, for a full group of 8 lanes and a partial one of 5.
+#[test]
+fn mixed_rows_lanes_in_different_states_in_the_same_call() {
+    let starts: Vec<ChaCha8Rng> = (0..BATCH as u64)
+        .map(|lane| {
+            let (seed, stream) = (lane * 7919 + 1, 3 * lane + 1);
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(stream);
+            match lane {
+                // Fresh.
+                0 => rng,
+                // Odd.
+                1 => {
+                    rng.set_word_pos(5);
+                    rng
+                }
+                // One u64 before the end of the first chunk.
+                2 => {
+                    rng.set_word_pos(62);
+                    rng
+                }
+                // One word before the end of a chunk, far into the stream.
+                3 => {
+                    rng.set_word_pos(64 * 1001 - 1);
+                    rng
+                }
+                // Slow path on the first draw.
+                4 => before_a_slow_draw(seed, stream, 0),
+                // A slow draw two draws in (unless an earlier one is slow), near the end of the
+                // ring's 4 chunks.
+                5 => {
+                    let slow = before_a_slow_draw(seed, stream, 256 - 2);
+                    let mut rng = slow.clone();
+                    rng.set_word_pos(slow.get_word_pos() - 4);
+                    rng
+                }
+                // A slow draw one draw in, after a single word drawn (`next_u32`) to get there.
+                6 => {
+                    let slow = before_a_slow_draw(seed, stream, 1001);
+                    let mut rng = slow.clone();
+                    rng.set_word_pos(slow.get_word_pos() - 3);
+                    rng.next_u32();
+                    rng
+                }
+                _ => {
+                    rng.set_word_pos(16 * 1234 + 14);
+                    rng
+                }
+            }
+        })
+        .collect();
+    for isa in Isa::available() {
+        for group in [&starts[..], &starts[..5]] {
+            let mut scalar = group.to_vec();
+            let mut lanes = ChaCha8Lanes::new(isa, group).unwrap();
+            for call in 0..3000 {
+                let rows = [1, 2, 4, 6][call % 4];
+                let mut out = vec![[f64::NAN; BATCH]; rows];
+                lanes.standard_normals(&mut out);
+                for (lane, rng) in scalar.iter_mut().enumerate() {
+                    for (r, row) in out.iter().enumerate() {
+                        let x: f64 = StandardNormal.sample(rng);
+                        assert_eq!(
+                            row[lane].to_bits(),
+                            x.to_bits(),
+                            "{isa}, {} lanes: call {call}, lane {lane}, row {r} of {rows}",
+                            group.len()
+                        );
+                    }
+                    assert_eq!(
+                        lanes.word_pos(lane),
+                        Some(rng.get_word_pos()),
+                        "{isa}, {} lanes: call {call}, lane {lane}",
+                        group.len()
+                    );
+                }
+                for row in &out {
+                    assert!(row[group.len()..].iter().all(|v| v.is_nan()), "{isa}");
+                }
+                // A single word from one lane in three calls: its parity flips.
+                if call % 3 == 0 {
+                    let lane = call / 3 % group.len();
+                    let word = lanes.lane(lane).unwrap().next_u32();
+                    assert_eq!(word, scalar[lane].next_u32(), "{isa}: call {call}");
+                }
+            }
+            let mut written = group.to_vec();
+            lanes.write_back(&mut written).unwrap();
+            for (w, s) in written.iter_mut().zip(&mut scalar) {
+                assert_eq!(w.get_word_pos(), s.get_word_pos(), "{isa}");
+                assert_eq!(w.next_u64(), s.next_u64(), "{isa}");
+            }
+        }
+    }
+}

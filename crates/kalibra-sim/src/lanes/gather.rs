@@ -1,0 +1,251 @@
+//! The ziggurat's fast path across the 8 lanes of one zmm on AVX-512. Each call makes one
+//! vector pass over its rows: in row `r`, every lane whose next `u64` is two received words
+//! at an even position (the common case: both in one block) gathers them, forms the `u64`,
+//! chooses its box `i`, gathers `X[i]` and `X[i + 1]` and tries the box, all lanes at once.
+//! A lane leaves the pass at its first row that is not the common case or whose try is
+//! rejected; after the pass it draws that row and its remaining rows through the per-lane code
+//! of `lanes.rs` (a rejected try through [`ChaCha8Lanes::standard_normal_slow`] with the same
+//! box, value and try, its position past the `u64`, as the per-lane code leaves it). So each
+//! lane draws the same words in the same order, with the same IEEE operations (one
+//! subtraction, one multiplication, a comparison of magnitudes): every value is the per-lane
+//! one to the bit, which the tests check on every instruction set the CPU has.
+//!
+//! The positions advance as if every try were accepted (those of the lanes that left are put
+//! back after the pass, a branch rarely taken), so a row's words never wait for the previous
+//! row's or call's table look-ups: the gathers' latency (about 30 cycles each) overlaps. What
+//! remains costly is leaving: with the leaving lanes skipped (wrong values, timing only) the
+//! 6 M normals below took 11 ms instead of 15.5 ms (the rejections, 1% of draws, the branch to
+//! them, known only after the look-ups, and the rows drawn per lane after them).
+//!
+//! # Why `unsafe`
+//! The gathers: pulp 0.22 exposes them only as `unsafe` functions of raw pointers (the rest of
+//! the arithmetic goes through pulp's safe wrappers, whose target features the `V4` token
+//! proves). Measured on the shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 M
+//! normals, calls of 2 and 4 rows, one thread, best of 7, three runs alternating with the
+//! per-lane build): 15.5-16.5 ms against 18.7-19.4 ms per lane; `cargo xtask bench w1`, three
+//! runs alternating: the draws 0.016 s against 0.019-0.020 s, the batched AVX-512 study
+//! 0.053-0.056 s against 0.058 s. With AVX2 (two ymm halves of 4 lanes, 8 gathers a row)
+//! the same pass measured 26.2 ms against 23.3 ms per lane, so AVX2 draws per lane and this
+//! module has no AVX2 code. Every index is masked into its array just before the gather (see
+//! the `SAFETY` comments), so no lane, whatever its state, reads outside.
+#![allow(unsafe_code)]
+
+use std::arch::x86_64::__m512i;
+
+use kalibra_filters::batch::{BATCH, Lanes};
+use pulp::x86::V4;
+use pulp::{NullaryFnOnce, cast};
+
+use super::{BLOCK_WORDS, CHUNK, CHUNK_BLOCKS, ChaCha8Lanes, GEN, RING_WORDS, SLOTS};
+use crate::ziggurat_tables::ZIG_NORM_X;
+
+/// Indices into the ring are masked with this: `RING_WORDS` is a power of two.
+const INDEX_MASK: u64 = RING_WORDS as u64 - 1;
+/// `word_index` as shifts and masks: the slot, the word in its block (the row) and the block
+/// of word `v`; the index is rows of GEN words and the lane's column of the block.
+const ROW_MASK: u64 = BLOCK_WORDS as u64 - 1;
+const ROW_STRIDE: u32 = GEN.trailing_zeros();
+const BLOCK_SHIFT: u32 = BLOCK_WORDS.trailing_zeros();
+const BLOCK_MASK: u64 = CHUNK_BLOCKS as u64 - 1;
+const SLOT_SHIFT: u32 = CHUNK.trailing_zeros();
+const SLOT_MASK: u64 = SLOTS as u64 - 1;
+const SLOT_ROWS: u32 = BLOCK_WORDS.trailing_zeros();
+const _: () = assert!(
+    RING_WORDS.is_power_of_two()
+        && CHUNK.is_power_of_two()
+        && SLOTS.is_power_of_two()
+        && GEN.is_power_of_two()
+        && BLOCK_WORDS.is_power_of_two()
+        && CHUNK_BLOCKS.is_power_of_two()
+);
+/// The ziggurat's boxes: `i = bits & BOX_MASK`, and `X` has an entry at `i + 1`.
+const BOX_MASK: u64 = 0xff;
+const _: () = assert!(ZIG_NORM_X.len() > BOX_MASK as usize + 1);
+/// Bits of a `u64` that place a value's 52 fraction bits in `[2, 4)` (exponent 1).
+const EXP_ONE: u64 = 1024 << 52;
+
+impl ChaCha8Lanes {
+    /// [`ChaCha8Lanes::standard_normals`] with AVX-512 gathers (`simd` proves the CPU has it).
+    pub(super) fn normals_v4(&mut self, simd: V4, rows: &mut [Lanes]) {
+        simd.vectorize(RowsV4 {
+            simd,
+            lanes: self,
+            rows,
+        });
+    }
+
+    /// The live lanes (below [`ChaCha8Lanes::len`]) as bits.
+    #[inline(always)]
+    fn live(&self) -> u8 {
+        ((1u16 << self.lanes) - 1) as u8
+    }
+
+    /// After the vector pass: each lane of `failed` left it at row `from[lane]`, rejected
+    /// there in box `tries.i[lane]` with `tries.u[lane]`, `tries.x[lane]` if it is in `tried`
+    /// (its position past that `u64`), not tried otherwise (its position at that row's draw);
+    /// it draws that row and the rest per lane.
+    #[cold]
+    #[inline(never)]
+    fn finish_rows(&mut self, rows: &mut [Lanes], failed: u8, tried: u8, tries: Tries) {
+        for lane in bits(failed) {
+            let from = tries.from[lane] as usize;
+            rows[from][lane] = if tried & (1 << lane) != 0 {
+                let (i, u, x) = (tries.i[lane] as usize, tries.u[lane], tries.x[lane]);
+                self.standard_normal_slow(lane, i, u, x)
+            } else {
+                self.standard_normal(lane)
+            };
+            for row in &mut rows[from + 1..] {
+                row[lane] = self.standard_normal(lane);
+            }
+        }
+    }
+}
+
+/// Where each lane left the vector pass, and its rejected try there.
+struct Tries {
+    from: [u64; BATCH],
+    i: [u64; BATCH],
+    u: [f64; BATCH],
+    x: [f64; BATCH],
+}
+
+/// The set bits of `mask`, lowest first.
+#[inline(always)]
+fn bits(mut mask: u8) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            lane
+        })
+    })
+}
+
+/// The rows of one call on AVX-512, inside the token's target features.
+struct RowsV4<'a> {
+    simd: V4,
+    lanes: &'a mut ChaCha8Lanes,
+    rows: &'a mut [Lanes],
+}
+
+impl NullaryFnOnce for RowsV4<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn call(self) {
+        let Self { simd, lanes, rows } = self;
+        let f = simd.avx512f;
+        let live = lanes.live();
+        let full = lanes.lanes == BATCH;
+        let splat = |v: u64| f._mm512_set1_epi64(v as i64);
+        let (one, two, index_mask) = (splat(1), splat(2), splat(INDEX_MASK));
+        let (slot_mask, row_mask, block_mask) =
+            (splat(SLOT_MASK), splat(ROW_MASK), splat(BLOCK_MASK));
+        let gen_words = splat(GEN as u64);
+        let box_mask = splat(BOX_MASK);
+        let exp_one = splat(EXP_ONE);
+        let three = f._mm512_set1_pd(3.0);
+        let c = CHUNK_BLOCKS as i64;
+        let starts = f._mm512_setr_epi64(0, c, 2 * c, 3 * c, 4 * c, 5 * c, 6 * c, 7 * c);
+        let mut end: __m512i = cast(lanes.end);
+        let mut read: __m512i = cast(lanes.read);
+        // A lane with fewer words than the rows' fast tries take: a refill now (the lane
+        // would ask for it a few draws later; the words do not depend on when they are
+        // computed), so that the pass can go on.
+        let needed = f._mm512_add_epi64(read, splat(2 * rows.len() as u64));
+        if live & f._mm512_cmpgt_epu64_mask(needed, end) != 0 {
+            lanes.refill();
+            end = cast(lanes.end);
+        }
+        let ring = lanes.ring.as_flattened().as_flattened();
+        // Lanes still on the vector path, those rejected on it, the row each left it at, its
+        // position then and the try it was rejected with. `read` goes on as if every try were
+        // accepted, so that a row's words need not wait for the previous row's table
+        // look-ups; a lane that left keeps the position it left with.
+        let (mut ok, mut tried) = (live, 0u8);
+        let (mut from, mut left_at, mut ti) = (splat(0), read, splat(0));
+        let (mut tu, mut tx) = (f._mm512_set1_pd(0.0), f._mm512_set1_pd(0.0));
+        for (r, row) in rows.iter_mut().enumerate() {
+            // Two words received, at an even word (both in one block).
+            let take = live
+                & f._mm512_testn_epi64_mask(read, one)
+                & f._mm512_cmple_epu64_mask(f._mm512_add_epi64(read, two), end);
+            // `word_index`: slot, row and block of the word, and the lane's first column; the
+            // high word (an even word: the same block) is a row further.
+            let slot = f._mm512_and_si512(f._mm512_srli_epi64::<SLOT_SHIFT>(read), slot_mask);
+            let row_of = f._mm512_add_epi64(
+                f._mm512_slli_epi64::<SLOT_ROWS>(slot),
+                f._mm512_and_si512(read, row_mask),
+            );
+            let block = f._mm512_and_si512(f._mm512_srli_epi64::<BLOCK_SHIFT>(read), block_mask);
+            let at = f._mm512_add_epi64(
+                f._mm512_slli_epi64::<ROW_STRIDE>(row_of),
+                f._mm512_add_epi64(starts, block),
+            );
+            let lo_at = f._mm512_and_si512(at, index_mask);
+            let hi_at = f._mm512_and_si512(f._mm512_add_epi64(at, gen_words), index_mask);
+            // SAFETY: every index is masked to below RING_WORDS, the length of `ring`
+            // (asserted at compile time to be a power of two), read as 4-byte elements (scale
+            // 4) of a `[u32]`; AVX-512F is present since `simd` is a V4 token, which exists
+            // only on a CPU that has it, and this runs inside its `vectorize`.
+            let (lo, hi) = unsafe {
+                (
+                    f._mm512_i64gather_epi32::<4>(lo_at, ring.as_ptr().cast()),
+                    f._mm512_i64gather_epi32::<4>(hi_at, ring.as_ptr().cast()),
+                )
+            };
+            let word = f._mm512_or_si512(
+                f._mm512_cvtepu32_epi64(lo),
+                f._mm512_slli_epi64::<32>(f._mm512_cvtepu32_epi64(hi)),
+            );
+            let i = f._mm512_and_si512(word, box_mask);
+            let u = f._mm512_sub_pd(
+                f._mm512_castsi512_pd(f._mm512_or_si512(f._mm512_srli_epi64::<12>(word), exp_one)),
+                three,
+            );
+            // SAFETY: `i` is masked to at most BOX_MASK, and `ZIG_NORM_X` has entries at
+            // BOX_MASK and BOX_MASK + 1 (asserted at compile time): `X[1..]` read at `i` is
+            // `X[i + 1]`. 8-byte elements (scale 8) of `[f64]`; AVX-512F as above.
+            let (xi, xi1) = unsafe {
+                (
+                    f._mm512_i64gather_pd::<8>(i, ZIG_NORM_X.as_ptr()),
+                    f._mm512_i64gather_pd::<8>(i, ZIG_NORM_X[1..].as_ptr()),
+                )
+            };
+            let x = f._mm512_mul_pd(u, xi);
+            let accept = f._mm512_mask_cmplt_pd_mask(ok & take, f._mm512_abs_pd(x), xi1);
+            // A full batch stores the whole row (the lanes that left the vector path are
+            // written again by `finish_rows`); a partial one must leave the lanes past it.
+            *row = cast(if full {
+                x
+            } else {
+                f._mm512_mask_blend_pd(accept, cast(*row), x)
+            });
+            read = f._mm512_mask_add_epi64(read, take, read, two);
+            let rejected = ok & take & !accept;
+            ti = f._mm512_mask_mov_epi64(ti, rejected, i);
+            tu = f._mm512_mask_mov_pd(tu, rejected, u);
+            tx = f._mm512_mask_mov_pd(tx, rejected, x);
+            tried |= rejected;
+            let left = ok & !accept;
+            from = f._mm512_mask_mov_epi64(from, left, splat(r as u64));
+            left_at = f._mm512_mask_mov_epi64(left_at, left, read);
+            ok = accept;
+        }
+        // Stored as if every lane stayed on the vector path, so that the next call's positions
+        // do not wait for this call's table look-ups (the branch below is rarely taken).
+        lanes.read = cast(read);
+        let failed = live & !ok;
+        if failed != 0 {
+            lanes.read = cast(f._mm512_mask_mov_epi64(left_at, ok, read));
+            let tries = Tries {
+                from: cast(from),
+                i: cast(ti),
+                u: cast(tu),
+                x: cast(tx),
+            };
+            lanes.finish_rows(rows, failed, tried, tries);
+        }
+    }
+}
