@@ -2,20 +2,22 @@
 //! vector pass over its rows: in row `r`, every lane whose next `u64` is two received words
 //! at an even position (the common case: both in one block) gathers them, forms the `u64`,
 //! chooses its box `i`, gathers `X[i]` and `X[i + 1]` and tries the box, all lanes at once.
-//! A lane leaves the pass at its first row that is not the common case or whose try is
-//! rejected; after the pass it draws that row and its remaining rows through the per-lane code
-//! of `lanes.rs` (a rejected try through [`ChaCha8Lanes::standard_normal_slow`] with the same
-//! box, value and try, its position past the `u64`, as the per-lane code leaves it). So each
-//! lane draws the same words in the same order, with the same IEEE operations (one
-//! subtraction, one multiplication, a comparison of magnitudes): every value is the per-lane
-//! one to the bit, which the tests check on every instruction set the CPU has.
+//! A lane whose row is not the common case, or whose try is rejected, draws that row through
+//! the per-lane code of `lanes.rs` at once (a rejected try through
+//! [`ChaCha8Lanes::standard_normal_slow`] with the same box, value and try, its position past
+//! the `u64`, as the per-lane code leaves it), and the pass goes on from the positions it
+//! leaves. So each lane draws the same words in the same order, with the same IEEE operations
+//! (one subtraction, one multiplication, a comparison of magnitudes): every value is the
+//! per-lane one to the bit, which the tests check on every instruction set the CPU has.
 //!
-//! The positions advance as if every try were accepted (those of the lanes that left are put
-//! back after the pass, a branch rarely taken), so a row's words never wait for the previous
-//! row's or call's table look-ups: the gathers' latency (about 30 cycles each) overlaps. What
-//! remains costly is leaving: with the leaving lanes skipped (wrong values, timing only) the
-//! 6 M normals below took 11 ms instead of 15.5 ms (the rejections, 1% of draws, the branch to
-//! them, known only after the look-ups, and the rows drawn per lane after them).
+//! The positions advance as if every try were accepted, and the branch to a row's leaving
+//! lanes (about one row in twenty) is rarely taken, so a row's words need not wait for the
+//! previous row's table look-ups: the gathers' latency (about 30 cycles each) overlaps. The
+//! first version let a lane that left draw the rest of its call per lane, after the pass:
+//! with the leaving lanes skipped (wrong values, timing only) the 6 M normals below took 11 ms
+//! instead of 15.5 ms; resolving them row by row took them to 14.0 ms (`lane_normals`, best of
+//! 7, twice) and W1's batched AVX-512 study from 106-110 ms to 103-105 ms for 4 x 10^6
+//! run-steps (`perf stat`, four alternations).
 //!
 //! # Why `unsafe`
 //! The gathers: pulp 0.22 exposes them only as `unsafe` functions of raw pointers (the rest of
@@ -80,31 +82,26 @@ impl ChaCha8Lanes {
         ((1u16 << self.lanes) - 1) as u8
     }
 
-    /// After the vector pass: each lane of `failed` left it at row `from[lane]`, rejected
-    /// there in box `tries.i[lane]` with `tries.u[lane]`, `tries.x[lane]` if it is in `tried`
-    /// (its position past that `u64`), not tried otherwise (its position at that row's draw);
-    /// it draws that row and the rest per lane.
+    /// The lanes of `bad` in one row of the vector pass: those in `tried` were rejected in
+    /// box `i[lane]` with `u[lane]`, `x[lane]` (their positions past that `u64`), the others
+    /// not tried (at an odd word or short of words, their positions at the row's draw); each
+    /// draws its value per lane, as the per-lane code would.
     #[cold]
     #[inline(never)]
-    fn finish_rows(&mut self, rows: &mut [Lanes], failed: u8, tried: u8, tries: Tries) {
-        for lane in bits(failed) {
-            let from = tries.from[lane] as usize;
-            rows[from][lane] = if tried & (1 << lane) != 0 {
+    fn resolve_row(&mut self, row: &mut Lanes, bad: u8, tried: u8, tries: Tries) {
+        for lane in bits(bad) {
+            row[lane] = if tried & (1 << lane) != 0 {
                 let (i, u, x) = (tries.i[lane] as usize, tries.u[lane], tries.x[lane]);
                 self.standard_normal_slow(lane, i, u, x)
             } else {
                 self.standard_normal(lane)
             };
-            for row in &mut rows[from + 1..] {
-                row[lane] = self.standard_normal(lane);
-            }
         }
     }
 }
 
-/// Where each lane left the vector pass, and its rejected try there.
+/// A row's tries, lane by lane.
 struct Tries {
-    from: [u64; BATCH],
     i: [u64; BATCH],
     u: [f64; BATCH],
     x: [f64; BATCH],
@@ -158,15 +155,7 @@ impl NullaryFnOnce for RowsV4<'_> {
             lanes.refill();
             end = cast(lanes.end);
         }
-        let ring = lanes.ring.as_flattened().as_flattened();
-        // Lanes still on the vector path, those rejected on it, the row each left it at, its
-        // position then and the try it was rejected with. `read` goes on as if every try were
-        // accepted, so that a row's words need not wait for the previous row's table
-        // look-ups; a lane that left keeps the position it left with.
-        let (mut ok, mut tried) = (live, 0u8);
-        let (mut from, mut left_at, mut ti) = (splat(0), read, splat(0));
-        let (mut tu, mut tx) = (f._mm512_set1_pd(0.0), f._mm512_set1_pd(0.0));
-        for (r, row) in rows.iter_mut().enumerate() {
+        for row in rows.iter_mut() {
             // Two words received, at an even word (both in one block).
             let take = live
                 & f._mm512_testn_epi64_mask(read, one)
@@ -185,6 +174,7 @@ impl NullaryFnOnce for RowsV4<'_> {
             );
             let lo_at = f._mm512_and_si512(at, index_mask);
             let hi_at = f._mm512_and_si512(f._mm512_add_epi64(at, gen_words), index_mask);
+            let ring = lanes.ring.as_flattened().as_flattened();
             // SAFETY: every index is masked to below RING_WORDS, the length of `ring`
             // (asserted at compile time to be a power of two), read as 4-byte elements (scale
             // 4) of a `[u32]`; AVX-512F is present since `simd` is a V4 token, which exists
@@ -214,38 +204,32 @@ impl NullaryFnOnce for RowsV4<'_> {
                 )
             };
             let x = f._mm512_mul_pd(u, xi);
-            let accept = f._mm512_mask_cmplt_pd_mask(ok & take, f._mm512_abs_pd(x), xi1);
-            // A full batch stores the whole row (the lanes that left the vector path are
-            // written again by `finish_rows`); a partial one must leave the lanes past it.
+            let accept = f._mm512_mask_cmplt_pd_mask(take, f._mm512_abs_pd(x), xi1);
+            // A full batch stores the whole row (the lanes that were not accepted are written
+            // again below); a partial one must leave the lanes past it.
             *row = cast(if full {
                 x
             } else {
                 f._mm512_mask_blend_pd(accept, cast(*row), x)
             });
             read = f._mm512_mask_add_epi64(read, take, read, two);
-            let rejected = ok & take & !accept;
-            ti = f._mm512_mask_mov_epi64(ti, rejected, i);
-            tu = f._mm512_mask_mov_pd(tu, rejected, u);
-            tx = f._mm512_mask_mov_pd(tx, rejected, x);
-            tried |= rejected;
-            let left = ok & !accept;
-            from = f._mm512_mask_mov_epi64(from, left, splat(r as u64));
-            left_at = f._mm512_mask_mov_epi64(left_at, left, read);
-            ok = accept;
+            // The lanes not taken or rejected (about one row in twenty): each draws this row
+            // per lane from its position (past the rejected `u64`, or at the row's draw), and
+            // the pass goes on from where they leave the positions. The branch is rarely
+            // taken, so the next row's words need not wait for this row's table look-ups.
+            let bad = live & !accept;
+            if bad != 0 {
+                lanes.read = cast(read);
+                let tries = Tries {
+                    i: cast(i),
+                    u: cast(u),
+                    x: cast(x),
+                };
+                lanes.resolve_row(row, bad, take & !accept, tries);
+                read = cast(lanes.read);
+                end = cast(lanes.end);
+            }
         }
-        // Stored as if every lane stayed on the vector path, so that the next call's positions
-        // do not wait for this call's table look-ups (the branch below is rarely taken).
         lanes.read = cast(read);
-        let failed = live & !ok;
-        if failed != 0 {
-            lanes.read = cast(f._mm512_mask_mov_epi64(left_at, ok, read));
-            let tries = Tries {
-                from: cast(from),
-                i: cast(ti),
-                u: cast(tu),
-                x: cast(tx),
-            };
-            lanes.finish_rows(rows, failed, tried, tries);
-        }
     }
 }
