@@ -284,6 +284,34 @@ pub(super) fn norm_squared<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -
     s
 }
 
+/// The health test's four independent sums, begun with the measurement's health `hz`, the
+/// NIS and the posterior mean (four sums keep the chain short: 0 + 0 is 0 and NaN stays NaN
+/// in any order).
+#[inline(always)]
+fn mean_health<S: Simd, const N: usize>(
+    simd: S,
+    hz: S::f64s,
+    nis: S::f64s,
+    x_post: &[S::f64s; N],
+) -> [S::f64s; 4] {
+    let zero = simd.splat_f64s(0.0);
+    let mut sums = [hz, zero, zero, zero];
+    sums[1] = health(simd, sums[1], nis);
+    for i in 0..N {
+        sums[(2 + i) % 4] = health(simd, sums[(2 + i) % 4], x_post[i]);
+    }
+    sums
+}
+
+/// The health sums' total: 0 where every entry tested was finite, NaN elsewhere.
+#[inline(always)]
+fn total<S: Simd>(simd: S, sums: [S::f64s; 4]) -> S::f64s {
+    simd.add_f64s(
+        simd.add_f64s(sums[0], sums[1]),
+        simd.add_f64s(sums[2], sums[3]),
+    )
+}
+
 /// `sum v * 0`: 0 if every entry is finite, NaN otherwise.
 #[inline(always)]
 fn health<S: Simd>(simd: S, acc: S::f64s, v: S::f64s) -> S::f64s {
@@ -488,11 +516,7 @@ where
             // symmetric (`symmetrize` wrote one value to both triangles), so its upper triangle
             // says all; four independent sums keep the test short (0 + 0 is 0 and NaN stays
             // NaN in any order).
-            let mut sums = [hz, zero, zero, zero];
-            sums[1] = health(simd, sums[1], nis);
-            for i in 0..N {
-                sums[(2 + i) % 4] = health(simd, sums[(2 + i) % 4], x_post[i]);
-            }
+            let mut sums = mean_health(simd, hz, nis, &x_post);
             let mut t = 0;
             for i in 0..N {
                 for j in i..N {
@@ -500,10 +524,7 @@ where
                     t += 1;
                 }
             }
-            let ok = simd.add_f64s(
-                simd.add_f64s(sums[0], sums[1]),
-                simd.add_f64s(sums[2], sums[3]),
-            );
+            let ok = total(simd, sums);
             let keep = simd.equal_f64s(ok, zero);
             // The common case, every lane healthy, stores the posterior without a selection
             // (and without waiting for the health test: the branch is predicted).
@@ -842,15 +863,7 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
             let nis = norm_squared(simd, &forward(simd, &ls, &nu));
             // The kernel's health test without P+'s entries, which the schedule holds only
             // finite: 0 or NaN as the kernel's.
-            let mut sums = [hz, zero, zero, zero];
-            sums[1] = health(simd, sums[1], nis);
-            for i in 0..N {
-                sums[(2 + i) % 4] = health(simd, sums[(2 + i) % 4], x_post[i]);
-            }
-            let ok = simd.add_f64s(
-                simd.add_f64s(sums[0], sums[1]),
-                simd.add_f64s(sums[2], sums[3]),
-            );
+            let ok = total(simd, mean_health(simd, hz, nis, &x_post));
             let keep = simd.equal_f64s(ok, zero);
             for i in 0..N {
                 store::<S>(&mut xs[i], c, simd.select_f64s(keep, x_post[i], x[i]));
