@@ -18,9 +18,10 @@
 //!
 //! # Cost
 //! Measured on one shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 million
-//! normals, calls of 2 and 4 rows, on one thread, best of 7, three runs): lane-wise 15.5 ms
-//! (AVX-512) and 22.7 ms (AVX2) against 23.8 ms for [`StandardNormal`] on the runs' own
-//! generators; 6 million `u64` 12.0 ms and 15.2 ms against 14.4 ms. On AVX-512 the ziggurat's
+//! normals, calls of 2 and 4 rows, on one thread, best of 7): lane-wise 14.0-14.3 ms
+//! (AVX-512) and 22.4-22.7 ms (AVX2) against 23.8-23.9 ms for [`StandardNormal`] on the runs'
+//! own generators; 6 million `u64` 12.0-12.3 ms and 15.2-15.6 ms against 13.9-14.4 ms. On
+//! AVX-512 the ziggurat's
 //! fast path runs across the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe`
 //! code: pulp offers gathers only as `unsafe`; 18.7 ms lane by lane before it); on AVX2 the
 //! same with two halves measured slower than lane by lane (26.2 ms against 23.3 ms), so AVX2
@@ -254,8 +255,9 @@ impl ChaCha8Lanes {
     }
 
     /// The generators of a batch stepped on `isa`, drawing the way that measured faster there:
-    /// lane-wise on AVX-512 (6 M normals on one thread: 15.5 ms against 23.8 ms through the
-    /// runs' own generators; W1's batched study 0.053-0.056 s against 0.058 s lane by lane),
+    /// lane-wise on AVX-512 (6 M normals on one thread: 14.0-14.3 ms against 23.8-23.9 ms
+    /// through the runs' own generators; W1's batched study, before its covariance schedule,
+    /// 0.053-0.056 s against 0.058 s lane by lane),
     /// through the runs' own generators ([`Isa::Scalar`]) on every other instruction set (on
     /// AVX2, lane-wise draws alone took 22.7 ms, but W1's batched AVX2 study took the same
     /// 0.067 s either way, its draws 0.023 s lane-wise against 0.024 s). The numbers drawn are
