@@ -2,7 +2,8 @@
 //! [`KfBatch`] alone, for profilers: the kernel's cost per run-step without the truth
 //! simulation or the study's bookkeeping (callgrind counts its instructions repeatably).
 //!
-//! `cargo run --release -p kalibra-filters --example kf_batch_w1 -- [avx512|avx2|scalar] [batches] [steps]`
+//! `cargo run --release -p kalibra-filters --example kf_batch_w1 -- [avx512|avx2|scalar] [batches] [steps] [scheduled]`
+//! (`scheduled`: the batches follow one [`KfSchedule`] of the covariances, as W1's study does)
 //!
 //! The measurements are a cheap deterministic sequence around a zero truth: the kernel's
 //! instruction count does not depend on the values, only on the model's sizes.
@@ -10,7 +11,9 @@
 // An example reports what it ran on standard output.
 #![allow(clippy::print_stdout)]
 
-use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch};
+use std::sync::Arc;
+
+use kalibra_filters::batch::{BATCH, BatchModel, Isa, KfBatch, KfSchedule};
 use nalgebra::{SMatrix, SVector};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -18,6 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let isa: Isa = args.next().unwrap_or_default().parse()?;
     let batches: usize = args.next().map_or(Ok(125), |a| a.parse())?;
     let steps: usize = args.next().map_or(Ok(1000), |a| a.parse())?;
+    let scheduled = args.next().as_deref() == Some("scheduled");
     #[rustfmt::skip]
     let f = SMatrix::<f64, 4, 4>::new(
         1.0, 0.0, 1.0, 0.0,
@@ -46,9 +50,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .wrapping_add(1442695040888963407);
         (state >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0
     };
+    let schedule = Arc::new(KfSchedule::new(isa, model.clone(), p0, steps)?);
     let mut total = 0.0;
     for _ in 0..batches {
-        let mut kf = KfBatch::new(isa, model.clone(), m0, p0)?;
+        let mut kf = if scheduled {
+            KfBatch::scheduled(schedule.clone(), m0)?
+        } else {
+            KfBatch::new(isa, model.clone(), m0, p0)?
+        };
         for k in 0..steps {
             let mut z = [[0.0; BATCH]; 2];
             for row in &mut z {

@@ -584,7 +584,18 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
     ) -> Result<Self, FilterError> {
         let isa = isa.checked()?;
         let (x, p) = initial_lanes(&x0, p0)?;
-        Ok(Self {
+        Ok(Self::at_start(isa, model, x, p, None))
+    }
+
+    /// A batch at step 0 with lanes `(x, P)`, already checked.
+    fn at_start(
+        isa: Isa,
+        model: BatchModel<N, M>,
+        x: [Lanes; N],
+        p: [[Lanes; N]; N],
+        schedule: Option<Arc<KfSchedule<N, M>>>,
+    ) -> Self {
+        Self {
             isa,
             model,
             k: 0,
@@ -592,9 +603,9 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
             p,
             gain: [[[0.0; BATCH]; M]; N],
             out: BatchStep::new(),
-            schedule: None,
+            schedule,
             at: 0,
-        })
+        }
     }
 
     /// [`BATCH`] filters at step 0 from the estimate `(x0, P0)` of `schedule` (its model, prior
@@ -613,17 +624,15 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         x0: SVector<f64, N>,
     ) -> Result<Self, FilterError> {
         check_finite(&x0, "initial mean").map_err(FilterError::Initial)?;
-        Ok(Self {
-            isa: schedule.isa,
-            model: schedule.model.clone(),
-            k: 0,
-            x: std::array::from_fn(|i| [x0[i]; BATCH]),
-            p: std::array::from_fn(|i| std::array::from_fn(|j| [schedule.p0[i][j]; BATCH])),
-            gain: [[[0.0; BATCH]; M]; N],
-            out: BatchStep::new(),
-            schedule: Some(schedule),
-            at: 0,
-        })
+        let x = std::array::from_fn(|i| [x0[i]; BATCH]);
+        let p = std::array::from_fn(|i| std::array::from_fn(|j| [schedule.p0[i][j]; BATCH]));
+        Ok(Self::at_start(
+            schedule.isa,
+            schedule.model.clone(),
+            x,
+            p,
+            Some(schedule),
+        ))
     }
 
     /// Whether the batch still follows a schedule ([`KfBatch::scheduled`]).
@@ -678,12 +687,10 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
         // Checked before the batch leaves its schedule, so that a refused estimate changes
         // nothing.
-        let p = kalibra_linalg::PsdMatrix::named(p, "initial covariance")
-            .map_err(FilterError::Initial)?
-            .matrix()
-            .clone_owned();
+        let p = initial_cov(p)?;
         self.leave_schedule([false; BATCH]);
-        set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
+        write_lane(&mut self.x, &mut self.p, lane, &x, &p);
+        Ok(())
     }
 
     /// The instruction set the batch runs on.
@@ -862,8 +869,7 @@ impl<const N: usize, const M: usize> KfSchedule<N, M> {
         updates: usize,
     ) -> Result<Self, FilterError> {
         let isa = isa.checked()?;
-        let (_, p) = initial_lanes(&SVector::zeros(), p0)?;
-        let p0: [[f64; N]; N] = std::array::from_fn(|i| std::array::from_fn(|j| p[i][j][0]));
+        let p0 = rows(&initial_cov(p0)?);
         let mut steps = Vec::new();
         steps
             .try_reserve_exact(updates)
@@ -910,18 +916,23 @@ impl<const N: usize, const M: usize> KfSchedule<N, M> {
     }
 }
 
+/// An initial covariance checked as the scalar filters check one, and symmetrised as they keep
+/// it.
+fn initial_cov<const N: usize>(p: SMatrix<f64, N, N>) -> Result<SMatrix<f64, N, N>, FilterError> {
+    Ok(kalibra_linalg::PsdMatrix::named(p, "initial covariance")
+        .map_err(FilterError::Initial)?
+        .matrix()
+        .clone_owned())
+}
+
 /// The lanes of a batch that all start from `(x0, P0)`, checked as the scalar filters check an
 /// initial estimate (and `P0` symmetrised as they keep it).
 fn initial_lanes<const N: usize>(
     x0: &SVector<f64, N>,
     p0: SMatrix<f64, N, N>,
 ) -> Result<([Lanes; N], [[Lanes; N]; N]), FilterError> {
-    let init = FilterError::Initial;
-    check_finite(x0, "initial mean").map_err(init)?;
-    let p0 = kalibra_linalg::PsdMatrix::named(p0, "initial covariance")
-        .map_err(init)?
-        .matrix()
-        .clone_owned();
+    check_finite(x0, "initial mean").map_err(FilterError::Initial)?;
+    let p0 = initial_cov(p0)?;
     Ok((
         std::array::from_fn(|i| [x0[i]; BATCH]),
         std::array::from_fn(|i| std::array::from_fn(|j| [p0[(i, j)]; BATCH])),
@@ -937,15 +948,22 @@ fn set_lane_estimate<const N: usize>(
     x: &SVector<f64, N>,
     p: SMatrix<f64, N, N>,
 ) -> Result<(), FilterError> {
-    let p = kalibra_linalg::PsdMatrix::named(p, "initial covariance")
-        .map_err(FilterError::Initial)?
-        .matrix()
-        .clone_owned();
+    write_lane(xs, ps, lane, x, &initial_cov(p)?);
+    Ok(())
+}
+
+/// Writes the estimate `(x, P)`, both already checked, into lane `lane`.
+fn write_lane<const N: usize>(
+    xs: &mut [Lanes; N],
+    ps: &mut [[Lanes; N]; N],
+    lane: usize,
+    x: &SVector<f64, N>,
+    p: &SMatrix<f64, N, N>,
+) {
     for i in 0..N {
         xs[i][lane] = x[i];
         for j in 0..N {
             ps[i][j][lane] = p[(i, j)];
         }
     }
-    Ok(())
 }
