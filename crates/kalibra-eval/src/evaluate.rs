@@ -26,7 +26,8 @@ const BATCH_CELLS: usize = 4096;
 const STRIP_STEPS: usize = 32;
 
 /// Feeds the cells of `runs` runs at the steps `block` to `evaluator` in strips of
-/// `strip_steps` steps ([`STRIP_STEPS`]; the whole block is one pass run after run): each strip run after run, the strips in step order. Each step still
+/// `strip_steps` steps ([`STRIP_STEPS`]; the whole block is one pass run after run): each
+/// strip run after run, the strips in step order. Each step still
 /// takes the runs in run order and each run its steps in step order, so every sum is the one
 /// a pass run after run gives, to the bit. Why strips: NCI keeps each step's errors in a
 /// vector of its own ([`kalibra_metrics::Credibility`]), so a run's pass over 128 steps stored
