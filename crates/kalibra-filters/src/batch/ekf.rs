@@ -198,7 +198,7 @@ where
         x0: SVector<f64, N>,
         p0: SMatrix<f64, N, N>,
     ) -> Result<Self, FilterError> {
-        let isa = isa.checked()?;
+        let isa = super::checked_isa(isa)?;
         let (x, p) = super::initial_lanes(&x0, p0)?;
         Ok(Self {
             isa,

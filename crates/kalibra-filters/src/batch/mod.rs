@@ -63,7 +63,6 @@
 //! # Ok::<(), kalibra_filters::FilterError>(())
 //! ```
 
-use std::str::FromStr;
 use std::sync::Arc;
 
 mod ekf;
@@ -76,186 +75,16 @@ use kernel::{BuildSchedule, Kernel, ScheduleStep, Scheduled};
 pub use ukf::UkfBatch;
 
 use kalibra_linalg::{Definiteness, SMatrix, SVector, check_covariance, check_finite};
-use pulp::{Simd, WithSimd};
 
 use crate::FilterError;
 
-/// Runs per batch ([`kalibra_models::lanes::BATCH`]): the lanes of one AVX-512 vector of f64.
-/// Narrower instruction sets step a batch as several vectors, so the grouping of runs (and so
-/// every result) does not depend on the instruction set.
-pub use kalibra_models::lanes::BATCH;
-/// One f64 per run of a batch.
-pub use kalibra_models::lanes::Lanes;
+/// The SIMD lane vocabulary, defined in [`kalibra_linalg::simd`]: the runs per batch, one
+/// f64 per run, and the instruction set a batch runs on.
+pub use kalibra_linalg::simd::{BATCH, Isa, Lanes};
 
-/// An instruction set a batched kernel runs on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[non_exhaustive]
-pub enum Isa {
-    /// x86-64 AVX-512 (pulp's `V4`): 8 f64 lanes per vector, fused multiply-add.
-    Avx512,
-    /// x86-64 AVX2 with FMA (pulp's `V3`): 4 lanes per vector, fused multiply-add.
-    Avx2,
-    /// aarch64 NEON: 2 lanes per vector, fused multiply-add.
-    Neon,
-    /// No SIMD: one lane at a time, separate multiply and add like the scalar filters.
-    Scalar,
-}
-
-impl Isa {
-    /// Every instruction set, widest first.
-    pub const ALL: [Isa; 4] = [Isa::Avx512, Isa::Avx2, Isa::Neon, Isa::Scalar];
-
-    /// The widest instruction set this CPU runs (at run time, not the build's target).
-    pub fn detect() -> Isa {
-        Self::ALL
-            .into_iter()
-            .find(|isa| isa.is_available())
-            .unwrap_or(Isa::Scalar)
-    }
-
-    /// Whether this CPU runs `self`.
-    pub fn is_available(self) -> bool {
-        match self {
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => pulp::x86::V4::try_new().is_some(),
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => pulp::x86::V3::try_new().is_some(),
-            #[cfg(target_arch = "aarch64")]
-            Isa::Neon => pulp::aarch64::Neon::try_new().is_some(),
-            Isa::Scalar => true,
-            #[allow(unreachable_patterns)] // Every arm above exists on some target.
-            _ => false,
-        }
-    }
-
-    /// The instruction sets this CPU runs, widest first (the scalar fallback always).
-    pub fn available() -> Vec<Isa> {
-        Self::ALL.into_iter().filter(|i| i.is_available()).collect()
-    }
-
-    /// f64 lanes per vector.
-    pub fn lanes(self) -> usize {
-        match self {
-            Isa::Avx512 => 8,
-            Isa::Avx2 => 4,
-            Isa::Neon => 2,
-            Isa::Scalar => 1,
-        }
-    }
-
-    /// The lowercase name [`Isa::from_str`](std::str::FromStr) parses.
-    pub fn name(self) -> &'static str {
-        match self {
-            Isa::Avx512 => "avx512",
-            Isa::Avx2 => "avx2",
-            Isa::Neon => "neon",
-            Isa::Scalar => "scalar",
-        }
-    }
-
-    /// `self` if this CPU runs it.
-    ///
-    /// # Errors
-    /// [`FilterError::Unsupported`] if it does not.
-    pub fn checked(self) -> Result<Isa, FilterError> {
-        if self.is_available() {
-            Ok(self)
-        } else {
-            Err(FilterError::Unsupported {
-                what: match self {
-                    Isa::Avx512 => "instruction set avx512 on this CPU",
-                    Isa::Avx2 => "instruction set avx2 on this CPU",
-                    Isa::Neon => "instruction set neon on this CPU",
-                    Isa::Scalar => "the scalar fallback",
-                },
-            })
-        }
-    }
-
-    /// Runs `op` with this instruction set's pulp token (the scalar fallback if the CPU does
-    /// not have it; constructors check with [`Isa::checked`] first). Studies use it to run
-    /// lane-wise model code (truth simulation, Jacobians at the estimates) on the batch's
-    /// instruction set, so that every lane-wise result depends on the `Isa` alone.
-    ///
-    /// ```
-    /// use kalibra_filters::batch::{BATCH, Isa};
-    /// use pulp::{Simd, WithSimd};
-    ///
-    /// struct Double<'a>(&'a mut [f64; BATCH]);
-    /// impl WithSimd for Double<'_> {
-    ///     type Output = ();
-    ///     #[inline(always)]
-    ///     fn with_simd<S: Simd>(self, simd: S) {
-    ///         let (chunks, _) = S::as_mut_simd_f64s(self.0);
-    ///         for c in chunks {
-    ///             *c = simd.add_f64s(*c, *c);
-    ///         }
-    ///     }
-    /// }
-    /// let mut x = [1.5; BATCH];
-    /// Isa::detect().dispatch(Double(&mut x));
-    /// assert_eq!(x, [3.0; BATCH]);
-    /// ```
-    #[inline]
-    pub fn dispatch<Op: WithSimd>(self, op: Op) -> Op::Output {
-        match self {
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => {
-                if let Some(simd) = pulp::x86::V4::try_new() {
-                    return Simd::vectorize(simd, op);
-                }
-            }
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => {
-                if let Some(simd) = pulp::x86::V3::try_new() {
-                    return Simd::vectorize(simd, op);
-                }
-            }
-            #[cfg(target_arch = "aarch64")]
-            Isa::Neon => {
-                if let Some(simd) = pulp::aarch64::Neon::try_new() {
-                    return Simd::vectorize(simd, op);
-                }
-            }
-            _ => {}
-        }
-        Simd::vectorize(pulp::Scalar::new(), op)
-    }
-}
-
-impl std::fmt::Display for Isa {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Isa {
-    type Err = FilterError;
-
-    /// Parses `avx512`, `avx2`, `neon` or `scalar` (any case, surrounding blanks ignored), or
-    /// `auto` (or nothing) for [`Isa::detect`]. The result is checked against the CPU.
-    ///
-    /// ```
-    /// use kalibra_filters::batch::Isa;
-    /// assert_eq!("scalar".parse::<Isa>()?, Isa::Scalar);
-    /// assert!("sse9".parse::<Isa>().is_err());
-    /// # Ok::<(), kalibra_filters::FilterError>(())
-    /// ```
-    fn from_str(text: &str) -> Result<Self, Self::Err> {
-        let isa = match text.trim().to_ascii_lowercase().as_str() {
-            "" | "auto" => return Ok(Isa::detect()),
-            "avx512" | "avx-512" => Isa::Avx512,
-            "avx2" => Isa::Avx2,
-            "neon" => Isa::Neon,
-            "scalar" => Isa::Scalar,
-            _ => {
-                return Err(FilterError::UnknownIsa {
-                    name: text.to_owned(),
-                });
-            }
-        };
-        isa.checked()
-    }
+/// `isa` if this CPU runs it, with the filters' error ([`FilterError::Unsupported`]).
+fn checked_isa(isa: Isa) -> Result<Isa, FilterError> {
+    isa.checked().map_err(|e| FilterError::at(0, e))
 }
 
 /// The shared, time-invariant linear model of a batch: `x_{k+1} = F x_k + w_k`, `w ~ N(0, Q)`,
@@ -582,7 +411,7 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         x0: SVector<f64, N>,
         p0: SMatrix<f64, N, N>,
     ) -> Result<Self, FilterError> {
-        let isa = isa.checked()?;
+        let isa = checked_isa(isa)?;
         let (x, p) = initial_lanes(&x0, p0)?;
         Ok(Self::at_start(isa, model, x, p, None))
     }
@@ -868,7 +697,7 @@ impl<const N: usize, const M: usize> KfSchedule<N, M> {
         p0: SMatrix<f64, N, N>,
         updates: usize,
     ) -> Result<Self, FilterError> {
-        let isa = isa.checked()?;
+        let isa = checked_isa(isa)?;
         let p0 = rows(&initial_cov(p0)?);
         let mut steps = Vec::new();
         steps

@@ -6,11 +6,12 @@
 // hide the algebra and add closures, which must not leave the dispatched function.
 #![allow(clippy::needless_range_loop)]
 
+use kalibra_linalg::simd::{Divide, LaneCholesky};
 use kalibra_linalg::{LinalgError, SMatrix, SVector, SqrtMethod, check_finite, sigma_sqrt};
 use kalibra_models::lanes::{LaneDynamics, LaneSigmaMeasurement};
 use pulp::{Simd, WithSimd};
 
-use super::kernel::{add, cholesky, forward, load, mul, mul_t, norm_squared, store, symmetrize};
+use super::kernel::{Factor, add, load, mul, mul_t, norm_squared, store, symmetrize};
 use super::{BATCH, BatchStep, Isa, Lanes};
 use crate::{FilterError, KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, UkfPrediction};
 
@@ -100,71 +101,12 @@ impl<const N: usize, const M: usize> Candidate<N, M> {
     }
 }
 
-// The factorisations below divide by each pivot, as nalgebra's Cholesky and triangular solves
-// do (the batch kernel multiplies by reciprocals): with the order of operations of the scalar
-// UKF, a lane then reproduces the scalar filter's numbers to the last bit where no fused
-// multiply-add intervenes, which keeps an adaptive kappa's choice the scalar's even between
-// close candidates.
-
-/// The lower Cholesky factor of a symmetric `a` in nalgebra's order of operations (pivots
-/// `a_jj - sum_k l_jk^2`, entries divided by the pivot). NaN or infinite entries, never a panic,
-/// where `a` is not positive definite.
-#[inline(always)]
-fn cholesky_div<S: Simd, const D: usize>(simd: S, a: &[[S::f64s; D]; D]) -> [[S::f64s; D]; D] {
-    let mut l = [[simd.splat_f64s(0.0); D]; D];
-    for j in 0..D {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d = simd.sub_f64s(d, simd.mul_f64s(l[j][k], l[j][k]));
-        }
-        let ljj = simd.sqrt_f64s(d);
-        l[j][j] = ljj;
-        for i in (j + 1)..D {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
-            }
-            l[i][j] = simd.div_f64s(s, ljj);
-        }
-    }
-    l
-}
-
-/// Solves `L w = b` by forward substitution, dividing by the pivots.
-#[inline(always)]
-fn forward_div<S: Simd, const D: usize>(
-    simd: S,
-    l: &[[S::f64s; D]; D],
-    b: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut w = *b;
-    for i in 0..D {
-        let mut s = w[i];
-        for k in 0..i {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
-        }
-        w[i] = simd.div_f64s(s, l[i][i]);
-    }
-    w
-}
-
-/// Solves `L^T y = w` by backward substitution, dividing by the pivots.
-#[inline(always)]
-fn backward_div<S: Simd, const D: usize>(
-    simd: S,
-    l: &[[S::f64s; D]; D],
-    w: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut y = *w;
-    for i in (0..D).rev() {
-        let mut s = y[i];
-        for k in (i + 1)..D {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
-        }
-        y[i] = simd.div_f64s(s, l[i][i]);
-    }
-    y
-}
+/// The factor the update solves with: division by each pivot ([`Divide`]), as nalgebra's
+/// Cholesky and triangular solves divide (the batch kernel multiplies by reciprocals): with
+/// the order of operations of the scalar UKF, a lane then reproduces the scalar filter's
+/// numbers to the last bit where no fused multiply-add intervenes, which keeps an adaptive
+/// kappa's choice the scalar's even between close candidates (`tests/batch_ukf.rs`).
+type Chol<S, const D: usize> = LaneCholesky<S, D, Divide>;
 
 /// `sum w_i^2` in index order, without fused multiply-adds (nalgebra's `norm_squared`).
 #[inline(always)]
@@ -275,7 +217,7 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
         let chunks = BATCH / S::F64_LANES;
         for c in 0..chunks {
             let p = load_mat(simd, &st.p, c);
-            store_mat::<S, N, N>(&mut st.l, c, &cholesky_div(simd, &p));
+            store_mat::<S, N, N>(&mut st.l, c, &Chol::new(simd, &p).l);
         }
         for lane in 0..BATCH {
             let finite = (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
@@ -404,7 +346,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
         let zero = simd.splat_f64s(0.0);
         for c in 0..chunks {
             let p = load_mat(simd, &st.p, c);
-            let l = cholesky_div(simd, &p);
+            let l = Chol::new(simd, &p).l;
             let mut health = zero;
             for i in 0..N {
                 health = simd.mul_add_e_f64s(load::<S>(&st.x[i], c), zero, health);
@@ -471,7 +413,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             // R's factor, for e^T R^-1 e (the scalar's `Covariance::from_symmetric(R)`).
             for c in 0..chunks {
                 let r = load_mat(simd, &st.r, c);
-                store_mat::<S, M, M>(&mut st.lr, c, &cholesky_div(simd, &r));
+                store_mat::<S, M, M>(&mut st.lr, c, &Chol::new(simd, &r).l);
             }
             for lane in 0..BATCH {
                 st.r_ok[lane] = (0..M).all(|i| {
@@ -620,11 +562,11 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         let pz = load_mat(simd, &st.cand.pz, c);
         let pxz = load_mat(simd, &st.cand.pxz, c);
         let nu = load_vec(simd, &st.cand.nu, c);
-        let ls = cholesky_div(simd, &pz);
+        let ls = Chol::new(simd, &pz);
         // K = (Pz^-1 Pxz^T)^T, a row of Pxz at a time (nalgebra's `solve` of the transpose).
         let mut gain = [[zero; M]; N];
         for i in 0..N {
-            gain[i] = backward_div(simd, &ls, &forward_div(simd, &ls, &pxz[i]));
+            gain[i] = ls.solve(simd, &pxz[i]);
         }
         // K nu, in nalgebra's column order without fused multiply-adds.
         let mut knu = [zero; N];
@@ -661,10 +603,10 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
             }
         }
         symmetrize(simd, &mut cov);
-        let nis = sum_squares(simd, &forward_div(simd, &ls, &nu));
+        let nis = sum_squares(simd, &ls.solve_lower(simd, &nu));
         let mut diag = [zero; M];
         for a in 0..M {
-            diag[a] = ls[a][a];
+            diag[a] = ls.l[a][a];
         }
         store_vec::<S, M>(&mut st.cand.pz_diag, c, &diag);
         store_mat::<S, N, M>(&mut st.cand.gain, c, &gain);
@@ -673,8 +615,8 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         store::<S>(&mut st.cand.nis, c, nis);
         if posterior {
             // nu^T U nu = |L^-1 K nu|^2: the prior's density at x+.
-            let l = load_mat(simd, &st.l, c);
-            let prior = sum_squares(simd, &forward_div(simd, &l, &knu));
+            let l = Chol::from_lower(simd, load_mat(simd, &st.l, c));
+            let prior = sum_squares(simd, &l.solve_lower(simd, &knu));
             store::<S>(&mut st.cand.prior_term, c, prior);
         }
     }
@@ -685,9 +627,9 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         let mut e = [[0.0; BATCH]; M];
         h.residual_lanes(simd, z, &zc, &mut e);
         for c in 0..chunks {
-            let lr = load_mat(simd, &st.lr, c);
+            let lr = Chol::from_lower(simd, load_mat(simd, &st.lr, c));
             let ev = load_vec(simd, &e, c);
-            let q = sum_squares(simd, &forward_div(simd, &lr, &ev));
+            let q = sum_squares(simd, &lr.solve_lower(simd, &ev));
             store::<S>(&mut st.cand.meas_term, c, q);
         }
     }
@@ -886,8 +828,8 @@ fn commit<S: Simd, const N: usize, const M: usize>(
         for i in 0..N {
             e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x[i]);
         }
-        let lp = cholesky(simd, &p);
-        let nees = norm_squared(simd, &forward(simd, &lp, &e));
+        let lp = Factor::new(simd, &p);
+        let nees = norm_squared(simd, &lp.solve_lower(simd, &e));
         store::<S>(&mut st.out.nees, c, nees);
         store_vec::<S, N>(&mut st.out.error, c, &e);
     }
@@ -982,7 +924,7 @@ where
         set: SigmaSet,
         prediction: UkfPrediction,
     ) -> Result<Self, FilterError> {
-        let isa = isa.checked()?;
+        let isa = super::checked_isa(isa)?;
         let w = set.weights(N)?;
         let (x, p) = super::initial_lanes(&x0, p0)?;
         let zn = [[[0.0; BATCH]; N]; N];
