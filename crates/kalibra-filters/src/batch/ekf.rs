@@ -199,7 +199,7 @@ where
         p0: SMatrix<f64, N, N>,
     ) -> Result<Self, FilterError> {
         let isa = super::checked_isa(isa)?;
-        let (x, p) = super::initial_lanes(&x0, p0)?;
+        let (x, p) = super::lanes::initial_lanes(&x0, p0)?;
         Ok(Self {
             isa,
             dynamics,
@@ -233,7 +233,7 @@ where
         p: SMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
         check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
-        super::set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
+        super::lanes::set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
     }
 
     /// The instruction set the batch runs on.

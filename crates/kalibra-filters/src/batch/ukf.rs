@@ -700,9 +700,7 @@ fn choose<const N: usize, const M: usize>(
         let nis = c.nis[lane];
         // A non-finite term makes the value non-finite, so the scalar's distinction between
         // an infinite and a NaN quadratic form cannot change the choice.
-        let value = if criterion == KappaCriterion::MaximumLikelihood {
-            log_det + nis
-        } else {
+        let value = criterion.value(log_det, nis, || {
             let prior = if st.cholesky_prior[lane] {
                 c.prior_term[lane]
             } else {
@@ -713,13 +711,10 @@ fn choose<const N: usize, const M: usize>(
             } else {
                 f64::NAN
             };
-            match criterion {
-                KappaCriterion::PureMap => prior + meas,
-                _ => prior + meas - nis - 0.5 * log_det,
-            }
-        };
-        // Strictly smaller: ties keep the smaller kappa; NaN never wins.
-        if value.is_finite() && (!st.has_best[lane] || value < st.best_value[lane]) {
+            (prior, meas)
+        });
+        let best = st.has_best[lane].then_some(st.best_value[lane]);
+        if KappaCriterion::improves(value, best) {
             st.take[lane] = 1.0;
             st.best_value[lane] = value;
             st.best_kappa[lane] = kappa;
@@ -926,7 +921,7 @@ where
     ) -> Result<Self, FilterError> {
         let isa = super::checked_isa(isa)?;
         let w = set.weights(N)?;
-        let (x, p) = super::initial_lanes(&x0, p0)?;
+        let (x, p) = super::lanes::initial_lanes(&x0, p0)?;
         let zn = [[[0.0; BATCH]; N]; N];
         let state = State {
             k: 0,
@@ -1010,7 +1005,7 @@ where
         p: SMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
         check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
-        super::set_lane_estimate(&mut self.state.x, &mut self.state.p, lane, &x, p)
+        super::lanes::set_lane_estimate(&mut self.state.x, &mut self.state.p, lane, &x, p)
     }
 
     /// The instruction set the batch runs on.
