@@ -5,23 +5,19 @@ use std::sync::Arc;
 use kalibra_linalg::{SMatrix, SVector, check_finite};
 
 use super::kernel::{Kernel, ScheduleStep, Scheduled};
-use super::lanes::{initial_cov, initial_lanes, write_lane};
-use super::{BATCH, BatchModel, BatchStep, Isa, KfSchedule, Lanes, checked_isa};
+use super::lanes::{LaneState, checked_estimate, lane_accessors};
+use super::{BATCH, BatchModel, BatchStep, Isa, KfSchedule, Lanes};
 use crate::FilterError;
 
 /// [`BATCH`] Kalman filters on one [`BatchModel`], stepped together (see the
 /// [module docs](self)).
 #[derive(Clone, Debug)]
 pub struct KfBatch<const N: usize, const M: usize> {
-    isa: Isa,
     model: BatchModel<N, M>,
-    k: usize,
-    x: [Lanes; N],
-    // While the batch follows a schedule (`schedule` is `Some`), `p` and `gain` are not
-    // written: every lane's are the schedule's after its first `at` updates
+    // While the batch follows a schedule (`schedule` is `Some`), the lanes' `p` and `gain` are
+    // not written: every lane's are the schedule's after its first `at` updates
     // ([`KfBatch::leave_schedule`] writes them back).
-    p: [[Lanes; N]; N],
-    gain: [[Lanes; M]; N],
+    lanes: LaneState<N, M>,
     out: BatchStep<N>,
     schedule: Option<Arc<KfSchedule<N, M>>>,
     at: usize,
@@ -39,26 +35,19 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         x0: SVector<f64, N>,
         p0: SMatrix<f64, N, N>,
     ) -> Result<Self, FilterError> {
-        let isa = checked_isa(isa)?;
-        let (x, p) = initial_lanes(&x0, p0)?;
-        Ok(Self::at_start(isa, model, x, p, None))
+        let lanes = LaneState::new(isa, &x0, p0)?;
+        Ok(Self::at_start(model, lanes, None))
     }
 
-    /// A batch at step 0 with lanes `(x, P)`, already checked.
+    /// A batch at step 0 with lanes already checked.
     fn at_start(
-        isa: Isa,
         model: BatchModel<N, M>,
-        x: [Lanes; N],
-        p: [[Lanes; N]; N],
+        lanes: LaneState<N, M>,
         schedule: Option<Arc<KfSchedule<N, M>>>,
     ) -> Self {
         Self {
-            isa,
             model,
-            k: 0,
-            x,
-            p,
-            gain: [[[0.0; BATCH]; M]; N],
+            lanes,
             out: BatchStep::new(),
             schedule,
             at: 0,
@@ -84,10 +73,8 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         let x = std::array::from_fn(|i| [x0[i]; BATCH]);
         let p = std::array::from_fn(|i| std::array::from_fn(|j| [schedule.p0[i][j]; BATCH]));
         Ok(Self::at_start(
-            schedule.isa,
             schedule.model.clone(),
-            x,
-            p,
+            LaneState::at_start(schedule.isa, x, p),
             Some(schedule),
         ))
     }
@@ -112,12 +99,12 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
             let (prior, posterior, gain) = (step.prior, step.posterior, step.gain);
             for (lane, failed) in failed.into_iter().enumerate() {
                 let p = if failed { &prior } else { &posterior };
-                for (row, p_row) in self.p.iter_mut().zip(p) {
+                for (row, p_row) in self.lanes.p.iter_mut().zip(p) {
                     for (entry, value) in row.iter_mut().zip(p_row) {
                         entry[lane] = *value;
                     }
                 }
-                for (row, k_row) in self.gain.iter_mut().zip(&gain) {
+                for (row, k_row) in self.lanes.gain.iter_mut().zip(&gain) {
                     for (entry, value) in row.iter_mut().zip(k_row) {
                         entry[lane] = *value;
                     }
@@ -141,32 +128,15 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         x: SVector<f64, N>,
         p: SMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
-        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
         // Checked before the batch leaves its schedule, so that a refused estimate changes
         // nothing.
-        let p = initial_cov(p)?;
+        let p = checked_estimate(&x, p)?;
         self.leave_schedule([false; BATCH]);
-        write_lane(&mut self.x, &mut self.p, lane, &x, &p);
+        self.lanes.write_lane(lane, &x, &p);
         Ok(())
     }
 
-    /// The instruction set the batch runs on.
-    pub fn isa(&self) -> Isa {
-        self.isa
-    }
-
-    /// The current step index.
-    pub fn step_index(&self) -> usize {
-        self.k
-    }
-
-    /// Lane `lane`'s current mean.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn mean(&self, lane: usize) -> SVector<f64, N> {
-        SVector::from_fn(|i, _| self.x[i][lane])
-    }
+    lane_accessors!(lanes);
 
     /// Lane `lane`'s current covariance.
     ///
@@ -176,7 +146,7 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         assert!(lane < BATCH, "lane {lane} of a batch of {BATCH}");
         match self.schedule_step() {
             Some(step) => SMatrix::from_fn(|i, j| step.posterior[i][j]),
-            None => SMatrix::from_fn(|i, j| self.p[i][j][lane]),
+            None => self.lanes.cov(lane),
         }
     }
 
@@ -191,12 +161,12 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
     /// does: one pass over the batch. A lane whose update fails keeps its prediction (the
     /// scalar filter's state after a prediction and a failed update).
     pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
-        self.k += 1;
+        self.lanes.k += 1;
         self.run::<true>(z, truth)
     }
 
     fn run<const PREDICT: bool>(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
-        let isa = self.isa;
+        let isa = self.lanes.isa;
         // (Borrowed, not cloned: an `Arc` clone per step is two atomic operations.)
         if let Some(schedule) = &self.schedule {
             match schedule.steps.get(self.at) {
@@ -205,7 +175,7 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
                         f: &self.model.f,
                         h: &self.model.h,
                         step,
-                        x: &mut self.x,
+                        x: &mut self.lanes.x,
                         z,
                         truth,
                         out: &mut self.out,
@@ -216,7 +186,8 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
                         // (`finish` reads `p` only for failed lanes, so it is written first.)
                         self.leave_schedule(self.out.health.map(|h| h != 0.0));
                     }
-                    self.out.finish(self.k, z, &self.x, &self.p);
+                    self.out
+                        .finish(self.lanes.k, z, &self.lanes.x, &self.lanes.p);
                     return &self.out;
                 }
                 _ => self.leave_schedule([false; BATCH]),
@@ -228,15 +199,16 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
             h: &self.model.h,
             r: &self.model.r,
             innovation: None,
-            x: &mut self.x,
-            p: &mut self.p,
+            x: &mut self.lanes.x,
+            p: &mut self.lanes.p,
             z,
             truth,
-            gain: &mut self.gain,
+            gain: &mut self.lanes.gain,
             out: &mut self.out,
             terms: None,
         });
-        self.out.finish(self.k, z, &self.x, &self.p);
+        self.out
+            .finish(self.lanes.k, z, &self.lanes.x, &self.lanes.p);
         &self.out
     }
 
@@ -249,7 +221,7 @@ impl<const N: usize, const M: usize> KfBatch<N, M> {
         assert!(lane < BATCH, "lane {lane} of a batch of {BATCH}");
         match self.schedule_step() {
             Some(step) => SMatrix::from_fn(|i, j| step.gain[i][j]),
-            None => SMatrix::from_fn(|i, j| self.gain[i][j][lane]),
+            None => self.lanes.gain(lane),
         }
     }
 }

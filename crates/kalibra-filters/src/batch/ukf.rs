@@ -7,11 +7,12 @@
 #![allow(clippy::needless_range_loop)]
 
 use kalibra_linalg::simd::{Divide, LaneCholesky};
-use kalibra_linalg::{LinalgError, SMatrix, SVector, SqrtMethod, check_finite, sigma_sqrt};
+use kalibra_linalg::{LinalgError, SMatrix, SVector, SqrtMethod, sigma_sqrt};
 use kalibra_models::lanes::{LaneDynamics, LaneSigmaMeasurement};
 use pulp::{Simd, WithSimd};
 
 use super::kernel::{Factor, add, load, mul, mul_t, norm_squared, store, symmetrize};
+use super::lanes::{LaneState, lane_accessors, lane_estimates};
 use super::{BATCH, BatchStep, Isa, Lanes};
 use crate::{FilterError, KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, UkfPrediction};
 
@@ -19,10 +20,7 @@ use crate::{FilterError, KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, UkfP
 /// pulp operation can borrow both.
 #[derive(Clone, Debug)]
 struct State<const N: usize, const M: usize> {
-    k: usize,
-    x: [Lanes; N],
-    p: [[Lanes; N]; N],
-    gain: [[Lanes; M]; N],
+    lanes: LaneState<N, M>,
     /// The kappa of each lane's last successful update.
     kappa: [Option<f64>; BATCH],
     // The prediction's per-lane model evaluations.
@@ -213,10 +211,10 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
             state: st,
             w,
         } = self;
-        let k = st.k;
+        let k = st.lanes.k;
         let chunks = BATCH / S::F64_LANES;
         for c in 0..chunks {
-            let p = load_mat(simd, &st.p, c);
+            let p = load_mat(simd, &st.lanes.p, c);
             store_mat::<S, N, N>(&mut st.l, c, &Chol::new(simd, &p).l);
         }
         for lane in 0..BATCH {
@@ -225,13 +223,13 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
                 predict_fallback(st, lane);
             }
         }
-        st.fx0 = st.x;
+        st.fx0 = st.lanes.x;
         dynamics.predict_lanes(simd, k, &mut st.fx0, &mut st.f, &mut st.q);
         let spread = simd.splat_f64s(w.spread);
         for j in 0..N {
             for c in 0..chunks {
                 for i in 0..N {
-                    let x = load::<S>(&st.x[i], c);
+                    let x = load::<S>(&st.lanes.x[i], c);
                     let d = simd.mul_f64s(load::<S>(&st.l[i][j], c), spread);
                     store::<S>(&mut st.fplus[j][i], c, simd.add_f64s(x, d));
                     store::<S>(&mut st.fminus[j][i], c, simd.sub_f64s(x, d));
@@ -285,8 +283,8 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
             let q = load_mat(simd, &st.q, c);
             let mut p = add(simd, &cov, &q);
             symmetrize(simd, &mut p);
-            store_vec::<S, N>(&mut st.x, c, &mean);
-            store_mat::<S, N, N>(&mut st.p, c, &p);
+            store_vec::<S, N>(&mut st.lanes.x, c, &mean);
+            store_mat::<S, N, N>(&mut st.lanes.p, c, &p);
         }
     }
 }
@@ -297,11 +295,11 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
 #[cold]
 #[inline(never)]
 fn predict_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: usize) {
-    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.p[i][j][lane]);
+    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.lanes.p[i][j][lane]);
     let l = match sigma_sqrt(&p, "covariance for sigma points") {
         Ok((l, _)) => l,
         Err(e) => {
-            st.predict_failure[lane] = Some(FilterError::at(st.k, e));
+            st.predict_failure[lane] = Some(FilterError::at(st.lanes.k, e));
             SMatrix::zeros()
         }
     };
@@ -337,7 +335,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             z,
             truth,
         } = self;
-        let k = st.k;
+        let k = st.lanes.k;
         let chunks = BATCH / S::F64_LANES;
         let at = |e| FilterError::at(k, e);
         // The prior's square root: Cholesky across the lanes, and a health sum (`sum v * 0`:
@@ -345,11 +343,11 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
         // them one by one only when something is not finite.
         let zero = simd.splat_f64s(0.0);
         for c in 0..chunks {
-            let p = load_mat(simd, &st.p, c);
+            let p = load_mat(simd, &st.lanes.p, c);
             let l = Chol::new(simd, &p).l;
             let mut health = zero;
             for i in 0..N {
-                health = simd.mul_add_e_f64s(load::<S>(&st.x[i], c), zero, health);
+                health = simd.mul_add_e_f64s(load::<S>(&st.lanes.x[i], c), zero, health);
                 for j in 0..N {
                     health = simd.mul_add_e_f64s(p[i][j], zero, health);
                     health = simd.mul_add_e_f64s(l[i][j], zero, health);
@@ -368,7 +366,8 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             let healthy = st.take[lane] == 0.0;
             let prior_finite = healthy
                 || (0..N).all(|i| {
-                    st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite())
+                    st.lanes.x[i][lane].is_finite()
+                        && (0..N).all(|j| st.lanes.p[i][j][lane].is_finite())
                 });
             if let Some(e) = st.predict_failure[lane].take() {
                 st.failure[lane] = Some(e);
@@ -394,8 +393,8 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             }
         }
         // R and the central measurement at the prior mean.
-        h.noise_lanes(simd, k, &st.x, &mut st.r);
-        h.measure_lanes(simd, k, &st.x, &mut st.z0);
+        h.noise_lanes(simd, k, &st.lanes.x, &mut st.r);
+        h.measure_lanes(simd, k, &st.lanes.x, &mut st.z0);
         for lane in 0..BATCH {
             if st.failure[lane].is_none()
                 && (0..M).any(|i| (0..M).any(|j| !st.r[i][j][lane].is_finite()))
@@ -444,7 +443,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
 #[cold]
 #[inline(never)]
 fn prior_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: usize) {
-    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.p[i][j][lane]);
+    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.lanes.p[i][j][lane]);
     match sigma_sqrt(&p, "prior covariance for sigma points") {
         Ok((l, method)) => {
             st.cholesky_prior[lane] = method == SqrtMethod::Cholesky;
@@ -456,7 +455,7 @@ fn prior_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: us
         }
         Err(e) => {
             if st.failure[lane].is_none() {
-                st.failure[lane] = Some(FilterError::at(st.k, e));
+                st.failure[lane] = Some(FilterError::at(st.lanes.k, e));
             }
             // Finite values keep the other lanes' arithmetic free of NaN traps; the lane's
             // result is discarded.
@@ -480,14 +479,14 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
     w: SigmaWeights,
     posterior: bool,
 ) {
-    let k = st.k;
+    let k = st.lanes.k;
     let chunks = BATCH / S::F64_LANES;
     let spread = simd.splat_f64s(w.spread);
     // Sigma measurements as residuals from the central one: unwrapped around it.
     for j in 0..N {
         for c in 0..chunks {
             for i in 0..N {
-                let x = load::<S>(&st.x[i], c);
+                let x = load::<S>(&st.lanes.x[i], c);
                 let d = simd.mul_f64s(load::<S>(&st.l[i][j], c), spread);
                 store::<S>(&mut st.plus[i], c, simd.add_f64s(x, d));
                 store::<S>(&mut st.minus[i], c, simd.sub_f64s(x, d));
@@ -579,7 +578,7 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         }
         let mut mean = [zero; N];
         for i in 0..N {
-            mean[i] = simd.add_f64s(load::<S>(&st.x[i], c), knu[i]);
+            mean[i] = simd.add_f64s(load::<S>(&st.lanes.x[i], c), knu[i]);
         }
         // P+ = P- - (K Pz) K^T, symmetrised (as the scalar's commit does).
         let mut kpz = [[zero; M]; N];
@@ -599,7 +598,7 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
                 for a in 1..M {
                     s = simd.add_f64s(s, simd.mul_f64s(kpz[i][a], gain[j][a]));
                 }
-                cov[i][j] = simd.sub_f64s(load::<S>(&st.p[i][j], c), s);
+                cov[i][j] = simd.sub_f64s(load::<S>(&st.lanes.p[i][j], c), s);
             }
         }
         symmetrize(simd, &mut cov);
@@ -643,7 +642,7 @@ fn choose<const N: usize, const M: usize>(
     kappa: f64,
     criterion: Option<KappaCriterion>,
 ) {
-    let k = st.k;
+    let k = st.lanes.k;
     for lane in 0..BATCH {
         st.take[lane] = 0.0;
         if st.failure[lane].is_some() {
@@ -768,7 +767,7 @@ fn commit<S: Simd, const N: usize, const M: usize>(
     truth: &[Lanes; N],
     fixed: bool,
 ) {
-    let k = st.k;
+    let k = st.lanes.k;
     if fixed {
         // The one candidate is the best: swap it in rather than copy it lane by lane.
         std::mem::swap(&mut st.cand, &mut st.best);
@@ -811,14 +810,14 @@ fn commit<S: Simd, const N: usize, const M: usize>(
     }
     for c in 0..chunks {
         let take = simd.equal_f64s(load::<S>(&st.take, c), simd.splat_f64s(1.0));
-        select_vec(simd, take, &st.best.mean, &mut st.x, c);
+        select_vec(simd, take, &st.best.mean, &mut st.lanes.x, c);
         for i in 0..N {
-            select_vec(simd, take, &st.best.cov[i], &mut st.p[i], c);
-            select_vec(simd, take, &st.best.gain[i], &mut st.gain[i], c);
+            select_vec(simd, take, &st.best.cov[i], &mut st.lanes.p[i], c);
+            select_vec(simd, take, &st.best.gain[i], &mut st.lanes.gain[i], c);
         }
         // NEES of the truth against the lane's state (its posterior where it succeeded).
-        let x = load_vec(simd, &st.x, c);
-        let p = load_mat(simd, &st.p, c);
+        let x = load_vec(simd, &st.lanes.x, c);
+        let p = load_mat(simd, &st.lanes.p, c);
         let mut e = [simd.splat_f64s(0.0); N];
         for i in 0..N {
             e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x[i]);
@@ -885,7 +884,6 @@ fn commit<S: Simd, const N: usize, const M: usize>(
 /// ```
 #[derive(Clone, Debug)]
 pub struct UkfBatch<const N: usize, const M: usize, D, H> {
-    isa: Isa,
     dynamics: D,
     measurement: H,
     set: SigmaSet,
@@ -921,13 +919,10 @@ where
     ) -> Result<Self, FilterError> {
         let isa = super::checked_isa(isa)?;
         let w = set.weights(N)?;
-        let (x, p) = super::lanes::initial_lanes(&x0, p0)?;
+        let lanes = LaneState::new(isa, &x0, p0)?;
         let zn = [[[0.0; BATCH]; N]; N];
         let state = State {
-            k: 0,
-            x,
-            p,
-            gain: [[[0.0; BATCH]; M]; N],
+            lanes,
             kappa: [None; BATCH],
             f: zn,
             q: zn,
@@ -956,7 +951,6 @@ where
             out: BatchStep::new(),
         };
         Ok(Self {
-            isa,
             dynamics,
             measurement,
             set,
@@ -990,56 +984,16 @@ where
         Ok(self)
     }
 
-    /// Restarts lane `lane` from its own estimate `(x, P)`, checked as [`UkfBatch::new`]
-    /// checks the shared one.
-    ///
-    /// # Errors
-    /// [`FilterError::Initial`] as [`UkfBatch::new`]; the lane is then unchanged.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn set_lane(
-        &mut self,
-        lane: usize,
-        x: SVector<f64, N>,
-        p: SMatrix<f64, N, N>,
-    ) -> Result<(), FilterError> {
-        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
-        super::lanes::set_lane_estimate(&mut self.state.x, &mut self.state.p, lane, &x, p)
-    }
+    lane_accessors!(state.lanes);
 
-    /// The instruction set the batch runs on.
-    pub fn isa(&self) -> Isa {
-        self.isa
-    }
-
-    /// The current step index.
-    pub fn step_index(&self) -> usize {
-        self.state.k
-    }
-
-    /// Lane `lane`'s current mean.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn mean(&self, lane: usize) -> SVector<f64, N> {
-        SVector::from_fn(|i, _| self.state.x[i][lane])
-    }
-
-    /// Lane `lane`'s current covariance.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn cov(&self, lane: usize) -> SMatrix<f64, N, N> {
-        SMatrix::from_fn(|i, j| self.state.p[i][j][lane])
-    }
+    lane_estimates!(state.lanes);
 
     /// Lane `lane`'s gain `K` of its last successful update.
     ///
     /// # Panics
     /// If `lane >= BATCH`.
     pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
-        SMatrix::from_fn(|i, j| self.state.gain[i][j][lane])
+        self.state.lanes.gain(lane)
     }
 
     /// The kappa of lane `lane`'s last successful update (the chosen one when adapting), as
@@ -1051,41 +1005,37 @@ where
         self.state.kappa[lane]
     }
 
-    /// Every lane's current mean, entry by entry (`means()[i][lane]`).
-    pub fn means(&self) -> &[Lanes; N] {
-        &self.state.x
-    }
-
     /// Predicts every lane from step `k` to `k + 1`, then updates it with its measurement
     /// `z[i][lane]` and computes its NIS `nu^T Pz^-1 nu`, and its NEES against
     /// `truth[i][lane]` (pass zeros where there is no truth and ignore the NEES). A lane whose
     /// update fails keeps its prediction, as the scalar filter does.
     pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        let isa = self.state.lanes.isa;
         let st = &mut *self.state;
         match self.prediction {
-            UkfPrediction::Linearised => self.isa.dispatch(Predict {
+            UkfPrediction::Linearised => isa.dispatch(Predict {
                 dynamics: &self.dynamics,
-                k: st.k,
-                x: &mut st.x,
-                p: &mut st.p,
+                k: st.lanes.k,
+                x: &mut st.lanes.x,
+                p: &mut st.lanes.p,
                 f: &mut st.f,
                 q: &mut st.q,
             }),
-            _ => self.isa.dispatch(PredictUnscented {
+            _ => isa.dispatch(PredictUnscented {
                 dynamics: &self.dynamics,
                 state: st,
                 w: self.weights,
             }),
         }
         let st = &mut *self.state;
-        st.k += 1;
+        st.lanes.k += 1;
         self.update(z, truth)
     }
 
     /// Updates every lane at the current step without a prediction (a filter whose first
     /// measurement is at its initial step), as [`UkfBatch::predict_update`] updates.
     pub fn update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
-        self.isa.dispatch(Update {
+        self.state.lanes.isa.dispatch(Update {
             measurement: &self.measurement,
             state: &mut self.state,
             candidates: &self.candidates,
