@@ -72,12 +72,7 @@ fn crate_dependencies_follow_the_design() {
         ),
         (
             "kalibra-sim",
-            &[
-                "kalibra-linalg",
-                "kalibra-models",
-                "kalibra-filters",
-                "kalibra-metrics",
-            ],
+            &["kalibra-linalg", "kalibra-models", "kalibra-metrics"],
         ),
         (
             "kalibra-studies",

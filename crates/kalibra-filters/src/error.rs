@@ -35,13 +35,15 @@ pub enum FilterError {
         step: usize,
     },
     /// A filter was asked for a mode it does not implement (the UKF or the SRF started with
-    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven)).
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven)), or a batch for an instruction
+    /// set the CPU does not run.
     #[error("{what} is not supported")]
     Unsupported {
         /// What was asked for.
         what: &'static str,
     },
-    /// An instruction set name that [`Isa`](crate::batch::Isa)'s parser does not know.
+    /// An instruction set name that [`Isa`](crate::batch::Isa)'s parser does not know (its
+    /// [`LinalgError::UnknownIsa`], converted).
     #[error("parse instruction set {name:?} (expected avx512, avx2, neon, scalar or auto)")]
     UnknownIsa {
         /// The text given.
@@ -84,7 +86,8 @@ pub enum FilterError {
 }
 
 impl FilterError {
-    /// Attaches the step index to a linear-algebra failure.
+    /// Attaches the step index to a linear-algebra failure (an instruction set's error, which
+    /// has no step, keeps its variant).
     pub(crate) fn at(step: usize, e: LinalgError) -> Self {
         match e {
             LinalgError::NonFinite { what } => FilterError::NonFinite { what, step },
@@ -102,6 +105,8 @@ impl FilterError {
             | LinalgError::NotSymmetric { what, .. } => {
                 FilterError::NotPositiveDefinite { what, step }
             }
+            LinalgError::Unsupported { what } => FilterError::Unsupported { what },
+            LinalgError::UnknownIsa { name } => FilterError::UnknownIsa { name },
             // LinalgError is non-exhaustive: report any future variant as a definiteness failure
             // of an unnamed matrix rather than panic.
             _ => FilterError::NotPositiveDefinite {

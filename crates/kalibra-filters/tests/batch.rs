@@ -262,24 +262,22 @@ fn bad_initial_estimates_and_models_are_errors() {
 }
 
 #[test]
-fn instruction_sets_parse_and_are_checked_against_the_cpu() {
-    assert_eq!("scalar".parse::<Isa>(), Ok(Isa::Scalar));
-    assert_eq!(" AVX2 ".parse::<Isa>().is_ok(), Isa::Avx2.is_available());
-    assert_eq!("auto".parse::<Isa>(), Ok(Isa::detect()));
-    assert!(matches!(
-        "sse9".parse::<Isa>(),
-        Err(FilterError::UnknownIsa { name }) if name == "sse9"
-    ));
+fn a_batch_on_an_instruction_set_the_cpu_lacks_is_refused_with_the_filters_error() {
+    let (f, q, h, r, m0, p0) = (
+        Matrix2::identity(),
+        Matrix2::identity(),
+        SMatrix::<f64, 1, 2>::new(1.0, 0.0),
+        SMatrix::<f64, 1, 1>::new(1.0),
+        Vector2::zeros(),
+        Matrix2::identity(),
+    );
     for isa in Isa::ALL {
-        assert_eq!(isa.name().parse::<Isa>().is_ok(), isa.is_available());
-        if !isa.is_available() {
-            assert!(matches!(
-                isa.checked(),
-                Err(FilterError::Unsupported { .. })
-            ));
+        let model = BatchModel::new(f, q, h, r).unwrap();
+        let batch = KfBatch::new(isa, model, m0, p0);
+        if isa.is_available() {
+            assert!(batch.is_ok());
+        } else {
+            assert!(matches!(batch, Err(FilterError::Unsupported { .. })));
         }
     }
-    assert!(Isa::available().contains(&Isa::detect()));
-    #[cfg(target_arch = "x86_64")]
-    assert!(!Isa::Neon.is_available());
 }

@@ -54,4 +54,16 @@ pub enum LinalgError {
         /// Iterations run.
         iterations: usize,
     },
+    /// An instruction set this CPU does not run ([`Isa::checked`](crate::simd::Isa::checked)).
+    #[error("{what} is not supported")]
+    Unsupported {
+        /// What was asked for.
+        what: &'static str,
+    },
+    /// An instruction set name that [`Isa`](crate::simd::Isa)'s parser does not know.
+    #[error("parse instruction set {name:?} (expected avx512, avx2, neon, scalar or auto)")]
+    UnknownIsa {
+        /// The text given.
+        name: String,
+    },
 }

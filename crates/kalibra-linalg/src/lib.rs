@@ -32,6 +32,12 @@
 //!   ([`with_kernel_policy`]), which can also let faer use several threads within a step for
 //!   `n >= ` [`PARALLEL_MIN_DIM`].
 //!
+//! * [`simd`]: the SIMD lane vocabulary of the batched filters and studies: the instruction
+//!   set chosen at run time ([`simd::Isa`], dispatched through pulp), the lane layout
+//!   ([`simd::BATCH`], [`simd::Lanes`]), lane-wise `atan2`, `sin`/`cos` and `exp`
+//!   ([`simd::math`]), and the lane-wise Cholesky factor and triangular solves
+//!   ([`simd::LaneCholesky`]).
+//!
 //! It is not a general linear-algebra library: it has no per-operation backend traits, and
 //! faer sits underneath the kernels, not beside them in the API.
 //!
@@ -77,6 +83,7 @@ mod kernels;
 mod lyapunov;
 mod psd;
 mod scale;
+pub mod simd;
 
 pub use alloc::Alloc;
 pub use backend::{

@@ -11,7 +11,7 @@
 
 use std::time::Instant;
 
-use kalibra_filters::batch::{BATCH, Isa};
+use kalibra_linalg::simd::{BATCH, Isa};
 use kalibra_sim::{ChaCha8Lanes, MonteCarlo};
 use rand_chacha::rand_core::Rng;
 

@@ -1,7 +1,7 @@
 //! Batched Monte Carlo: runs stepped [`BATCH`] at a time ([`MonteCarlo::accumulate_batched`])
 //! and their true trajectories ([`LinearTruthBatch`] for linear models, [`TruthBatch`] for any).
 
-use kalibra_filters::batch::{BATCH, Isa, Lanes};
+use kalibra_linalg::simd::{BATCH, Isa, Lanes};
 use kalibra_linalg::{Const, SMatrix, SVector};
 use kalibra_metrics::Merge;
 use kalibra_models::{
@@ -191,7 +191,7 @@ impl MonteCarlo {
 }
 
 /// The true trajectories of up to [`BATCH`] runs, in the lane layout of
-/// [`KfBatch`](kalibra_filters::batch::KfBatch): lane `i` is a [`Simulator`] of its own, drawing
+/// `kalibra_filters::batch::KfBatch`: lane `i` is a [`Simulator`] of its own, drawing
 /// from run `i`'s generator exactly what the scalar study's simulator draws (the initial state,
 /// then per step the measurement noise and the process noise), through the same model calls,
 /// so a lane's truth is bit-identical to its scalar run's.
@@ -298,7 +298,7 @@ fn write_lane<const D: usize>(out: &mut [Lanes; D], lane: usize, v: &SVector<f64
 
 /// The true trajectories of up to [`BATCH`] runs of a time-invariant linear model
 /// ([`LinearGaussian`] dynamics, [`LinearObservation`] sensor), in the lane layout of
-/// [`KfBatch`](kalibra_filters::batch::KfBatch).
+/// `kalibra_filters::batch::KfBatch`.
 ///
 /// Lane `i` draws from run `i`'s stream exactly the normals its scalar [`Simulator`] draws,
 /// in the same order (per step: the measurement noise, then the process noise), and applies
@@ -311,7 +311,7 @@ fn write_lane<const D: usize>(out: &mut [Lanes; D], lane: usize, v: &SVector<f64
 /// the lanes' ChaCha8 blocks together and gives each lane its own stream's normals, bit for bit.
 ///
 /// ```
-/// use kalibra_filters::batch::Isa;
+/// use kalibra_linalg::simd::Isa;
 /// use kalibra_linalg::{Matrix1, Vector1};
 /// use kalibra_models::{LinearGaussian, LinearObservation};
 /// use kalibra_sim::{ChaCha8Lanes, LinearTruthBatch, MonteCarlo};

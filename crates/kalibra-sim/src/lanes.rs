@@ -52,8 +52,8 @@ mod gather;
 
 use std::convert::Infallible;
 
-use kalibra_filters::FilterError;
-use kalibra_filters::batch::{BATCH, Isa, Lanes};
+use kalibra_linalg::LinalgError;
+use kalibra_linalg::simd::{BATCH, Isa, Lanes};
 use pulp::{Simd, WithSimd};
 use rand_chacha::rand_core::{Rng, TryRng};
 use rand_distr::{Distribution, Open01, StandardNormal};
@@ -115,7 +115,7 @@ pub enum LanesError {
     },
     /// The instruction set is not available on this CPU.
     #[error(transparent)]
-    Isa(#[from] FilterError),
+    Isa(#[from] LinalgError),
 }
 
 /// The ChaCha8 streams of up to [`BATCH`] generators, drawn lane by lane with their blocks
@@ -132,7 +132,7 @@ pub enum LanesError {
 /// generators.
 ///
 /// ```
-/// use kalibra_filters::batch::{BATCH, Isa};
+/// use kalibra_linalg::simd::{BATCH, Isa};
 /// use kalibra_sim::{ChaCha8Lanes, MonteCarlo};
 /// use rand_distr::{Distribution, StandardNormal};
 ///

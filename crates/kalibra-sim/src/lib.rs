@@ -16,7 +16,7 @@
 //! failing run is returned.
 //!
 //! # Lane-wise draws
-//! Batched studies step [`BATCH`](kalibra_filters::batch::BATCH) runs together
+//! Batched studies step [`BATCH`](kalibra_linalg::simd::BATCH) runs together
 //! ([`MonteCarlo::accumulate_batched`]); [`ChaCha8Lanes`] draws for them together: the runs'
 //! ChaCha8 blocks computed with SIMD, one block per vector lane, and each run reading only its
 //! own stream's words, in order, so that every run draws exactly the numbers (and

@@ -3,7 +3,7 @@
 //! that the ziggurat's tail and wedge paths are taken many times), and the same positions
 //! afterwards, for full and partial groups of lanes, any key, stream and word position.
 
-use kalibra_filters::batch::{BATCH, Isa};
+use kalibra_linalg::simd::{BATCH, Isa};
 use kalibra_sim::{ChaCha8Lanes, ChaCha8Rng, LanesError, MonteCarlo};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};

@@ -1,11 +1,12 @@
 //! The batched extended Kalman filter: [`BATCH`] runs of one nonlinear model, the model
 //! evaluated lane by lane and the covariance algebra stepped together.
 
-use kalibra_linalg::{SMatrix, SVector, check_finite};
+use kalibra_linalg::{SMatrix, SVector};
 use kalibra_models::lanes::{LaneDynamics, LaneMeasurement};
 use pulp::{Simd, WithSimd};
 
 use super::kernel::Kernel;
+use super::lanes::{LaneState, lane_accessors, lane_estimates};
 use super::{BATCH, BatchStep, Isa, Lanes};
 use crate::FilterError;
 
@@ -164,13 +165,9 @@ impl<const M: usize> JLanes<M> {
 /// ```
 #[derive(Clone, Debug)]
 pub struct EkfBatch<const N: usize, const M: usize, D, H> {
-    isa: Isa,
     dynamics: D,
     measurement: H,
-    k: usize,
-    x: [Lanes; N],
-    p: [[Lanes; N]; N],
-    gain: [[Lanes; M]; N],
+    lanes: LaneState<N, M>,
     // Per-lane model evaluations of the current step (kept to avoid re-zeroing each step).
     f: [[Lanes; N]; N],
     q: [[Lanes; N]; N],
@@ -198,16 +195,11 @@ where
         x0: SVector<f64, N>,
         p0: SMatrix<f64, N, N>,
     ) -> Result<Self, FilterError> {
-        let isa = isa.checked()?;
-        let (x, p) = super::initial_lanes(&x0, p0)?;
+        let lanes = LaneState::new(isa, &x0, p0)?;
         Ok(Self {
-            isa,
             dynamics,
             measurement,
-            k: 0,
-            x,
-            p,
-            gain: [[[0.0; BATCH]; M]; N],
+            lanes,
             f: [[[0.0; BATCH]; N]; N],
             q: [[[0.0; BATCH]; N]; N],
             h: [[[0.0; BATCH]; N]; M],
@@ -218,49 +210,9 @@ where
         })
     }
 
-    /// Restarts lane `lane` from its own estimate `(x, P)`, checked as [`EkfBatch::new`]
-    /// checks the shared one.
-    ///
-    /// # Errors
-    /// [`FilterError::Initial`] as [`EkfBatch::new`]; the lane is then unchanged.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn set_lane(
-        &mut self,
-        lane: usize,
-        x: SVector<f64, N>,
-        p: SMatrix<f64, N, N>,
-    ) -> Result<(), FilterError> {
-        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
-        super::set_lane_estimate(&mut self.x, &mut self.p, lane, &x, p)
-    }
+    lane_accessors!(lanes);
 
-    /// The instruction set the batch runs on.
-    pub fn isa(&self) -> Isa {
-        self.isa
-    }
-
-    /// The current step index.
-    pub fn step_index(&self) -> usize {
-        self.k
-    }
-
-    /// Lane `lane`'s current mean.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn mean(&self, lane: usize) -> SVector<f64, N> {
-        SVector::from_fn(|i, _| self.x[i][lane])
-    }
-
-    /// Lane `lane`'s current covariance.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn cov(&self, lane: usize) -> SMatrix<f64, N, N> {
-        SMatrix::from_fn(|i, j| self.p[i][j][lane])
-    }
+    lane_estimates!(lanes);
 
     /// Lane `lane`'s gain `K` of the last update (meaningful when its [`BatchStep::nis`] is
     /// `Ok`).
@@ -268,18 +220,13 @@ where
     /// # Panics
     /// If `lane >= BATCH`.
     pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
-        SMatrix::from_fn(|i, j| self.gain[i][j][lane])
-    }
-
-    /// Every lane's current mean, entry by entry (`means()[i][lane]`).
-    pub fn means(&self) -> &[Lanes; N] {
-        &self.x
+        self.lanes.gain(lane)
     }
 
     /// Every lane's gain `K` of the last update, entry by entry (`gains()[i][j][lane]`;
     /// meaningful for the lanes whose [`BatchStep::nis`] is `Ok`).
     pub fn gains(&self) -> &[[Lanes; M]; N] {
-        &self.gain
+        &self.lanes.gain
     }
 
     /// Predicts every lane from step `k` to `k + 1` (`f_k`, `F_k` and `Q_k` at the lane's
@@ -314,13 +261,14 @@ where
         truth: &[Lanes; N],
         terms: bool,
     ) -> &BatchStep<N> {
-        self.isa.dispatch(Step::<N, M, PREDICT, _, _> {
+        let lanes = &mut self.lanes;
+        lanes.isa.dispatch(Step::<N, M, PREDICT, _, _> {
             dynamics: &self.dynamics,
             measurement: &self.measurement,
-            k: self.k,
-            x: &mut self.x,
-            p: &mut self.p,
-            gain: &mut self.gain,
+            k: lanes.k,
+            x: &mut lanes.x,
+            p: &mut lanes.p,
+            gain: &mut lanes.gain,
             f: &mut self.f,
             q: &mut self.q,
             h: &mut self.h,
@@ -332,9 +280,10 @@ where
             terms: terms.then_some(&mut self.terms),
         });
         if PREDICT {
-            self.k += 1;
+            self.lanes.k += 1;
         }
-        self.out.finish(self.k, z, &self.x, &self.p);
+        self.out
+            .finish(self.lanes.k, z, &self.lanes.x, &self.lanes.p);
         &self.out
     }
 }

@@ -9,7 +9,14 @@
 
 use pulp::{Simd, WithSimd};
 
+use kalibra_linalg::simd::{LaneCholesky, Reciprocal};
+
 use super::{BATCH, BatchStep, JLanes, Lanes};
+pub(super) use kalibra_linalg::simd::{load, store};
+
+/// The factor every KF and EKF kernel solves with: multiplications by the reciprocals of the
+/// pivots ([`Reciprocal`]).
+pub(super) type Factor<S, const D: usize> = LaneCholesky<S, D, Reciprocal>;
 
 /// Where the kernel reads a model matrix: one matrix broadcast to every lane
 /// (`&[[f64; C]; R]`), or one per lane (`&[[Lanes; C]; R]`).
@@ -104,16 +111,6 @@ pub(super) struct Kernel<'a, const N: usize, const M: usize, const PREDICT: bool
     pub terms: Option<&'a mut JLanes<M>>,
 }
 
-#[inline(always)]
-pub(super) fn load<S: Simd>(a: &Lanes, c: usize) -> S::f64s {
-    S::as_simd_f64s(a).0[c]
-}
-
-#[inline(always)]
-pub(super) fn store<S: Simd>(a: &mut Lanes, c: usize, v: S::f64s) {
-    S::as_mut_simd_f64s(a).0[c] = v;
-}
-
 // The helpers below use plain loops over arrays, never closures (`std::array::from_fn`): a
 // closure is a function of its own, compiled for the baseline instruction set unless it is
 // inlined, and one that was not made the AVX-512 kernel slower than the scalar one.
@@ -206,75 +203,6 @@ pub(super) fn symmetrize<S: Simd, const D: usize>(simd: S, m: &mut [[S::f64s; D]
     }
 }
 
-/// The lower Cholesky factor `L` of a symmetric `a`, and the reciprocals of its diagonal:
-/// each pivot is divided once and the other divisions by it are multiplications, which takes
-/// the divider's latency off the chain of dependent operations (a division by `l_jj` and a
-/// multiplication by its reciprocal differ by one rounding). NaN or infinite entries, never a
-/// panic, for a matrix that is not positive definite: `sqrt` of a negative pivot is NaN, of
-/// zero 0, and its reciprocal infinite.
-#[inline(always)]
-pub(super) fn cholesky<S: Simd, const D: usize>(
-    simd: S,
-    a: &[[S::f64s; D]; D],
-) -> ([[S::f64s; D]; D], [S::f64s; D]) {
-    let one = simd.splat_f64s(1.0);
-    let mut l = [[simd.splat_f64s(0.0); D]; D];
-    let mut inv = [one; D];
-    for j in 0..D {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d = simd.sub_f64s(d, simd.mul_f64s(l[j][k], l[j][k]));
-        }
-        let ljj = simd.sqrt_f64s(d);
-        l[j][j] = ljj;
-        inv[j] = simd.div_f64s(one, ljj);
-        for i in (j + 1)..D {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
-            }
-            l[i][j] = simd.mul_f64s(s, inv[j]);
-        }
-    }
-    (l, inv)
-}
-
-/// Solves `L w = b` by forward substitution (`inv`: the reciprocals of `L`'s diagonal).
-#[inline(always)]
-pub(super) fn forward<S: Simd, const D: usize>(
-    simd: S,
-    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
-    b: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut w = *b;
-    for i in 0..D {
-        let mut s = w[i];
-        for k in 0..i {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
-        }
-        w[i] = simd.mul_f64s(s, inv[i]);
-    }
-    w
-}
-
-/// Solves `L^T y = w` by backward substitution.
-#[inline(always)]
-fn backward<S: Simd, const D: usize>(
-    simd: S,
-    (l, inv): &([[S::f64s; D]; D], [S::f64s; D]),
-    w: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut y = *w;
-    for i in (0..D).rev() {
-        let mut s = y[i];
-        for k in (i + 1)..D {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
-        }
-        y[i] = simd.mul_f64s(s, inv[i]);
-    }
-    y
-}
-
 #[inline(always)]
 pub(super) fn norm_squared<S: Simd, const D: usize>(simd: S, w: &[S::f64s; D]) -> S::f64s {
     let mut s = simd.mul_f64s(w[0], w[0]);
@@ -330,8 +258,8 @@ pub(super) struct Covariance<S: Simd, const N: usize, const M: usize> {
     /// `F P F^T`, the propagated part of the prior (the J terms' `A_k`); `P` without
     /// prediction.
     pub propagated: [[S::f64s; N]; N],
-    /// The Cholesky factor of `S` and the reciprocals of its diagonal.
-    pub ls: ([[S::f64s; M]; M], [S::f64s; M]),
+    /// The Cholesky factor of `S`.
+    pub ls: Factor<S, M>,
     /// `K`.
     pub gain: [[S::f64s; M]; N],
     /// `P+`.
@@ -361,11 +289,11 @@ pub(super) fn covariance<S: Simd, const N: usize, const M: usize, const PREDICT:
     let pht = mul_t(simd, &p, h);
     let mut s = add(simd, &mul(simd, h, &pht), r);
     symmetrize(simd, &mut s);
-    let ls = cholesky(simd, &s);
+    let ls = Factor::new(simd, &s);
     // K = (S^-1 (P H^T)^T)^T, one column of (P H^T)^T (a row of P H^T) at a time.
     let mut gain = [[zero; M]; N];
     for i in 0..N {
-        gain[i] = backward(simd, &ls, &forward(simd, &ls, &pht[i]));
+        gain[i] = ls.solve(simd, &pht[i]);
     }
     // Joseph: (I - K H) P (I - K H)^T + (K R) K^T, symmetrised.
     let mut ikh = mul(simd, &gain, h);
@@ -510,7 +438,7 @@ where
             };
             let x_post = corrected(simd, &gain, &x, &nu);
             // NIS through the factor of S.
-            let nis = norm_squared(simd, &forward(simd, &ls, &nu));
+            let nis = norm_squared(simd, &ls.solve_lower(simd, &nu));
             // Health: 0 if the measurement, the NIS (so S's factor) and the posterior are all
             // finite, NaN otherwise; a lane keeps its old estimate unless it is 0. P+ is
             // symmetric (`symmetrize` wrote one value to both triangles), so its upper triangle
@@ -550,8 +478,8 @@ where
             }
             // NEES of the truth against the posterior, through P+'s factor.
             let e = errors(simd, truth, c, &x_post);
-            let lp = cholesky(simd, &p_post);
-            let nees = norm_squared(simd, &forward(simd, &lp, &e));
+            let lp = Factor::new(simd, &p_post);
+            let nees = norm_squared(simd, &lp.solve_lower(simd, &e));
             store::<S>(&mut out.nis, c, nis);
             store::<S>(&mut out.nees, c, nees);
             if let (true, Some(t)) = (PREDICT, terms.as_deref_mut()) {
@@ -576,12 +504,12 @@ where
 #[inline(always)]
 fn trace_solve<S: Simd, const D: usize>(
     simd: S,
-    factor: &([[S::f64s; D]; D], [S::f64s; D]),
+    factor: &Factor<S, D>,
     b: &[[S::f64s; D]; D],
 ) -> S::f64s {
     let mut t = simd.splat_f64s(0.0);
     for j in 0..D {
-        let y = backward(simd, factor, &forward(simd, factor, &b[j]));
+        let y = factor.solve(simd, &b[j]);
         t = simd.add_f64s(t, y[j]);
     }
     t
@@ -624,8 +552,8 @@ fn j_terms<S: Simd, const N: usize, const M: usize>(
     symmetrize(simd, &mut ab);
     let mut s = add(simd, &ab, r);
     symmetrize(simd, &mut s);
-    let j1 = trace_solve(simd, &cholesky(simd, &s), r);
-    let lab = cholesky(simd, &ab);
+    let j1 = trace_solve(simd, &Factor::new(simd, &s), r);
+    let lab = Factor::new(simd, &ab);
     let j2 = trace_solve(simd, &lab, &b);
     let mut a_minus_c = a;
     let mut tr_b = b[0][0];
@@ -785,17 +713,20 @@ impl<const N: usize, const M: usize> WithSimd for BuildSchedule<'_, N, M> {
             } else {
                 covariance::<S, N, M, true>(simd, &f, &q, &h, &r, p)
             };
-            let (lp, lp_inv) = cholesky(simd, &cov.posterior);
+            let lp = Factor::new(simd, &cov.posterior);
             let step = ScheduleStep {
                 predicted: k > 0,
                 prior: first_matrix::<S, N, N>(&cov.prior),
                 gain: first_matrix::<S, N, M>(&cov.gain),
                 ls: (
-                    first_matrix::<S, M, M>(&cov.ls.0),
-                    first_vector::<S, M>(&cov.ls.1),
+                    first_matrix::<S, M, M>(&cov.ls.l),
+                    first_vector::<S, M>(&cov.ls.inv),
                 ),
                 posterior: first_matrix::<S, N, N>(&cov.posterior),
-                lp: (first_matrix::<S, N, N>(&lp), first_vector::<S, N>(&lp_inv)),
+                lp: (
+                    first_matrix::<S, N, N>(&lp.l),
+                    first_vector::<S, N>(&lp.inv),
+                ),
             };
             if !step.is_finite() {
                 break;
@@ -839,11 +770,11 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
         } = self;
         let zero = simd.splat_f64s(0.0);
         let gain = splat_matrix(simd, &step.gain);
-        let ls = (
+        let ls = Factor::from_parts(
             splat_matrix(simd, &step.ls.0),
             splat_vector(simd, &step.ls.1),
         );
-        let lp = (
+        let lp = Factor::from_parts(
             splat_matrix(simd, &step.lp.0),
             splat_vector(simd, &step.lp.1),
         );
@@ -860,7 +791,7 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
             }
             let (nu, hz) = innovate(simd, &h, &x, zs, c);
             let x_post = corrected(simd, &gain, &x, &nu);
-            let nis = norm_squared(simd, &forward(simd, &ls, &nu));
+            let nis = norm_squared(simd, &ls.solve_lower(simd, &nu));
             // The kernel's health test without P+'s entries, which the schedule holds only
             // finite: 0 or NaN as the kernel's.
             let ok = total(simd, mean_health(simd, hz, nis, &x_post));
@@ -871,7 +802,7 @@ impl<const N: usize, const M: usize, const PREDICT: bool> WithSimd
             let failing = simd.xor_m64s(keep, simd.equal_f64s(zero, zero));
             all_kept &= simd.first_true_m64s(failing) == S::F64_LANES;
             let e = errors(simd, truth, c, &x_post);
-            let nees = norm_squared(simd, &forward(simd, &lp, &e));
+            let nees = norm_squared(simd, &lp.solve_lower(simd, &e));
             store::<S>(&mut out.nis, c, nis);
             store::<S>(&mut out.nees, c, nees);
             store::<S>(&mut out.health, c, ok);

@@ -6,11 +6,13 @@
 // hide the algebra and add closures, which must not leave the dispatched function.
 #![allow(clippy::needless_range_loop)]
 
-use kalibra_linalg::{LinalgError, SMatrix, SVector, SqrtMethod, check_finite, sigma_sqrt};
+use kalibra_linalg::simd::{Divide, LaneCholesky};
+use kalibra_linalg::{LinalgError, SMatrix, SVector, SqrtMethod, sigma_sqrt};
 use kalibra_models::lanes::{LaneDynamics, LaneSigmaMeasurement};
 use pulp::{Simd, WithSimd};
 
-use super::kernel::{add, cholesky, forward, load, mul, mul_t, norm_squared, store, symmetrize};
+use super::kernel::{Factor, add, load, mul, mul_t, norm_squared, store, symmetrize};
+use super::lanes::{LaneState, lane_accessors, lane_estimates};
 use super::{BATCH, BatchStep, Isa, Lanes};
 use crate::{FilterError, KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, UkfPrediction};
 
@@ -18,10 +20,7 @@ use crate::{FilterError, KappaCriterion, KappaGrid, SigmaSet, SigmaWeights, UkfP
 /// pulp operation can borrow both.
 #[derive(Clone, Debug)]
 struct State<const N: usize, const M: usize> {
-    k: usize,
-    x: [Lanes; N],
-    p: [[Lanes; N]; N],
-    gain: [[Lanes; M]; N],
+    lanes: LaneState<N, M>,
     /// The kappa of each lane's last successful update.
     kappa: [Option<f64>; BATCH],
     // The prediction's per-lane model evaluations.
@@ -100,71 +99,12 @@ impl<const N: usize, const M: usize> Candidate<N, M> {
     }
 }
 
-// The factorisations below divide by each pivot, as nalgebra's Cholesky and triangular solves
-// do (the batch kernel multiplies by reciprocals): with the order of operations of the scalar
-// UKF, a lane then reproduces the scalar filter's numbers to the last bit where no fused
-// multiply-add intervenes, which keeps an adaptive kappa's choice the scalar's even between
-// close candidates.
-
-/// The lower Cholesky factor of a symmetric `a` in nalgebra's order of operations (pivots
-/// `a_jj - sum_k l_jk^2`, entries divided by the pivot). NaN or infinite entries, never a panic,
-/// where `a` is not positive definite.
-#[inline(always)]
-fn cholesky_div<S: Simd, const D: usize>(simd: S, a: &[[S::f64s; D]; D]) -> [[S::f64s; D]; D] {
-    let mut l = [[simd.splat_f64s(0.0); D]; D];
-    for j in 0..D {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d = simd.sub_f64s(d, simd.mul_f64s(l[j][k], l[j][k]));
-        }
-        let ljj = simd.sqrt_f64s(d);
-        l[j][j] = ljj;
-        for i in (j + 1)..D {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], l[j][k]));
-            }
-            l[i][j] = simd.div_f64s(s, ljj);
-        }
-    }
-    l
-}
-
-/// Solves `L w = b` by forward substitution, dividing by the pivots.
-#[inline(always)]
-fn forward_div<S: Simd, const D: usize>(
-    simd: S,
-    l: &[[S::f64s; D]; D],
-    b: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut w = *b;
-    for i in 0..D {
-        let mut s = w[i];
-        for k in 0..i {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[i][k], w[k]));
-        }
-        w[i] = simd.div_f64s(s, l[i][i]);
-    }
-    w
-}
-
-/// Solves `L^T y = w` by backward substitution, dividing by the pivots.
-#[inline(always)]
-fn backward_div<S: Simd, const D: usize>(
-    simd: S,
-    l: &[[S::f64s; D]; D],
-    w: &[S::f64s; D],
-) -> [S::f64s; D] {
-    let mut y = *w;
-    for i in (0..D).rev() {
-        let mut s = y[i];
-        for k in (i + 1)..D {
-            s = simd.sub_f64s(s, simd.mul_f64s(l[k][i], y[k]));
-        }
-        y[i] = simd.div_f64s(s, l[i][i]);
-    }
-    y
-}
+/// The factor the update solves with: division by each pivot ([`Divide`]), as nalgebra's
+/// Cholesky and triangular solves divide (the batch kernel multiplies by reciprocals): with
+/// the order of operations of the scalar UKF, a lane then reproduces the scalar filter's
+/// numbers to the last bit where no fused multiply-add intervenes, which keeps an adaptive
+/// kappa's choice the scalar's even between close candidates (`tests/batch_ukf.rs`).
+type Chol<S, const D: usize> = LaneCholesky<S, D, Divide>;
 
 /// `sum w_i^2` in index order, without fused multiply-adds (nalgebra's `norm_squared`).
 #[inline(always)]
@@ -271,11 +211,11 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
             state: st,
             w,
         } = self;
-        let k = st.k;
+        let k = st.lanes.k;
         let chunks = BATCH / S::F64_LANES;
         for c in 0..chunks {
-            let p = load_mat(simd, &st.p, c);
-            store_mat::<S, N, N>(&mut st.l, c, &cholesky_div(simd, &p));
+            let p = load_mat(simd, &st.lanes.p, c);
+            store_mat::<S, N, N>(&mut st.l, c, &Chol::new(simd, &p).l);
         }
         for lane in 0..BATCH {
             let finite = (0..N).all(|i| (0..=i).all(|j| st.l[i][j][lane].is_finite()));
@@ -283,13 +223,13 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
                 predict_fallback(st, lane);
             }
         }
-        st.fx0 = st.x;
+        st.fx0 = st.lanes.x;
         dynamics.predict_lanes(simd, k, &mut st.fx0, &mut st.f, &mut st.q);
         let spread = simd.splat_f64s(w.spread);
         for j in 0..N {
             for c in 0..chunks {
                 for i in 0..N {
-                    let x = load::<S>(&st.x[i], c);
+                    let x = load::<S>(&st.lanes.x[i], c);
                     let d = simd.mul_f64s(load::<S>(&st.l[i][j], c), spread);
                     store::<S>(&mut st.fplus[j][i], c, simd.add_f64s(x, d));
                     store::<S>(&mut st.fminus[j][i], c, simd.sub_f64s(x, d));
@@ -343,8 +283,8 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
             let q = load_mat(simd, &st.q, c);
             let mut p = add(simd, &cov, &q);
             symmetrize(simd, &mut p);
-            store_vec::<S, N>(&mut st.x, c, &mean);
-            store_mat::<S, N, N>(&mut st.p, c, &p);
+            store_vec::<S, N>(&mut st.lanes.x, c, &mean);
+            store_mat::<S, N, N>(&mut st.lanes.p, c, &p);
         }
     }
 }
@@ -355,11 +295,11 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
 #[cold]
 #[inline(never)]
 fn predict_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: usize) {
-    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.p[i][j][lane]);
+    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.lanes.p[i][j][lane]);
     let l = match sigma_sqrt(&p, "covariance for sigma points") {
         Ok((l, _)) => l,
         Err(e) => {
-            st.predict_failure[lane] = Some(FilterError::at(st.k, e));
+            st.predict_failure[lane] = Some(FilterError::at(st.lanes.k, e));
             SMatrix::zeros()
         }
     };
@@ -395,7 +335,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             z,
             truth,
         } = self;
-        let k = st.k;
+        let k = st.lanes.k;
         let chunks = BATCH / S::F64_LANES;
         let at = |e| FilterError::at(k, e);
         // The prior's square root: Cholesky across the lanes, and a health sum (`sum v * 0`:
@@ -403,11 +343,11 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
         // them one by one only when something is not finite.
         let zero = simd.splat_f64s(0.0);
         for c in 0..chunks {
-            let p = load_mat(simd, &st.p, c);
-            let l = cholesky_div(simd, &p);
+            let p = load_mat(simd, &st.lanes.p, c);
+            let l = Chol::new(simd, &p).l;
             let mut health = zero;
             for i in 0..N {
-                health = simd.mul_add_e_f64s(load::<S>(&st.x[i], c), zero, health);
+                health = simd.mul_add_e_f64s(load::<S>(&st.lanes.x[i], c), zero, health);
                 for j in 0..N {
                     health = simd.mul_add_e_f64s(p[i][j], zero, health);
                     health = simd.mul_add_e_f64s(l[i][j], zero, health);
@@ -426,7 +366,8 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             let healthy = st.take[lane] == 0.0;
             let prior_finite = healthy
                 || (0..N).all(|i| {
-                    st.x[i][lane].is_finite() && (0..N).all(|j| st.p[i][j][lane].is_finite())
+                    st.lanes.x[i][lane].is_finite()
+                        && (0..N).all(|j| st.lanes.p[i][j][lane].is_finite())
                 });
             if let Some(e) = st.predict_failure[lane].take() {
                 st.failure[lane] = Some(e);
@@ -452,8 +393,8 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             }
         }
         // R and the central measurement at the prior mean.
-        h.noise_lanes(simd, k, &st.x, &mut st.r);
-        h.measure_lanes(simd, k, &st.x, &mut st.z0);
+        h.noise_lanes(simd, k, &st.lanes.x, &mut st.r);
+        h.measure_lanes(simd, k, &st.lanes.x, &mut st.z0);
         for lane in 0..BATCH {
             if st.failure[lane].is_none()
                 && (0..M).any(|i| (0..M).any(|j| !st.r[i][j][lane].is_finite()))
@@ -471,7 +412,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
             // R's factor, for e^T R^-1 e (the scalar's `Covariance::from_symmetric(R)`).
             for c in 0..chunks {
                 let r = load_mat(simd, &st.r, c);
-                store_mat::<S, M, M>(&mut st.lr, c, &cholesky_div(simd, &r));
+                store_mat::<S, M, M>(&mut st.lr, c, &Chol::new(simd, &r).l);
             }
             for lane in 0..BATCH {
                 st.r_ok[lane] = (0..M).all(|i| {
@@ -502,7 +443,7 @@ impl<const N: usize, const M: usize, H: LaneSigmaMeasurement<N, M>> WithSimd
 #[cold]
 #[inline(never)]
 fn prior_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: usize) {
-    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.p[i][j][lane]);
+    let p = SMatrix::<f64, N, N>::from_fn(|i, j| st.lanes.p[i][j][lane]);
     match sigma_sqrt(&p, "prior covariance for sigma points") {
         Ok((l, method)) => {
             st.cholesky_prior[lane] = method == SqrtMethod::Cholesky;
@@ -514,7 +455,7 @@ fn prior_fallback<const N: usize, const M: usize>(st: &mut State<N, M>, lane: us
         }
         Err(e) => {
             if st.failure[lane].is_none() {
-                st.failure[lane] = Some(FilterError::at(st.k, e));
+                st.failure[lane] = Some(FilterError::at(st.lanes.k, e));
             }
             // Finite values keep the other lanes' arithmetic free of NaN traps; the lane's
             // result is discarded.
@@ -538,14 +479,14 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
     w: SigmaWeights,
     posterior: bool,
 ) {
-    let k = st.k;
+    let k = st.lanes.k;
     let chunks = BATCH / S::F64_LANES;
     let spread = simd.splat_f64s(w.spread);
     // Sigma measurements as residuals from the central one: unwrapped around it.
     for j in 0..N {
         for c in 0..chunks {
             for i in 0..N {
-                let x = load::<S>(&st.x[i], c);
+                let x = load::<S>(&st.lanes.x[i], c);
                 let d = simd.mul_f64s(load::<S>(&st.l[i][j], c), spread);
                 store::<S>(&mut st.plus[i], c, simd.add_f64s(x, d));
                 store::<S>(&mut st.minus[i], c, simd.sub_f64s(x, d));
@@ -620,11 +561,11 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         let pz = load_mat(simd, &st.cand.pz, c);
         let pxz = load_mat(simd, &st.cand.pxz, c);
         let nu = load_vec(simd, &st.cand.nu, c);
-        let ls = cholesky_div(simd, &pz);
+        let ls = Chol::new(simd, &pz);
         // K = (Pz^-1 Pxz^T)^T, a row of Pxz at a time (nalgebra's `solve` of the transpose).
         let mut gain = [[zero; M]; N];
         for i in 0..N {
-            gain[i] = backward_div(simd, &ls, &forward_div(simd, &ls, &pxz[i]));
+            gain[i] = ls.solve(simd, &pxz[i]);
         }
         // K nu, in nalgebra's column order without fused multiply-adds.
         let mut knu = [zero; N];
@@ -637,7 +578,7 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         }
         let mut mean = [zero; N];
         for i in 0..N {
-            mean[i] = simd.add_f64s(load::<S>(&st.x[i], c), knu[i]);
+            mean[i] = simd.add_f64s(load::<S>(&st.lanes.x[i], c), knu[i]);
         }
         // P+ = P- - (K Pz) K^T, symmetrised (as the scalar's commit does).
         let mut kpz = [[zero; M]; N];
@@ -657,14 +598,14 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
                 for a in 1..M {
                     s = simd.add_f64s(s, simd.mul_f64s(kpz[i][a], gain[j][a]));
                 }
-                cov[i][j] = simd.sub_f64s(load::<S>(&st.p[i][j], c), s);
+                cov[i][j] = simd.sub_f64s(load::<S>(&st.lanes.p[i][j], c), s);
             }
         }
         symmetrize(simd, &mut cov);
-        let nis = sum_squares(simd, &forward_div(simd, &ls, &nu));
+        let nis = sum_squares(simd, &ls.solve_lower(simd, &nu));
         let mut diag = [zero; M];
         for a in 0..M {
-            diag[a] = ls[a][a];
+            diag[a] = ls.l[a][a];
         }
         store_vec::<S, M>(&mut st.cand.pz_diag, c, &diag);
         store_mat::<S, N, M>(&mut st.cand.gain, c, &gain);
@@ -673,8 +614,8 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         store::<S>(&mut st.cand.nis, c, nis);
         if posterior {
             // nu^T U nu = |L^-1 K nu|^2: the prior's density at x+.
-            let l = load_mat(simd, &st.l, c);
-            let prior = sum_squares(simd, &forward_div(simd, &l, &knu));
+            let l = Chol::from_lower(simd, load_mat(simd, &st.l, c));
+            let prior = sum_squares(simd, &l.solve_lower(simd, &knu));
             store::<S>(&mut st.cand.prior_term, c, prior);
         }
     }
@@ -685,9 +626,9 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
         let mut e = [[0.0; BATCH]; M];
         h.residual_lanes(simd, z, &zc, &mut e);
         for c in 0..chunks {
-            let lr = load_mat(simd, &st.lr, c);
+            let lr = Chol::from_lower(simd, load_mat(simd, &st.lr, c));
             let ev = load_vec(simd, &e, c);
-            let q = sum_squares(simd, &forward_div(simd, &lr, &ev));
+            let q = sum_squares(simd, &lr.solve_lower(simd, &ev));
             store::<S>(&mut st.cand.meas_term, c, q);
         }
     }
@@ -701,7 +642,7 @@ fn choose<const N: usize, const M: usize>(
     kappa: f64,
     criterion: Option<KappaCriterion>,
 ) {
-    let k = st.k;
+    let k = st.lanes.k;
     for lane in 0..BATCH {
         st.take[lane] = 0.0;
         if st.failure[lane].is_some() {
@@ -758,9 +699,7 @@ fn choose<const N: usize, const M: usize>(
         let nis = c.nis[lane];
         // A non-finite term makes the value non-finite, so the scalar's distinction between
         // an infinite and a NaN quadratic form cannot change the choice.
-        let value = if criterion == KappaCriterion::MaximumLikelihood {
-            log_det + nis
-        } else {
+        let value = criterion.value(log_det, nis, || {
             let prior = if st.cholesky_prior[lane] {
                 c.prior_term[lane]
             } else {
@@ -771,13 +710,10 @@ fn choose<const N: usize, const M: usize>(
             } else {
                 f64::NAN
             };
-            match criterion {
-                KappaCriterion::PureMap => prior + meas,
-                _ => prior + meas - nis - 0.5 * log_det,
-            }
-        };
-        // Strictly smaller: ties keep the smaller kappa; NaN never wins.
-        if value.is_finite() && (!st.has_best[lane] || value < st.best_value[lane]) {
+            (prior, meas)
+        });
+        let best = st.has_best[lane].then_some(st.best_value[lane]);
+        if KappaCriterion::improves(value, best) {
             st.take[lane] = 1.0;
             st.best_value[lane] = value;
             st.best_kappa[lane] = kappa;
@@ -831,7 +767,7 @@ fn commit<S: Simd, const N: usize, const M: usize>(
     truth: &[Lanes; N],
     fixed: bool,
 ) {
-    let k = st.k;
+    let k = st.lanes.k;
     if fixed {
         // The one candidate is the best: swap it in rather than copy it lane by lane.
         std::mem::swap(&mut st.cand, &mut st.best);
@@ -874,20 +810,20 @@ fn commit<S: Simd, const N: usize, const M: usize>(
     }
     for c in 0..chunks {
         let take = simd.equal_f64s(load::<S>(&st.take, c), simd.splat_f64s(1.0));
-        select_vec(simd, take, &st.best.mean, &mut st.x, c);
+        select_vec(simd, take, &st.best.mean, &mut st.lanes.x, c);
         for i in 0..N {
-            select_vec(simd, take, &st.best.cov[i], &mut st.p[i], c);
-            select_vec(simd, take, &st.best.gain[i], &mut st.gain[i], c);
+            select_vec(simd, take, &st.best.cov[i], &mut st.lanes.p[i], c);
+            select_vec(simd, take, &st.best.gain[i], &mut st.lanes.gain[i], c);
         }
         // NEES of the truth against the lane's state (its posterior where it succeeded).
-        let x = load_vec(simd, &st.x, c);
-        let p = load_mat(simd, &st.p, c);
+        let x = load_vec(simd, &st.lanes.x, c);
+        let p = load_mat(simd, &st.lanes.p, c);
         let mut e = [simd.splat_f64s(0.0); N];
         for i in 0..N {
             e[i] = simd.sub_f64s(load::<S>(&truth[i], c), x[i]);
         }
-        let lp = cholesky(simd, &p);
-        let nees = norm_squared(simd, &forward(simd, &lp, &e));
+        let lp = Factor::new(simd, &p);
+        let nees = norm_squared(simd, &lp.solve_lower(simd, &e));
         store::<S>(&mut st.out.nees, c, nees);
         store_vec::<S, N>(&mut st.out.error, c, &e);
     }
@@ -948,7 +884,6 @@ fn commit<S: Simd, const N: usize, const M: usize>(
 /// ```
 #[derive(Clone, Debug)]
 pub struct UkfBatch<const N: usize, const M: usize, D, H> {
-    isa: Isa,
     dynamics: D,
     measurement: H,
     set: SigmaSet,
@@ -982,15 +917,12 @@ where
         set: SigmaSet,
         prediction: UkfPrediction,
     ) -> Result<Self, FilterError> {
-        let isa = isa.checked()?;
+        let isa = super::checked_isa(isa)?;
         let w = set.weights(N)?;
-        let (x, p) = super::initial_lanes(&x0, p0)?;
+        let lanes = LaneState::new(isa, &x0, p0)?;
         let zn = [[[0.0; BATCH]; N]; N];
         let state = State {
-            k: 0,
-            x,
-            p,
-            gain: [[[0.0; BATCH]; M]; N],
+            lanes,
             kappa: [None; BATCH],
             f: zn,
             q: zn,
@@ -1019,7 +951,6 @@ where
             out: BatchStep::new(),
         };
         Ok(Self {
-            isa,
             dynamics,
             measurement,
             set,
@@ -1053,56 +984,16 @@ where
         Ok(self)
     }
 
-    /// Restarts lane `lane` from its own estimate `(x, P)`, checked as [`UkfBatch::new`]
-    /// checks the shared one.
-    ///
-    /// # Errors
-    /// [`FilterError::Initial`] as [`UkfBatch::new`]; the lane is then unchanged.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn set_lane(
-        &mut self,
-        lane: usize,
-        x: SVector<f64, N>,
-        p: SMatrix<f64, N, N>,
-    ) -> Result<(), FilterError> {
-        check_finite(&x, "initial mean").map_err(FilterError::Initial)?;
-        super::set_lane_estimate(&mut self.state.x, &mut self.state.p, lane, &x, p)
-    }
+    lane_accessors!(state.lanes);
 
-    /// The instruction set the batch runs on.
-    pub fn isa(&self) -> Isa {
-        self.isa
-    }
-
-    /// The current step index.
-    pub fn step_index(&self) -> usize {
-        self.state.k
-    }
-
-    /// Lane `lane`'s current mean.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn mean(&self, lane: usize) -> SVector<f64, N> {
-        SVector::from_fn(|i, _| self.state.x[i][lane])
-    }
-
-    /// Lane `lane`'s current covariance.
-    ///
-    /// # Panics
-    /// If `lane >= BATCH`.
-    pub fn cov(&self, lane: usize) -> SMatrix<f64, N, N> {
-        SMatrix::from_fn(|i, j| self.state.p[i][j][lane])
-    }
+    lane_estimates!(state.lanes);
 
     /// Lane `lane`'s gain `K` of its last successful update.
     ///
     /// # Panics
     /// If `lane >= BATCH`.
     pub fn gain(&self, lane: usize) -> SMatrix<f64, N, M> {
-        SMatrix::from_fn(|i, j| self.state.gain[i][j][lane])
+        self.state.lanes.gain(lane)
     }
 
     /// The kappa of lane `lane`'s last successful update (the chosen one when adapting), as
@@ -1114,41 +1005,37 @@ where
         self.state.kappa[lane]
     }
 
-    /// Every lane's current mean, entry by entry (`means()[i][lane]`).
-    pub fn means(&self) -> &[Lanes; N] {
-        &self.state.x
-    }
-
     /// Predicts every lane from step `k` to `k + 1`, then updates it with its measurement
     /// `z[i][lane]` and computes its NIS `nu^T Pz^-1 nu`, and its NEES against
     /// `truth[i][lane]` (pass zeros where there is no truth and ignore the NEES). A lane whose
     /// update fails keeps its prediction, as the scalar filter does.
     pub fn predict_update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
+        let isa = self.state.lanes.isa;
         let st = &mut *self.state;
         match self.prediction {
-            UkfPrediction::Linearised => self.isa.dispatch(Predict {
+            UkfPrediction::Linearised => isa.dispatch(Predict {
                 dynamics: &self.dynamics,
-                k: st.k,
-                x: &mut st.x,
-                p: &mut st.p,
+                k: st.lanes.k,
+                x: &mut st.lanes.x,
+                p: &mut st.lanes.p,
                 f: &mut st.f,
                 q: &mut st.q,
             }),
-            _ => self.isa.dispatch(PredictUnscented {
+            _ => isa.dispatch(PredictUnscented {
                 dynamics: &self.dynamics,
                 state: st,
                 w: self.weights,
             }),
         }
         let st = &mut *self.state;
-        st.k += 1;
+        st.lanes.k += 1;
         self.update(z, truth)
     }
 
     /// Updates every lane at the current step without a prediction (a filter whose first
     /// measurement is at its initial step), as [`UkfBatch::predict_update`] updates.
     pub fn update(&mut self, z: &[Lanes; M], truth: &[Lanes; N]) -> &BatchStep<N> {
-        self.isa.dispatch(Update {
+        self.state.lanes.isa.dispatch(Update {
             measurement: &self.measurement,
             state: &mut self.state,
             candidates: &self.candidates,

@@ -1,6 +1,7 @@
 //! Models evaluated for [`BATCH`] Monte Carlo runs at once, in the lane layout of
-//! `kalibra_filters::batch`: every scalar of a state, a measurement or a matrix is a
-//! [`Lanes`] array with one entry per run.
+//! [`kalibra_linalg::simd`] (re-exported here: [`BATCH`], [`Lanes`], [`load`], [`store`]) that
+//! the batched filters of `kalibra_filters::batch` step: every scalar of a state, a measurement
+//! or a matrix is a [`Lanes`] array with one entry per run.
 //!
 //! A batched filter asks its model for every lane's `f(x)`, `F`, `Q` ([`LaneDynamics`]) and
 //! every lane's innovation `z (-) h(x)`, `H`, `R` ([`LaneMeasurement`]). [`PerLane`] answers for
@@ -25,11 +26,7 @@ use pulp::Simd;
 
 use crate::{Dynamics, Measurement};
 
-/// Runs per batch: the lanes of one AVX-512 vector of f64.
-pub const BATCH: usize = 8;
-
-/// One f64 per run of a batch.
-pub type Lanes = [f64; BATCH];
+pub use kalibra_linalg::simd::{BATCH, Lanes, load, store};
 
 /// Dynamics a batch evaluates for all its lanes at once: for every lane, the predicted mean
 /// `f_k(x)`, the Jacobian `F_k` at `x` and the process noise `Q_k`.
@@ -204,19 +201,6 @@ impl<const N: usize, const M: usize, T: LaneMeasurement<N, M>> LaneMeasurement<N
 /// calls the scalar EKF and UKF make.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PerLane<T>(pub T);
-
-/// The lanes of chunk `c` of `a` as one vector of the instruction set of `S`
-/// (`BATCH / S::F64_LANES` chunks per batch).
-#[inline(always)]
-pub fn load<S: Simd>(a: &Lanes, c: usize) -> S::f64s {
-    S::as_simd_f64s(a).0[c]
-}
-
-/// Stores `v` into the lanes of chunk `c` of `a`.
-#[inline(always)]
-pub fn store<S: Simd>(a: &mut Lanes, c: usize, v: S::f64s) {
-    S::as_mut_simd_f64s(a).0[c] = v;
-}
 
 /// Lane `l` of `x` as a vector.
 pub fn lane<const N: usize>(x: &[Lanes; N], l: usize) -> SVector<f64, N> {

@@ -35,7 +35,7 @@
 
 use std::arch::x86_64::__m512i;
 
-use kalibra_filters::batch::{BATCH, Lanes};
+use kalibra_linalg::simd::{BATCH, Lanes};
 use pulp::x86::V4;
 use pulp::{NullaryFnOnce, cast};
 

@@ -1,0 +1,243 @@
+//! The scalar [`Ukf`]: its construction, options and the [`Filter`] interface; the prediction
+//! is in `predict.rs`, the update in `update.rs`.
+
+use std::sync::Arc;
+
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
+use kalibra_models::{Dynamics, Measurement};
+
+use super::{KappaCriterion, KappaGrid, SigmaSet, SigmaSpace};
+use crate::core::KalmanCore;
+use crate::kalman::{core_accessors, jacobian_predict};
+use crate::{Filter, FilterError, FilterOptions, StepRecord};
+
+/// How the UKF predicts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum UkfPrediction {
+    /// Sigma points of the posterior through `f_k` (the general UKF).
+    #[default]
+    Unscented,
+    /// `x- = f_k(x+)`, `P- = F P+ F^T + Q` with the Jacobian `F` (exact for linear dynamics, and
+    /// what paper 001's Alg. 1 does: only the measurement statistics are unscented). Cheaper.
+    Linearised,
+}
+
+/// The unscented Kalman filter (Julier and Uhlmann), paper 001 eqs 16-22.
+///
+/// Update: the `2n + 1` sigma points of the prior through `h_k`, each measurement taken as a
+/// residual from the central point's (so sigma bearings are unwrapped around the central
+/// bearing and never straddle +-pi), `zhat = Z_0 + sum W_i (Z_i - Z_0)`,
+/// `Pz = sum W_i (Z_i - zhat)(Z_i - zhat)^T + R`, `Pxz = sum W_i (X_i - x-)(Z_i - zhat)^T`,
+/// `K = Pxz Pz^-1`, `x+ = x- + K nu`, `P+ = P- - K Pz K^T` (eq 7), symmetrised. `R` is the
+/// model's `R_k` at the prior mean.
+///
+/// With [`Ukf::with_adaptive_kappa`] the update is computed for every kappa of a grid and
+/// the one minimising a [`KappaCriterion`] is kept (UKF-ML, UKF-MPP); ties go to the smallest
+/// kappa and kappas whose criterion is not finite are never chosen.
+///
+/// The step record is the Kalman filter's: `S = Pz`, `K`, and as `H` the statistical
+/// linearisation `Pxz^T P-^-1` (equal to `H` for a linear measurement; the model's Jacobian at
+/// the prior mean when `P-` is singular). On linear-Gaussian models the UKF equals the KF for
+/// any valid sigma set (tested).
+///
+/// ```
+/// use kalibra_filters::{Filter, SigmaSet, Ukf};
+/// use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary};
+/// use kalibra_linalg::{Matrix4, U4, Vector1, Vector2, Vector4};
+///
+/// let cv = Kinematic::constant_velocity(2, 1.0)?.dynamics(U4)?;
+/// let sensor = Bearing::new(U4, [0, 1], BearingReference::XAxis, 1e-4, Stationary(Vector2::zeros()))?;
+/// let x0 = Vector4::new(100.0, 10.0, -1.0, 0.0);
+/// let mut ukf = Ukf::new(cv, sensor, x0, Matrix4::identity() * 10.0, SigmaSet::recommended(4))?;
+/// ukf.predict()?;
+/// let record = ukf.update(&Vector1::new(0.11))?;
+/// // NIS = nu^2 / S for a scalar measurement, from the record's innovation and S.
+/// let direct = record.innovation()[0].powi(2) / record.s_matrix()[(0, 0)];
+/// assert!((record.nis() - direct).abs() <= 1e-12 * direct);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Ukf<N: Dim, M: Dim, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    pub(super) dynamics: D,
+    pub(super) measurement: H,
+    pub(super) core: KalmanCore<N, M>,
+    pub(super) set: SigmaSet,
+    pub(super) prediction: UkfPrediction,
+    pub(super) adaptive: Option<(KappaCriterion, KappaGrid)>,
+    pub(super) last_kappa: Option<f64>,
+    // Scratch for the 2n transformed points, allocated once so that a step allocates nothing
+    // on the fixed-size path.
+    pub(super) scratch_z: Vec<OVector<f64, M>>,
+    pub(super) scratch_x: Vec<OVector<f64, N>>,
+    // The optional non-Euclidean spaces; `None` keeps the plain arithmetic, bit for bit.
+    pub(super) state_space: Option<Arc<dyn SigmaSpace<N>>>,
+    pub(super) measurement_mean: Option<Arc<dyn SigmaSpace<M>>>,
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Ukf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// A UKF at step 0 with initial mean `x0`, covariance `p0` and sigma set `set`, predicting
+    /// with [`UkfPrediction::Unscented`].
+    ///
+    /// # Errors
+    /// [`FilterError::Initial`] for a bad initial estimate (as [`crate::Kf::new`]),
+    /// [`FilterError::DimensionMismatch`] for a measurement model built for another state
+    /// dimension (as [`crate::Kf::new`]), [`FilterError::InvalidParameter`] for a sigma set
+    /// invalid at this dimension.
+    pub fn new(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+    ) -> Result<Self, FilterError> {
+        Self::with_options(dynamics, measurement, x0, p0, set, FilterOptions::default())
+    }
+
+    /// As [`Ukf::new`] with [`FilterOptions`] (the first step and the initial check; the
+    /// update form is always eq 7's `P- - K Pz K^T`, since the UKF has no `H` for a Joseph
+    /// form).
+    ///
+    /// # Errors
+    /// As [`Ukf::new`]; [`FilterError::Unsupported`] for
+    /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven).
+    pub fn with_options(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+        options: FilterOptions,
+    ) -> Result<Self, FilterError> {
+        crate::core::reject_as_given(
+            &options,
+            "the UKF with an as-given initial covariance (sigma points need P's square root)",
+        )?;
+        crate::kalman::check_model_sizes(&dynamics, &measurement)?;
+        let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
+        set.weights(n.value())?;
+        let core = KalmanCore::new(n, m, x0, p0, options)?;
+        let zeros_z = OVector::<f64, M>::zeros_generic(m, nalgebra::U1);
+        let zeros_x = OVector::<f64, N>::zeros_generic(n, nalgebra::U1);
+        Ok(Self {
+            dynamics,
+            measurement,
+            core,
+            set,
+            prediction: UkfPrediction::default(),
+            adaptive: None,
+            last_kappa: None,
+            scratch_z: vec![zeros_z; 2 * n.value()],
+            scratch_x: vec![zeros_x; 2 * n.value()],
+            state_space: None,
+            measurement_mean: None,
+        })
+    }
+
+    /// The same filter with a non-Euclidean state space (FilterPy's `x_mean_fn` and
+    /// `residual_x`): the unscented prediction averages its sigma points with
+    /// [`SigmaSpace::mean`] and forms the covariance from [`SigmaSpace::residual`]s, and the
+    /// updated mean `x- + K nu` is [`SigmaSpace::normalize`]d. With [`AngleComponents`](super::AngleComponents) an
+    /// angle in the state near `+-pi` averages to near `pi`, where the plain mean gives about 0.
+    /// A prediction with a space collects its sigma points in a fresh `Vec` (one allocation
+    /// per step); without one the filter keeps its allocation-free path, bit for bit.
+    ///
+    /// # Errors
+    /// [`SigmaSpace::check`]'s error if the space does not fit the state dimension.
+    pub fn with_state_space(
+        mut self,
+        space: impl SigmaSpace<N> + 'static,
+    ) -> Result<Self, FilterError> {
+        space.check(self.dynamics.state_dim().value())?;
+        self.state_space = Some(Arc::new(space));
+        Ok(self)
+    }
+
+    /// The same filter forming the predicted measurement `zhat` with `mean` (FilterPy's
+    /// `z_mean_fn`) from the sigma points' measurements, for instance the circular mean of
+    /// [`AngleComponents`](super::AngleComponents). By default `zhat` is the central measurement plus the mean of the
+    /// others' residuals from it, which handles angles through the model's residual; the option
+    /// serves models whose residual does not wrap, or a circular mean by choice.
+    ///
+    /// # Errors
+    /// [`SigmaSpace::check`]'s error if `mean` does not fit the measurement dimension.
+    pub fn with_measurement_mean(
+        mut self,
+        mean: impl SigmaSpace<M> + 'static,
+    ) -> Result<Self, FilterError> {
+        mean.check(self.measurement.meas_dim().value())?;
+        self.measurement_mean = Some(Arc::new(mean));
+        Ok(self)
+    }
+
+    /// The same filter predicting as `prediction` says.
+    #[must_use]
+    pub fn with_prediction(mut self, prediction: UkfPrediction) -> Self {
+        self.prediction = prediction;
+        self
+    }
+
+    /// The same filter choosing kappa at every update: the value of `grid` minimising
+    /// `criterion` (UKF-ML, UKF-MPP of paper 001). The prediction keeps the set's own kappa.
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] if a grid value gives an invalid sigma set.
+    pub fn with_adaptive_kappa(
+        mut self,
+        criterion: KappaCriterion,
+        grid: KappaGrid,
+    ) -> Result<Self, FilterError> {
+        let n = self.dynamics.state_dim().value();
+        for &kappa in grid.values() {
+            self.set.with_kappa(kappa).weights(n)?;
+        }
+        self.adaptive = Some((criterion, grid));
+        Ok(self)
+    }
+
+    /// The sigma set (its kappa is the one used when not adapting, and in the prediction).
+    pub fn sigma_set(&self) -> SigmaSet {
+        self.set
+    }
+
+    /// The kappa of the last update (the chosen one when adapting); `None` before the first.
+    pub fn last_kappa(&self) -> Option<f64> {
+        self.last_kappa
+    }
+
+    /// The dynamics model.
+    pub fn dynamics(&self) -> &D {
+        &self.dynamics
+    }
+
+    /// The measurement model.
+    pub fn measurement(&self) -> &H {
+        &self.measurement
+    }
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M> for Ukf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    core_accessors!();
+
+    fn predict(&mut self) -> Result<(), FilterError> {
+        match self.prediction {
+            UkfPrediction::Unscented => self.unscented_predict(),
+            UkfPrediction::Linearised => {
+                jacobian_predict::<false, _, _, _>(&mut self.core, &self.dynamics)
+            }
+        }
+    }
+
+    fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+        self.unscented_update(z)
+    }
+}

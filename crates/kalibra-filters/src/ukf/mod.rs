@@ -1,0 +1,23 @@
+//! The unscented Kalman filter, with a fixed sigma-point set or with the scaling parameter
+//! `kappa` chosen at every update from a grid (paper 001, section III-C).
+//!
+//! # Where each job lives
+//! * `ukf/sigma.rs`: the sigma-point sets and their weights ([`SigmaSet`], [`SigmaWeights`]).
+//! * `ukf/kappa.rs`: the adaptive kappa's criteria and grid ([`KappaCriterion`],
+//!   [`KappaGrid`]), and the criterion's value and choice rule that the scalar and the batched
+//!   UKF share.
+//! * `ukf/space.rs`: non-Euclidean spaces ([`SigmaSpace`], [`AngleComponents`]).
+//! * `ukf/filter.rs`: the filter ([`Ukf`], [`UkfPrediction`]); `ukf/predict.rs` its unscented
+//!   prediction; `ukf/update.rs` its update at one kappa and the choice among a grid's.
+
+mod filter;
+mod kappa;
+mod predict;
+mod sigma;
+mod space;
+mod update;
+
+pub use filter::{Ukf, UkfPrediction};
+pub use kappa::{KappaCriterion, KappaGrid};
+pub use sigma::{SigmaSet, SigmaWeights};
+pub use space::{AngleComponents, SigmaSpace};

@@ -1,0 +1,358 @@
+//! The scalar UKF's update: the unscented measurement statistics at one kappa ([`candidate`]),
+//! and with an adaptive kappa the choice among the grid's candidates.
+
+use kalibra_linalg::{
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, SqrtMethod,
+    add_cross_scatter, add_scatter, all_finite, check_finite, propagate, sigma_sqrt, symmetrize,
+};
+use kalibra_models::{Dynamics, Measurement};
+
+use super::{KappaCriterion, SigmaSpace, SigmaWeights, Ukf};
+use crate::core::{UpdateParts, check_model_output};
+use crate::{Estimate, FilterError, StepRecord};
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Ukf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    pub(super) fn unscented_update(
+        &mut self,
+        z: &OVector<f64, M>,
+    ) -> Result<&StepRecord<N, M>, FilterError> {
+        let k = self.core.step();
+        self.core
+            .check_measurement(self.measurement.meas_dim().value(), z)?;
+        let prior: Estimate<N> = self.core.update_prior().clone();
+        let n = prior.mean.nrows();
+        let (l, method) = sigma_sqrt(&prior.cov, "prior covariance for sigma points")
+            .map_err(|e| FilterError::at(k, e))?;
+        let m = self.measurement.meas_dim().value();
+        let r = self.measurement.noise_cov(k, &prior.mean);
+        check_model_output("measurement noise covariance R", &r, (m, m), k)?;
+        check_finite(&r, "measurement noise covariance R").map_err(|e| FilterError::at(k, e))?;
+        let z0 = self.measurement.measure(k, &prior.mean);
+        check_model_output("predicted measurement h(x)", &z0, (m, 1), k)?;
+        let spaces = Spaces {
+            state: self.state_space.as_deref(),
+            measurement_mean: self.measurement_mean.as_deref(),
+        };
+
+        let best = match &self.adaptive {
+            None => {
+                let kappa = self.set.kappa();
+                let w = self.set.weights(n)?;
+                let c = candidate(
+                    &self.measurement,
+                    &mut self.scratch_z,
+                    k,
+                    &prior,
+                    &l,
+                    &z0,
+                    &r,
+                    z,
+                    w,
+                    spaces,
+                )?;
+                (kappa, c)
+            }
+            Some((criterion, grid)) => {
+                let r_chol = Covariance::from_symmetric(r.clone(), "R").ok();
+                let mut best: Option<(f64, f64, Candidate<N, M>)> = None;
+                let mut first_error = None;
+                for &kappa in grid.values() {
+                    let w = self.set.with_kappa(kappa).weights(n)?;
+                    let c = match candidate(
+                        &self.measurement,
+                        &mut self.scratch_z,
+                        k,
+                        &prior,
+                        &l,
+                        &z0,
+                        &r,
+                        z,
+                        w,
+                        spaces,
+                    ) {
+                        Ok(c) => c,
+                        Err(e) => {
+                            first_error.get_or_insert(e);
+                            continue;
+                        }
+                    };
+                    let value = criterion_value(
+                        *criterion,
+                        &self.measurement,
+                        k,
+                        z,
+                        &c,
+                        &l,
+                        method,
+                        r_chol.as_ref(),
+                    );
+                    if KappaCriterion::improves(value, best.as_ref().map(|(b, _, _)| *b)) {
+                        best = Some((value, kappa, c));
+                    }
+                }
+                match best {
+                    Some((_, kappa, c)) => (kappa, c),
+                    None => {
+                        return Err(first_error.unwrap_or(FilterError::NonFinite {
+                            what: "adaptive kappa criterion (every grid value)",
+                            step: k,
+                        }));
+                    }
+                }
+            }
+        };
+        let (kappa, c) = best;
+        // The statistical linearisation H = Pxz^T P-^-1, through the Cholesky factor.
+        let h = match method {
+            SqrtMethod::Cholesky => l
+                .solve_lower_triangular(&c.pxz)
+                .and_then(|y| l.tr_solve_lower_triangular(&y))
+                .map(|ht| ht.transpose()),
+            _ => None,
+        }
+        .unwrap_or_else(|| self.measurement.jacobian(k, &prior.mean));
+        check_model_output("measurement Jacobian H", &h, (m, n), k)?;
+        self.last_kappa = Some(kappa);
+        self.core.commit_update(UpdateParts {
+            zhat: c.zhat,
+            innovation: c.nu,
+            h,
+            r,
+            s: c.s,
+            gain: c.gain,
+            mean: c.mean,
+            cov: c.cov,
+        })
+    }
+}
+
+/// The update at one kappa.
+#[derive(Clone, Debug)]
+struct Candidate<N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    zhat: OVector<f64, M>,
+    nu: OVector<f64, M>,
+    s: Covariance<M>,
+    pxz: OMatrix<f64, N, M>,
+    gain: OMatrix<f64, N, M>,
+    mean: OVector<f64, N>,
+    cov: OMatrix<f64, N, N>,
+}
+
+/// The optional non-Euclidean spaces of an update.
+struct Spaces<'a, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    state: Option<&'a dyn SigmaSpace<N>>,
+    measurement_mean: Option<&'a dyn SigmaSpace<M>>,
+}
+
+impl<N: Dim, M: Dim> Clone for Spaces<'_, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<N: Dim, M: Dim> Copy for Spaces<'_, N, M> where DefaultAllocator: Alloc<N, M> {}
+
+/// The unscented measurement update with weights `w`, the prior's factor `l` and the central
+/// measurement `z0` given (they do not depend on kappa).
+#[allow(clippy::too_many_arguments)]
+fn candidate<N: Dim, M: Dim, H: Measurement<N, M>>(
+    measurement: &H,
+    scratch: &mut [OVector<f64, M>],
+    k: usize,
+    prior: &Estimate<N>,
+    l: &OMatrix<f64, N, N>,
+    z0: &OVector<f64, M>,
+    r: &OMatrix<f64, M, M>,
+    z: &OVector<f64, M>,
+    w: SigmaWeights,
+    spaces: Spaces<'_, N, M>,
+) -> Result<Candidate<N, M>, FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let n = prior.mean.nrows();
+    let m = z0.nrows();
+    let x = &prior.mean;
+    // The model's answers are checked as they come, as in the prediction.
+    let (hx, residual) = ("sigma measurement h(x)", "measurement residual");
+    let measured = |at: &OVector<f64, N>| {
+        let z = measurement.measure(k, at);
+        check_model_output(hx, &z, (m, 1), k).map(|()| z)
+    };
+    let residual_of = |a: &OVector<f64, M>, b: &OVector<f64, M>| {
+        let e = measurement.residual(a, b);
+        check_model_output(residual, &e, (m, 1), k).map(|()| e)
+    };
+    // Fixed sizes write the sigma-point sums out, run-time sizes call the kernels (which may
+    // hand them to faer): the same arithmetic below the faer threshold, but the kernel calls
+    // changed how the compiler inlined the fixed-size update (W2's UKF step, callgrind).
+    let fixed = N::try_to_usize().is_some() && M::try_to_usize().is_some();
+    let (zhat, mut pz) = match spaces.measurement_mean {
+        None => {
+            // Sigma measurements as residuals from the central one: unwrapped around it.
+            for j in 0..n {
+                let d = l.column(j) * w.spread;
+                scratch[j] = residual_of(&measured(&(x + &d))?, z0)?;
+                scratch[n + j] = residual_of(&measured(&(x - &d))?, z0)?;
+            }
+            let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, nalgebra::U1);
+            for d in scratch.iter() {
+                dbar += d * w.other;
+            }
+            let mut pz = &dbar * dbar.transpose() * w.cov_center;
+            if fixed {
+                for d in scratch.iter() {
+                    let dd = d - &dbar;
+                    pz += &dd * dd.transpose() * w.other;
+                }
+            } else {
+                add_scatter(&mut pz, scratch, &dbar, w.other);
+            }
+            (z0 + &dbar, pz)
+        }
+        Some(mean) => {
+            // The sigma measurements as measured, averaged by the chosen mean, then their
+            // residuals from it.
+            let mut points = Vec::with_capacity(2 * n + 1);
+            points.push(z0.clone());
+            for sign in [1.0, -1.0] {
+                for j in 0..n {
+                    let d = l.column(j) * (sign * w.spread);
+                    points.push(measured(&(x + &d))?);
+                }
+            }
+            let mut zhat = mean.mean(&points, &w);
+            measurement.normalize(&mut zhat);
+            check_model_output("measurement space's sigma-point mean", &zhat, (m, 1), k)?;
+            for (slot, zi) in scratch.iter_mut().zip(&points[1..]) {
+                *slot = residual_of(zi, &zhat)?;
+            }
+            let e0 = residual_of(z0, &zhat)?;
+            let mut pz = &e0 * e0.transpose() * w.cov_center;
+            for e in scratch.iter() {
+                pz += e * e.transpose() * w.other;
+            }
+            (zhat, pz)
+        }
+    };
+    pz += r;
+    symmetrize(&mut pz);
+    // The central point has no state deviation, and the mean cancels between each pair.
+    let mut pxz = OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
+    if fixed {
+        for j in 0..n {
+            let dz = &scratch[j] - &scratch[n + j];
+            pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
+        }
+    } else {
+        add_cross_scatter(
+            &mut pxz,
+            l,
+            &scratch[..n],
+            &scratch[n..],
+            w.spread * w.other,
+        );
+    }
+    let mut zhat = zhat;
+    if spaces.measurement_mean.is_none() {
+        measurement.normalize(&mut zhat);
+        check_model_output("normalized measurement", &zhat, (m, 1), k)?;
+    }
+    let nu = residual_of(z, &zhat)?;
+    let s = Covariance::from_symmetric(pz, "innovation covariance Pz").map_err(|e| {
+        let e = if all_finite(&zhat) {
+            e
+        } else {
+            LinalgError::NonFinite {
+                what: "sigma-point measurements",
+            }
+        };
+        FilterError::at(k, e)
+    })?;
+    // Sizes agree by construction: `pxz` has as many columns as `S` has rows.
+    let gain = s.solve_right(&pxz).map_err(|e| FilterError::at(k, e))?;
+    let mut mean = x + &gain * &nu;
+    if let Some(space) = spaces.state {
+        space.normalize(&mut mean);
+        check_model_output("state space's normalized mean", &mean, (n, 1), k)?;
+    }
+    let cov = &prior.cov - propagate(&gain, s.matrix());
+    Ok(Candidate {
+        zhat,
+        nu,
+        s,
+        pxz,
+        gain,
+        mean,
+        cov,
+    })
+}
+
+/// The value of `criterion` for one candidate (smaller is better); NaN when it cannot be
+/// evaluated (a singular `P-` or `R` for the posterior criteria).
+#[allow(clippy::too_many_arguments)]
+fn criterion_value<N: Dim, M: Dim, H: Measurement<N, M>>(
+    criterion: KappaCriterion,
+    measurement: &H,
+    k: usize,
+    z: &OVector<f64, M>,
+    c: &Candidate<N, M>,
+    l: &OMatrix<f64, N, N>,
+    method: SqrtMethod,
+    r: Option<&Covariance<M>>,
+) -> f64
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let nis = quad_or_non_finite(&c.s, &c.nu);
+    criterion.value(c.s.log_det(), nis, || {
+        // nu^T U nu = (K nu)^T P-^-1 (K nu) = |L^-1 K nu|^2: the prior's density at x+.
+        let step = &c.gain * &c.nu;
+        let prior_term = match method {
+            SqrtMethod::Cholesky => l
+                .solve_lower_triangular(&step)
+                .map_or(f64::NAN, |y| y.norm_squared()),
+            _ => f64::NAN,
+        };
+        // A model answering with the wrong length here makes the criterion NaN (this kappa
+        // never wins), as a failed factorisation does; the update's own checks caught the
+        // others.
+        let zc = measurement.measure(k, &c.mean);
+        if zc.nrows() != z.nrows() {
+            return (f64::NAN, f64::NAN);
+        }
+        let e = measurement.residual(z, &zc);
+        if e.nrows() != z.nrows() {
+            return (f64::NAN, f64::NAN);
+        }
+        let meas_term = r.map_or(f64::NAN, |r| quad_or_non_finite(r, &e));
+        (prior_term, meas_term)
+    })
+}
+
+/// `v^T S^-1 v` as a score term: `+inf` when it lies beyond f64's range, NaN for a non-finite
+/// `v` (what the unchecked form gave before `quad_form` refused both).
+fn quad_or_non_finite<M: Dim>(s: &Covariance<M>, v: &OVector<f64, M>) -> f64
+where
+    DefaultAllocator: Alloc<M>,
+{
+    s.quad_form(v).unwrap_or_else(|_| {
+        if v.iter().all(|x| x.is_finite()) {
+            f64::INFINITY
+        } else {
+            f64::NAN
+        }
+    })
+}
