@@ -2,7 +2,7 @@
 //! random stable models, `Const` and `Dyn` sizes), its record's invariants, and typed errors.
 
 use kalibra_filters::{
-    Filter, FilterError, FilterOptions, InitialCheck, Kf, SqrtKf, Start, StepRecord, UpdateForm,
+    Filter, FilterError, FilterOptions, InitialCheck, Kf, SqrtKf, Start, UpdateForm,
 };
 use kalibra_linalg::{
     Alloc, Const, DMatrix, DVector, DefaultAllocator, Dim, Dyn, Matrix1, Matrix2, Matrix3, OMatrix,
@@ -12,6 +12,9 @@ use kalibra_models::{LinearGaussian, LinearObservation};
 use proptest::prelude::*;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::{Rng, SeedableRng};
+
+mod sqrt_common;
+use sqrt_common::{rel, worst_difference};
 
 /// A uniform draw in `[-1, 1)`.
 fn unit(rng: &mut ChaCha8Rng) -> f64 {
@@ -75,42 +78,6 @@ where
         p0,
         zs,
     )
-}
-
-/// Largest difference of `a` and `b` relative to `max(1, |a|)`.
-fn rel<R: Dim, C: Dim>(a: &OMatrix<f64, R, C>, b: &OMatrix<f64, R, C>) -> f64
-where
-    DefaultAllocator: kalibra_linalg::nalgebra::allocator::Allocator<R, C>,
-{
-    (a - b).amax() / a.amax().max(1.0)
-}
-
-/// The largest relative difference between two runs' records, over everything a metric reads.
-fn worst_difference<N: Dim, M: Dim>(a: &[StepRecord<N, M>], b: &[StepRecord<N, M>]) -> f64
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    assert_eq!(a.len(), b.len());
-    let mut worst = 0.0f64;
-    for (a, b) in a.iter().zip(b) {
-        assert_eq!(a.step(), b.step());
-        for d in [
-            rel(&a.prior().mean, &b.prior().mean),
-            rel(&a.prior().cov, &b.prior().cov),
-            rel(&a.posterior().mean, &b.posterior().mean),
-            rel(&a.posterior().cov, &b.posterior().cov),
-            rel(a.s_matrix(), b.s_matrix()),
-            rel(a.gain(), b.gain()),
-            rel(a.innovation(), b.innovation()),
-            rel(a.propagated(), b.propagated()),
-            rel(a.process_noise(), b.process_noise()),
-            (a.nis() - b.nis()).abs() / a.nis().max(1.0),
-            (a.log_likelihood() - b.log_likelihood()).abs() / a.log_likelihood().abs().max(1.0),
-        ] {
-            worst = worst.max(d);
-        }
-    }
-    worst
 }
 
 /// Runs the KF and the square-root KF on one random problem (every third measurement missing,

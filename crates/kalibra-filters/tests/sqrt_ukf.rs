@@ -2,53 +2,18 @@
 //! hooks, a bearings run), and typed errors.
 
 use kalibra_filters::{
-    AngleComponents, Filter, FilterError, SigmaSet, SqrtUkf, Start, StepRecord, Ukf, UkfPrediction,
+    AngleComponents, Filter, FilterError, SigmaSet, SqrtUkf, Start, Ukf, UkfPrediction,
 };
-use kalibra_linalg::{
-    Alloc, DefaultAllocator, Dim, Matrix1, Matrix2, Matrix4, OMatrix, U1, U2, U4, Vector1, Vector2,
-    Vector4,
-};
+use kalibra_linalg::{Matrix1, Matrix2, Matrix4, OMatrix, U1, U2, U4, Vector1, Vector2, Vector4};
 use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary, simulate, wrap_angle};
 use proptest::prelude::*;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 
 mod common;
+mod sqrt_common;
 use common::{p0, truth, w1};
-
-/// Largest difference of `a` and `b` relative to `max(1, |a|)`.
-fn rel<R: Dim, C: Dim>(a: &OMatrix<f64, R, C>, b: &OMatrix<f64, R, C>) -> f64
-where
-    DefaultAllocator: kalibra_linalg::nalgebra::allocator::Allocator<R, C>,
-{
-    (a - b).amax() / a.amax().max(1.0)
-}
-
-/// The largest relative difference between two runs' records.
-fn worst_difference<N: Dim, M: Dim>(a: &[StepRecord<N, M>], b: &[StepRecord<N, M>]) -> f64
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    assert_eq!(a.len(), b.len());
-    let mut worst = 0.0f64;
-    for (a, b) in a.iter().zip(b) {
-        for d in [
-            rel(&a.prior().mean, &b.prior().mean),
-            rel(&a.prior().cov, &b.prior().cov),
-            rel(&a.posterior().mean, &b.posterior().mean),
-            rel(&a.posterior().cov, &b.posterior().cov),
-            rel(a.s_matrix(), b.s_matrix()),
-            rel(a.gain(), b.gain()),
-            rel(a.h(), b.h()),
-            rel(a.propagated(), b.propagated()),
-            rel(a.process_noise(), b.process_noise()),
-            (a.nis() - b.nis()).abs() / a.nis().max(1.0),
-        ] {
-            worst = worst.max(d);
-        }
-    }
-    worst
-}
+use sqrt_common::{rel, worst_difference};
 
 /// The Ukf and the square-root UKF with `set` on W1 (every fourth measurement missing).
 fn ukf_vs_sqrt(set: SigmaSet, prediction: UkfPrediction, seed: u64) -> f64 {

@@ -4,7 +4,7 @@ use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite,
     check_finite, symmetrize,
 };
-use kalibra_models::{LinearDynamics, LinearMeasurement};
+use kalibra_models::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
 
 use crate::core::{KalmanCore, UpdateParts, check_model_output, reject_as_given};
 use crate::kalman::{check_model_sizes, core_accessors};
@@ -99,21 +99,21 @@ where
         p0: OMatrix<f64, N, N>,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
-        reject_as_given(
-            &options,
-            "the square-root KF with an as-given initial covariance (it needs a factor)",
-        )?;
         if options.update != UpdateForm::Joseph {
             return Err(FilterError::Unsupported {
                 what: "UpdateForm::Standard in the square-root KF (its update is the array form)",
             });
         }
-        check_model_sizes(&dynamics, &measurement)?;
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
-        let core = KalmanCore::new(n, m, x0, p0, options)?;
         let (nv, mv) = (n.value(), m.value());
-        let mut scratch = vec![0.0; (nv + mv).pow(2).max(2 * nv * nv)];
-        let factor = initial_factor(&mut scratch, core.cov())?;
+        let (core, factor, scratch) = start(
+            &dynamics,
+            &measurement,
+            x0,
+            p0,
+            options,
+            (nv + mv).pow(2).max(2 * nv * nv),
+        )?;
         Ok(Self {
             dynamics,
             measurement,
@@ -142,18 +142,36 @@ where
     }
 }
 
-/// The lower-triangular factor of a checked initial covariance: Cholesky's, or for a singular
-/// one the pivoted semi-definite factor made triangular.
-pub(crate) fn initial_factor<N: Dim>(
-    scratch: &mut Vec<f64>,
-    p0: &OMatrix<f64, N, N>,
-) -> Result<OMatrix<f64, N, N>, FilterError>
+/// A square-root filter's core, initial factor and QR work array.
+pub(crate) type Started<N, M> = (KalmanCore<N, M>, OMatrix<f64, N, N>, Vec<f64>);
+
+/// What both square-root filters build at construction: the models' sizes checked (as the
+/// standard filters check them), the core with the checked initial estimate, the initial
+/// factor (Cholesky's, or for a singular covariance the pivoted semi-definite factor made
+/// triangular), and a QR work array of `scratch_len` entries.
+pub(crate) fn start<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
+    dynamics: &D,
+    measurement: &H,
+    x0: OVector<f64, N>,
+    p0: OMatrix<f64, N, N>,
+    options: FilterOptions,
+    scratch_len: usize,
+) -> Result<Started<N, M>, FilterError>
 where
-    DefaultAllocator: Alloc<N>,
+    DefaultAllocator: Alloc<N, M>,
 {
-    let (root, _) = kalibra_linalg::semidefinite_factor(p0, "initial covariance")
+    reject_as_given(
+        &options,
+        "a square-root filter with an as-given initial covariance (it needs a factor)",
+    )?;
+    check_model_sizes(dynamics, measurement)?;
+    let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
+    let core = KalmanCore::new(n, m, x0, p0, options)?;
+    let (root, _) = kalibra_linalg::semidefinite_factor(core.cov(), "initial covariance")
         .map_err(FilterError::Initial)?;
-    Ok(lower_root(scratch, &root))
+    let mut scratch = vec![0.0; scratch_len];
+    let factor = lower_root(&mut scratch, &root);
+    Ok((core, factor, scratch))
 }
 
 /// The square-root prediction `S- = tria([F S, sqrt(Q)])` for the mean `x_pred` already

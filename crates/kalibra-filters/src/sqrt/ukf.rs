@@ -8,10 +8,10 @@ use std::sync::Arc;
 
 use kalibra_models::{Dynamics, Measurement};
 
-use crate::core::{KalmanCore, UpdateParts, check_model_output, reject_as_given};
-use crate::kalman::{check_model_sizes, core_accessors};
+use crate::core::{KalmanCore, UpdateParts, check_model_output};
+use crate::kalman::core_accessors;
 use crate::sqrt::cholupdate::rank_one;
-use crate::sqrt::kf::{factor_predict, initial_factor};
+use crate::sqrt::kf::{factor_predict, start};
 use crate::sqrt::noise_root::NoiseRoot;
 use crate::sqrt::qr::Array;
 use crate::{
@@ -115,17 +115,13 @@ where
         set: SigmaSet,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
-        reject_as_given(
-            &options,
-            "the square-root UKF with an as-given initial covariance (it needs a factor)",
-        )?;
-        check_model_sizes(&dynamics, &measurement)?;
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
-        set.weights(n.value())?;
-        let core = KalmanCore::new(n, m, x0, p0, options)?;
         let (nv, mv) = (n.value(), m.value());
-        let mut scratch = vec![0.0; (3 * nv * nv).max((2 * nv + mv) * mv).max((nv + mv).pow(2))];
-        let factor = initial_factor(&mut scratch, core.cov())?;
+        set.weights(nv)?;
+        // The largest QR array: the prediction's 3n x n, the update's (2n + m) x m and
+        // (2n + m) x n, or the linearised prediction's 2n x n.
+        let len = (3 * nv * nv).max((2 * nv + mv) * mv.max(nv));
+        let (core, factor, scratch) = start(&dynamics, &measurement, x0, p0, options, len)?;
         Ok(Self {
             dynamics,
             measurement,
