@@ -91,7 +91,8 @@ where
     /// [`InitialCheck::AsGiven`](crate::InitialCheck::AsGiven) (a factor needs a semi-definite
     /// `p0`) and for [`UpdateForm::Standard`] (the update is the array form, not a choice of
     /// covariance formula). [`FilterError::Initial`] for a `p0` that passes
-    /// [`InitialCheck::SymmetricOnly`] but is indefinite (it has no factor).
+    /// [`InitialCheck::SymmetricOnly`](crate::InitialCheck::SymmetricOnly) but is indefinite
+    /// (it has no factor).
     pub fn with_options(
         dynamics: D,
         measurement: H,
