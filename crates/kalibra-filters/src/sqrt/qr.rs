@@ -8,7 +8,7 @@
 //! measurement update's `(m + n) x (m + n)` array) need no `DimSum` size types and a step
 //! allocates nothing: the QR factorisation `T = Q R` gives `L = R^T`.
 
-use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix};
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, binary_exponent, ldexp};
 
 /// A column-major `rows x cols` work array (`rows >= cols`) holding `T = W^T`.
 pub(crate) struct Array<'a> {
@@ -52,20 +52,34 @@ impl<'a> Array<'a> {
     /// whose diagonal entry is negative, so that `L = R^T` has a non-negative diagonal (the
     /// Cholesky factor's convention; `L L^T` is unchanged).
     pub(crate) fn triangularise(&mut self) {
+        // Squares and dot products of entries beyond about 1e150 (or below 1e-150) leave f64's
+        // range: such an array is scaled by a power of two first, which is exact, and scaled
+        // back at the end; arrays within the range are not touched, bit for bit (the test
+        // `entries_whose_squares_leave_the_range_are_scaled`).
+        let largest = self.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let shift = match binary_exponent(largest) {
+            Some(e) if e.abs() > 450 => e,
+            _ => 0,
+        };
+        if shift != 0 {
+            self.data.iter_mut().for_each(|v| *v = ldexp(*v, -shift));
+        }
+        self.reflect();
+        if shift != 0 {
+            self.data.iter_mut().for_each(|v| *v = ldexp(*v, shift));
+        }
+    }
+
+    /// [`Array::triangularise`] on an array within range.
+    fn reflect(&mut self) {
         let (rows, cols) = (self.rows, self.cols);
         for j in 0..cols.min(rows) {
             let col = &mut self.data[j * rows..(j + 1) * rows];
-            // Scaled norm: the squares of entries near 1e160 or 1e-160 would leave f64's range.
-            let scale = col[j..].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            if scale == 0.0 || !scale.is_finite() {
+            let squares: f64 = col[j..].iter().map(|v| v * v).sum();
+            if squares == 0.0 {
                 continue;
             }
-            let norm = scale
-                * col[j..]
-                    .iter()
-                    .map(|v| (v / scale).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
+            let norm = squares.sqrt();
             let x0 = col[j];
             // alpha of the opposite sign to x0, so v = x - alpha e1 has no cancellation; v is
             // kept in the column, and 2 / v^T v = 1 / (alpha (alpha - x0)), written as two
@@ -170,6 +184,16 @@ mod tests {
         // The Cholesky factor is unique with a positive diagonal.
         let chol = expected.cholesky().unwrap().unpack();
         assert!((l - chol).amax() < 1e-13 * chol.amax());
+    }
+
+    #[test]
+    fn entries_whose_squares_leave_the_range_are_scaled() {
+        for scale in [1e200, 1e-200] {
+            let a = Matrix3::new(1.0, 2.0, 0.5, -1.0, 3.0, 0.25, 0.0, 1.0, 4.0) * scale;
+            let l = lower_root(&mut Vec::new(), &a) / scale;
+            let a = a / scale;
+            assert!((l * l.transpose() - a * a.transpose()).amax() < 1e-13 * 30.0);
+        }
     }
 
     #[test]
