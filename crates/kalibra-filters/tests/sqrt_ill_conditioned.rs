@@ -7,9 +7,13 @@
 //! 3). After the first update the exact posterior has the eigenvalues 1, 1 and
 //! `d^2 / (3 + d^2)`, about 3e-19: its matrix is positive definite but its smallest eigenvalue
 //! lies far below the rounding of its entries (1e-16), so the computed `P+` is a rounding away
-//! from indefinite, and the second update's `S = h2 P+ h2^T + d^2` (exactly about `8/3 d^2`)
-//! comes out as rounding noise of either sign. The factor of `P+` has the singular values
-//! 1, 1 and about 5e-10, well inside double precision, and keeps them.
+//! from indefinite (the Joseph form returns it singular), and the second update's
+//! `S = h2 P+ h2^T + d^2` (exactly about `8/3 d^2`) is dominated by rounding: the Joseph-form
+//! filter then returns a grossly indefinite posterior and a wrong mean, without an error (a
+//! typed error from a failed factorisation of `S` is the other possible outcome; the test
+//! accepts either). The UKF's `P- - K Pz K^T` loses the second measurement the same way. The
+//! factor of `P+` has the singular values 1, 1 and about 5e-10, well inside double precision,
+//! and keeps them.
 //!
 //! The exact posterior is computed another way, in closed form: with `P0 = I` and `x0 = 0`,
 //! `x+ = H^T (H H^T + d^2 I)^-1 z` (the batch update), which for the truth `(a, b, c)` and

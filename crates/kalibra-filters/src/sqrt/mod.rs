@@ -5,9 +5,11 @@
 //! A covariance computed as `P` can stop being positive definite in double precision: a
 //! near-perfect measurement against a large prior leaves a posterior whose smallest variance
 //! is below the rounding of its largest, and the Joseph form's products, or the UKF's
-//! `P- - K Pz K^T`, can then return an indefinite matrix; the next update's `S` fails its
-//! Cholesky factorisation ([`FilterError::NotPositiveDefinite`](crate::FilterError)), which the
-//! standard filters report. A factor changed only by orthogonal transformations stands for a
+//! `P- - K Pz K^T`, can then return an indefinite matrix. What follows depends on the
+//! rounding: a later `S` fails its Cholesky factorisation
+//! ([`FilterError::NotPositiveDefinite`](crate::FilterError)), which the standard filters
+//! report, or, as in the committed case below, every step succeeds on an indefinite covariance
+//! and the estimate drifts from the exact one with no error at all. A factor changed only by orthogonal transformations stands for a
 //! positive semi-definite covariance whatever the rounding, and carries about twice the
 //! precision of `P` (its condition number is the square root of `P`'s), so these filters carry
 //! on where the standard ones stop. The committed case is `tests/sqrt_ill_conditioned.rs`.
