@@ -20,6 +20,8 @@
 //!   kappa chosen per update on a [`KappaGrid`] by a [`KappaCriterion`] (UKF-ML, UKF-MPP).
 //! * [`Srf`]: the shifted Rayleigh filter for bearings (paper 001, Alg. 2, typos fixed) on any
 //!   [`BearingSensor`], with [`shifted_rayleigh_moments`] evaluated stably.
+//! * [`SqrtKf`] and [`SqrtUkf`] ([`sqrt`]): the KF and the UKF carrying a Cholesky factor of the
+//!   covariance, for problems where the standard filters' covariance loses definiteness.
 //!
 //! Every filter yields the same [`StepRecord`].
 //!
@@ -71,6 +73,7 @@ mod filter;
 mod kalman;
 mod rayleigh;
 mod record;
+pub mod sqrt;
 mod srf;
 mod steady;
 mod ukf;
@@ -82,6 +85,7 @@ pub use filter::{Filter, Start, Trajectory, TrajectoryEntry};
 pub use kalman::{Ekf, Kf};
 pub use rayleigh::{ShiftedRayleigh, shifted_rayleigh_moments};
 pub use record::{Estimate, StepRecord};
+pub use sqrt::{SqrtKf, SqrtUkf};
 pub use srf::{BearingSensor, Srf};
 pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};
 pub use ukf::{

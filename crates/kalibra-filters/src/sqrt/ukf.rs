@@ -1,0 +1,501 @@
+//! The square-root unscented Kalman filter (Van der Merwe and Wan, 2001).
+
+use kalibra_linalg::{
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, U1, all_finite,
+    check_finite, propagate, symmetrize,
+};
+use std::sync::Arc;
+
+use kalibra_models::{Dynamics, Measurement};
+
+use crate::core::{KalmanCore, UpdateParts, check_model_output};
+use crate::kalman::core_accessors;
+use crate::sqrt::cholupdate::rank_one;
+use crate::sqrt::kf::{factor_predict, start};
+use crate::sqrt::noise_root::NoiseRoot;
+use crate::sqrt::qr::Array;
+use crate::{
+    Filter, FilterError, FilterOptions, SigmaSet, SigmaSpace, SigmaWeights, StepRecord,
+    UkfPrediction,
+};
+
+/// The square-root UKF: the [`Ukf`](crate::Ukf)'s estimate, computed from a lower-triangular
+/// Cholesky factor `S` of the covariance (Van der Merwe and Wan, 2001).
+///
+/// The sigma points are `x +- spread S_j` from the factor's columns (the [`Ukf`](crate::Ukf)'s
+/// points: its Cholesky factor of `P` is this `S`). The predicted factor is the triangular
+/// factor of the QR factorisation of `[sqrt(W) (X_i - x-), sqrt(Q)]^T` over the `2n` outer points,
+/// then a rank-one update with the central point's deviation, a downdate when its covariance
+/// weight is negative (the scaled set with small `alpha`, the symmetric set with negative
+/// `kappa`). The measurement's factor `S_z` comes the same way from the sigma measurements and
+/// `sqrt(R)`; the gain is `K = Pxz S_z^-T S_z^-1` by two triangular solves. The posterior factor
+/// is not Van der Merwe and Wan's `S-` downdated by the `m` columns of `K S_z`, which fails where
+/// the measurement is much better than the prior, but the QR factorisation of the sigma points'
+/// errors `sqrt(W) (dx_i - K dz_i)` beside `K sqrt(R)` (equal for the optimal gain; see the
+/// [module docs](crate::sqrt)).
+///
+/// The same sigma sets ([`SigmaSet`]), predictions ([`UkfPrediction`], the linearised one by the
+/// square-root KF's QR step) and angle hooks ([`SqrtUkf::with_state_space`],
+/// [`SqrtUkf::with_measurement_mean`]) as the [`Ukf`](crate::Ukf), and its [`StepRecord`], with
+/// the covariances formed from the factors; where both work they agree (tested to 1e-10,
+/// relative). The adaptive choice of kappa ([`Ukf::with_adaptive_kappa`](crate::Ukf)) has no
+/// square-root form here.
+///
+/// ```
+/// use kalibra_filters::{Filter, SigmaSet, SqrtUkf, Ukf};
+/// use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary};
+/// use kalibra_linalg::{Matrix4, U4, Vector1, Vector2, Vector4};
+///
+/// let cv = Kinematic::constant_velocity(2, 1.0)?.dynamics(U4)?;
+/// let sensor = Bearing::new(U4, [0, 1], BearingReference::XAxis, 1e-4, Stationary(Vector2::zeros()))?;
+/// let (x0, p0) = (Vector4::new(100.0, 10.0, -1.0, 0.0), Matrix4::identity() * 10.0);
+/// let mut ukf = Ukf::new(&cv, &sensor, x0, p0, SigmaSet::recommended(4))?;
+/// let mut sqrt = SqrtUkf::new(&cv, &sensor, x0, p0, SigmaSet::recommended(4))?;
+/// ukf.predict()?;
+/// sqrt.predict()?;
+/// ukf.update(&Vector1::new(0.11))?;
+/// sqrt.update(&Vector1::new(0.11))?;
+/// assert!((ukf.mean() - sqrt.mean()).amax() < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct SqrtUkf<N: Dim, M: Dim, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    dynamics: D,
+    measurement: H,
+    core: KalmanCore<N, M>,
+    /// Lower triangular, `factor factor^T` the current (prior or posterior) covariance.
+    factor: OMatrix<f64, N, N>,
+    set: SigmaSet,
+    prediction: UkfPrediction,
+    q_root: NoiseRoot<N>,
+    r_root: NoiseRoot<M>,
+    /// The QR work array, sized at construction for the largest array, `(2n + n) x n`.
+    scratch: Vec<f64>,
+    // The 2n transformed points (then their deviations), allocated once.
+    scratch_x: Vec<OVector<f64, N>>,
+    scratch_z: Vec<OVector<f64, M>>,
+    state_space: Option<Arc<dyn SigmaSpace<N>>>,
+    measurement_mean: Option<Arc<dyn SigmaSpace<M>>>,
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> SqrtUkf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// A filter at step 0 with initial mean `x0`, covariance `p0` and sigma set `set`,
+    /// predicting with [`UkfPrediction::Unscented`].
+    ///
+    /// # Errors
+    /// As [`Ukf::new`](crate::Ukf::new).
+    pub fn new(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+    ) -> Result<Self, FilterError> {
+        Self::with_options(dynamics, measurement, x0, p0, set, FilterOptions::default())
+    }
+
+    /// As [`SqrtUkf::new`] with [`FilterOptions`] (the first step and the initial check; the
+    /// update form does not apply).
+    ///
+    /// # Errors
+    /// As [`Ukf::with_options`](crate::Ukf::with_options); [`FilterError::Initial`] for a `p0`
+    /// that passes [`InitialCheck::SymmetricOnly`](crate::InitialCheck::SymmetricOnly) but is
+    /// indefinite (it has no factor).
+    pub fn with_options(
+        dynamics: D,
+        measurement: H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+        options: FilterOptions,
+    ) -> Result<Self, FilterError> {
+        let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
+        let (nv, mv) = (n.value(), m.value());
+        set.weights(nv)?;
+        // The largest QR array: the prediction's 3n x n, the update's (2n + m) x m and
+        // (2n + m) x n, or the linearised prediction's 2n x n.
+        let len = (3 * nv * nv).max((2 * nv + mv) * mv.max(nv));
+        let (core, factor, scratch) = start(&dynamics, &measurement, x0, p0, options, len)?;
+        Ok(Self {
+            dynamics,
+            measurement,
+            core,
+            factor,
+            set,
+            prediction: UkfPrediction::default(),
+            q_root: NoiseRoot::new(n),
+            r_root: NoiseRoot::new(m),
+            scratch,
+            scratch_x: vec![OVector::<f64, N>::zeros_generic(n, U1); 2 * nv],
+            scratch_z: vec![OVector::<f64, M>::zeros_generic(m, U1); 2 * nv],
+            state_space: None,
+            measurement_mean: None,
+        })
+    }
+
+    /// The same filter with a non-Euclidean state space, as
+    /// [`Ukf::with_state_space`](crate::Ukf::with_state_space): the predicted mean and the
+    /// deviations the predicted factor is built from go through the space, and the updated
+    /// mean is normalised.
+    ///
+    /// # Errors
+    /// [`SigmaSpace::check`]'s error if the space does not fit the state dimension.
+    pub fn with_state_space(
+        mut self,
+        space: impl SigmaSpace<N> + 'static,
+    ) -> Result<Self, FilterError> {
+        space.check(self.dynamics.state_dim().value())?;
+        self.state_space = Some(Arc::new(space));
+        Ok(self)
+    }
+
+    /// The same filter forming the predicted measurement with `mean`, as
+    /// [`Ukf::with_measurement_mean`](crate::Ukf::with_measurement_mean).
+    ///
+    /// # Errors
+    /// [`SigmaSpace::check`]'s error if `mean` does not fit the measurement dimension.
+    pub fn with_measurement_mean(
+        mut self,
+        mean: impl SigmaSpace<M> + 'static,
+    ) -> Result<Self, FilterError> {
+        mean.check(self.measurement.meas_dim().value())?;
+        self.measurement_mean = Some(Arc::new(mean));
+        Ok(self)
+    }
+
+    /// The same filter predicting as `prediction` says ([`UkfPrediction::Linearised`]: the
+    /// square-root KF's QR prediction with the Jacobian).
+    #[must_use]
+    pub fn with_prediction(mut self, prediction: UkfPrediction) -> Self {
+        self.prediction = prediction;
+        self
+    }
+
+    /// The lower-triangular factor `S` of the current covariance (`P = S S^T`).
+    pub fn factor(&self) -> &OMatrix<f64, N, N> {
+        &self.factor
+    }
+
+    /// The sigma set.
+    pub fn sigma_set(&self) -> SigmaSet {
+        self.set
+    }
+
+    /// The dynamics model.
+    pub fn dynamics(&self) -> &D {
+        &self.dynamics
+    }
+
+    /// The measurement model.
+    pub fn measurement(&self) -> &H {
+        &self.measurement
+    }
+
+    fn unscented_predict(&mut self) -> Result<(), FilterError> {
+        let k = self.core.step();
+        let n = self.dynamics.state_dim().value();
+        let w = self.set.weights(n)?;
+        let x = self.core.mean().clone();
+        let fx = "predicted sigma point f(x)";
+        let x0 = self.dynamics.transition(k, &x);
+        check_model_output(fx, &x0, (n, 1), k)?;
+        for j in 0..n {
+            let d = self.factor.column(j) * w.spread;
+            let (plus, minus) = (
+                self.dynamics.transition(k, &(&x + &d)),
+                self.dynamics.transition(k, &(&x - &d)),
+            );
+            check_model_output(fx, &plus, (n, 1), k)?;
+            check_model_output(fx, &minus, (n, 1), k)?;
+            self.scratch_x[j] = plus;
+            self.scratch_x[n + j] = minus;
+        }
+        // The mean, then every point replaced by its deviation from it.
+        let (mean, d0) = match &self.state_space {
+            None => {
+                let mut mean = &x0 * w.mean_center;
+                for xi in &self.scratch_x {
+                    mean += xi * w.other;
+                }
+                for xi in &mut self.scratch_x {
+                    *xi -= &mean;
+                }
+                let d0 = &x0 - &mean;
+                (mean, d0)
+            }
+            Some(space) => {
+                let mut points = Vec::with_capacity(2 * n + 1);
+                points.push(x0);
+                points.extend(self.scratch_x.iter().cloned());
+                let mean = space.mean(&points, &w);
+                check_model_output("state space's sigma-point mean", &mean, (n, 1), k)?;
+                let residual = "state space's sigma-point residual";
+                for (slot, xi) in self.scratch_x.iter_mut().zip(&points[1..]) {
+                    *slot = space.residual(xi, &mean);
+                    check_model_output(residual, slot, (n, 1), k)?;
+                }
+                let d0 = space.residual(&points[0], &mean);
+                check_model_output(residual, &d0, (n, 1), k)?;
+                (mean, d0)
+            }
+        };
+        let f = self.dynamics.jacobian(k, &x);
+        check_model_output("transition Jacobian F", &f, (n, n), k)?;
+        let q = self.dynamics.noise_cov(k);
+        check_model_output("process noise covariance Q", &q, (n, n), k)?;
+        let lq = self
+            .q_root
+            .root(&q, "process noise covariance Q")
+            .map_err(|e| FilterError::at(k, e))?;
+        let predicted = weighted_factor(&mut self.scratch, &self.scratch_x, lq, &d0, &w).ok_or(
+            FilterError::NotPositiveDefinite {
+                what: "predicted covariance factor (central point's downdate)",
+                step: k + 1,
+            },
+        )?;
+        if !(all_finite(&predicted) && all_finite(&mean)) {
+            return Err(FilterError::NonFinite {
+                what: "predicted covariance factor",
+                step: k + 1,
+            });
+        }
+        // The record's prior and its split, as the Ukf records them.
+        let mut cov = &d0 * d0.transpose() * w.cov_center;
+        for d in &self.scratch_x {
+            cov += d * d.transpose() * w.other;
+        }
+        symmetrize(&mut cov);
+        let (propagated, noise) = if self.core.is_prior() {
+            let (_, old_noise) = self.core.prior_split();
+            let carried_noise = propagate(&f, old_noise);
+            (&cov - &carried_noise, carried_noise + q)
+        } else {
+            (cov, q)
+        };
+        self.core
+            .predict_split::<false>(mean, f, propagated, noise)?;
+        self.factor = predicted;
+        Ok(())
+    }
+
+    fn unscented_update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+        let k = self.core.step();
+        let at = |e| FilterError::at(k, e);
+        let m = self.measurement.meas_dim().value();
+        self.core.check_measurement(m, z)?;
+        let x = self.core.update_prior().mean.clone();
+        let n = x.nrows();
+        let w = self.set.weights(n)?;
+        let l = &self.factor;
+        let r = self.measurement.noise_cov(k, &x);
+        check_model_output("measurement noise covariance R", &r, (m, m), k)?;
+        check_finite(&r, "measurement noise covariance R").map_err(at)?;
+        let lr = self
+            .r_root
+            .root(&r, "measurement noise covariance R")
+            .map_err(at)?;
+        let z0 = self.measurement.measure(k, &x);
+        check_model_output("predicted measurement h(x)", &z0, (m, 1), k)?;
+        let measurement = &self.measurement;
+        let measured = |at: &OVector<f64, N>| {
+            let z = measurement.measure(k, at);
+            check_model_output("sigma measurement h(x)", &z, (m, 1), k).map(|()| z)
+        };
+        let residual_of = |a: &OVector<f64, M>, b: &OVector<f64, M>| {
+            let e = measurement.residual(a, b);
+            check_model_output("measurement residual", &e, (m, 1), k).map(|()| e)
+        };
+        let scratch = &mut self.scratch_z;
+        // The sigma measurements as residuals (from the central one, or from the chosen mean),
+        // then the cross covariance, in which the mean cancels between each pair.
+        let (mut zhat, e0) = match self.measurement_mean.as_deref() {
+            None => {
+                for j in 0..n {
+                    let d = l.column(j) * w.spread;
+                    scratch[j] = residual_of(&measured(&(&x + &d))?, &z0)?;
+                    scratch[n + j] = residual_of(&measured(&(&x - &d))?, &z0)?;
+                }
+                let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, U1);
+                for d in scratch.iter() {
+                    dbar += d * w.other;
+                }
+                (&z0 + &dbar, -dbar)
+            }
+            Some(mean) => {
+                let mut points = Vec::with_capacity(2 * n + 1);
+                points.push(z0.clone());
+                for sign in [1.0, -1.0] {
+                    for j in 0..n {
+                        let d = l.column(j) * (sign * w.spread);
+                        points.push(measured(&(&x + &d))?);
+                    }
+                }
+                let mut zhat = mean.mean(&points, &w);
+                measurement.normalize(&mut zhat);
+                check_model_output("measurement space's sigma-point mean", &zhat, (m, 1), k)?;
+                for (slot, zi) in scratch.iter_mut().zip(&points[1..]) {
+                    *slot = residual_of(zi, &zhat)?;
+                }
+                let e0 = residual_of(&z0, &zhat)?;
+                (zhat, e0)
+            }
+        };
+        let mut pxz =
+            OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
+        for j in 0..n {
+            let dz = &scratch[j] - &scratch[n + j];
+            pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
+        }
+        if self.measurement_mean.is_none() {
+            // Deviations from zhat: the residuals were taken from the central measurement.
+            for d in scratch.iter_mut() {
+                *d += &e0;
+            }
+            measurement.normalize(&mut zhat);
+            check_model_output("normalized measurement", &zhat, (m, 1), k)?;
+        }
+        let not_pd = FilterError::NotPositiveDefinite {
+            what: "innovation covariance Pz",
+            step: k,
+        };
+        let sz = weighted_factor(&mut self.scratch, scratch, lr, &e0, &w).ok_or(not_pd.clone())?;
+        let nu = residual_of(z, &zhat)?;
+        let mut s = &sz * sz.transpose();
+        symmetrize(&mut s);
+        let s = Covariance::from_symmetric(s, "innovation covariance Pz").map_err(|e| {
+            let e = if all_finite(&zhat) {
+                e
+            } else {
+                LinalgError::NonFinite {
+                    what: "sigma-point measurements",
+                }
+            };
+            at(e)
+        })?;
+        // K = Pxz S_z^-T S_z^-1, as the transpose of S_z^-T (S_z^-1 Pxz^T).
+        let gain = sz
+            .solve_lower_triangular(&pxz.transpose())
+            .and_then(|y| sz.tr_solve_lower_triangular(&y))
+            .ok_or(not_pd)?
+            .transpose();
+        let mut mean = &x + &gain * &nu;
+        if let Some(space) = &self.state_space {
+            space.normalize(&mut mean);
+            check_model_output("state space's normalized mean", &mean, (n, 1), k)?;
+        }
+        // S+ S+^T = sum_i W_i (dx_i - K dz_i)(dx_i - K dz_i)^T + (K sqrt(R))(K sqrt(R))^T, which
+        // equals P- - K Pz K^T for the optimal gain: an orthogonal triangularisation, where
+        // downdating S- by the columns of K S_z subtracts nearly equal numbers whenever the
+        // measurement is much better than the prior (and fails on the test
+        // `sqrt_ill_conditioned`'s first update).
+        for j in 0..n {
+            let d = l.column(j) * w.spread;
+            self.scratch_x[j] = &d - &gain * &scratch[j];
+            self.scratch_x[n + j] = -d - &gain * &scratch[n + j];
+        }
+        let posterior = weighted_factor(
+            &mut self.scratch,
+            &self.scratch_x,
+            &(&gain * lr),
+            &(-(&gain * &e0)),
+            &w,
+        )
+        .ok_or(FilterError::NotPositiveDefinite {
+            what: "posterior covariance factor (central point's downdate)",
+            step: k,
+        })?;
+        // The statistical linearisation H = Pxz^T P-^-1, through the factor; the model's
+        // Jacobian where the factor is singular (as the Ukf).
+        let h = l
+            .solve_lower_triangular(&pxz)
+            .and_then(|y| l.tr_solve_lower_triangular(&y))
+            .map(|ht| ht.transpose())
+            .unwrap_or_else(|| self.measurement.jacobian(k, &x));
+        check_model_output("measurement Jacobian H", &h, (m, n), k)?;
+        let cov = &posterior * posterior.transpose();
+        let record = self.core.commit_update(UpdateParts {
+            zhat,
+            innovation: nu,
+            h,
+            r,
+            s,
+            gain,
+            mean,
+            cov,
+        })?;
+        self.factor = posterior;
+        Ok(record)
+    }
+}
+
+/// The lower-triangular factor of `W_c0 d0 d0^T + W sum_i d_i d_i^T + L L^T` (the unscented
+/// covariance of deviations `d_i` from the mean, plus a noise with root `L`, which need not be
+/// square): the QR factorisation of `[sqrt(W) d_1 .. sqrt(W) d_2n, L]^T`, then a rank-one update with
+/// `sqrt(|W_c0|) d0`, a downdate for a negative `W_c0`. `None` when that downdate fails.
+fn weighted_factor<D: Dim, C: Dim>(
+    scratch: &mut Vec<f64>,
+    deviations: &[OVector<f64, D>],
+    noise_root: &OMatrix<f64, D, C>,
+    d0: &OVector<f64, D>,
+    w: &SigmaWeights,
+) -> Option<OMatrix<f64, D, D>>
+where
+    DefaultAllocator: Alloc<D> + nalgebra::allocator::Allocator<D, C>,
+{
+    let dim = noise_root.nrows();
+    let count = deviations.len();
+    let mut t = Array::zeroed(scratch, count + noise_root.ncols(), dim);
+    let root_w = w.other.sqrt();
+    for (i, d) in deviations.iter().enumerate() {
+        t.put_transposed(i, 0, &(d * root_w));
+    }
+    t.put_transposed(count, 0, noise_root);
+    t.triangularise();
+    let dd = d0.shape_generic().0;
+    let mut factor = t.lower_block(0, 0, (dd, dd));
+    if w.cov_center != 0.0 {
+        let mut x = d0 * w.cov_center.abs().sqrt();
+        if !rank_one(&mut factor, &mut x, w.cov_center.signum()) {
+            return None;
+        }
+    }
+    Some(factor)
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M> for SqrtUkf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    core_accessors!();
+
+    fn predict(&mut self) -> Result<(), FilterError> {
+        match self.prediction {
+            UkfPrediction::Unscented => self.unscented_predict(),
+            UkfPrediction::Linearised => {
+                let k = self.core.step();
+                let x = self.core.mean();
+                let x_pred = self.dynamics.transition(k, x);
+                let (f, q) = (self.dynamics.jacobian(k, x), self.dynamics.noise_cov(k));
+                factor_predict(
+                    &mut self.core,
+                    &mut self.factor,
+                    &mut self.q_root,
+                    &mut self.scratch,
+                    x_pred,
+                    f,
+                    q,
+                )
+            }
+        }
+    }
+
+    fn update(&mut self, z: &OVector<f64, M>) -> Result<&StepRecord<N, M>, FilterError> {
+        self.unscented_update(z)
+    }
+}
