@@ -27,6 +27,24 @@ pub trait Merge {
     }
 }
 
+/// The check every shaped accumulator's [`Merge::merge`] makes first: panics unless `other`
+/// [`Merge::fits`] `acc`.
+#[track_caller]
+pub(crate) fn assert_fits<A: Merge>(acc: &A, other: &A) {
+    assert!(acc.fits(other), "merging accumulators of different shapes");
+}
+
+/// Adds `other`'s per-step sums and counts to `sum` and `count`, entry by entry: the merge of
+/// [`StepMean`] and [`SquaredErrors`].
+fn add_sums(sum: &mut [f64], count: &mut [u64], other_sum: &[f64], other_count: &[u64]) {
+    for (a, b) in sum.iter_mut().zip(other_sum) {
+        *a += b;
+    }
+    for (a, b) in count.iter_mut().zip(other_count) {
+        *a += b;
+    }
+}
+
 impl<A: Merge, B: Merge> Merge for (A, B) {
     fn merge(&mut self, other: &Self) {
         self.0.merge(&other.0);
@@ -306,17 +324,8 @@ impl Merge for StepMean {
     }
 
     fn merge(&mut self, other: &Self) {
-        assert_eq!(
-            self.steps(),
-            other.steps(),
-            "merging accumulators of different horizons"
-        );
-        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
-            *a += b;
-        }
-        for (a, b) in self.count.iter_mut().zip(&other.count) {
-            *a += b;
-        }
+        assert_fits(self, other);
+        add_sums(&mut self.sum, &mut self.count, &other.sum, &other.count);
     }
 }
 
@@ -632,17 +641,8 @@ impl Merge for SquaredErrors {
     }
 
     fn merge(&mut self, other: &Self) {
-        assert_eq!(
-            (self.steps(), self.dim),
-            (other.steps(), other.dim),
-            "merging accumulators of different shapes"
-        );
-        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
-            *a += b;
-        }
-        for (a, b) in self.count.iter_mut().zip(&other.count) {
-            *a += b;
-        }
+        assert_fits(self, other);
+        add_sums(&mut self.sum, &mut self.count, &other.sum, &other.count);
     }
 }
 
