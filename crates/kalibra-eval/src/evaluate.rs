@@ -29,12 +29,12 @@ const STRIP_STEPS: usize = 32;
 /// `strip_steps` steps ([`STRIP_STEPS`]; the whole block is one pass run after run): each
 /// strip run after run, the strips in step order. Each step still
 /// takes the runs in run order and each run its steps in step order, so every sum is the one
-/// a pass run after run gives, to the bit. Why strips: NCI keeps each step's errors in a
-/// vector of its own ([`kalibra_metrics::Credibility`]), so a run's pass over 128 steps stored
-/// to 256 places far apart, cell after cell, and under perf those stores stalled about a
-/// quarter of the time of a 1000 x 1000 log; a strip of 32 steps stores to 64, still reads 32
-/// cells of each array in a row, and took 1.34-1.52 s of CPU per 8 calls against 1.60-1.67 s
-/// (strips of 8 and 16 read too little in a row and were slower: 1.99 s, 1.55-1.82 s).
+/// a pass run after run gives, to the bit (the test
+/// `blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count`). Why strips: NCI keeps
+/// each step's errors in a vector of its own ([`kalibra_metrics::Credibility`]), so a run's
+/// pass over a whole block stores to places far apart, cell after cell, while a strip of 32
+/// steps stores to few places and still reads 32 cells of each array in a row
+/// (`cargo xtask bench eval` times it).
 ///
 /// # Errors
 /// The first failing cell in the order fed (not necessarily the first run after run).

@@ -291,9 +291,8 @@ impl StepMean {
         self.count.get(step).copied().unwrap_or(0)
     }
 
-    /// The mean at `step`, finite; `None` where nothing was pushed (and beyond the horizon).
-    /// (Before issue 19 an empty step's mean was NaN, which looked like a number to every
-    /// caller that did not test for it.)
+    /// The mean at `step`, finite; `None` where nothing was pushed (and beyond the horizon),
+    /// rather than a NaN that would look like a number to a caller that did not test for it.
     ///
     /// ```
     /// use kalibra_metrics::StepMean;
@@ -660,7 +659,7 @@ impl Merge for SquaredErrors {
 /// ```
 ///
 /// # Errors
-/// [`MetricsError::Empty`] for an empty series (before issue 19 it was NaN);
+/// [`MetricsError::Empty`] for an empty series (rather than a NaN mean);
 /// [`MetricsError::NonFiniteSample`] naming the first NaN or infinite value.
 pub fn time_average(series: &[f64]) -> Result<f64, MetricsError> {
     if series.is_empty() {

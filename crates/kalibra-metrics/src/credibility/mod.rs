@@ -369,8 +369,8 @@ impl Credibility {
 
     /// The non-credibility index of `step` alone: [`Credibility::step_summary`]'s `nci`, to
     /// the bit, without the median (a sort of the runs' NEES), the ANEES and the MSE matrix,
-    /// for a caller that reports NCI only (the evaluation's per-step NCI spent two fifths of
-    /// its time on those).
+    /// for a caller that reports NCI only (the evaluation's per-step NCI; the test
+    /// `step_nci_is_the_summary_nci_to_the_bit` checks the two agree).
     ///
     /// # Errors
     /// As [`Credibility::step_summary`].
@@ -507,7 +507,7 @@ pub fn consistent_median_nees(dim: usize) -> Result<f64, MetricsError> {
 ///
 /// # Errors
 /// [`MetricsError::Empty`] for an empty sample and [`MetricsError::NonFiniteSample`] for a
-/// NaN or infinite value (before issue 19 both gave NaN, or a NaN sorted to the middle).
+/// NaN or infinite value, so that neither passes for a number.
 pub fn median(values: &[f64]) -> Result<f64, MetricsError> {
     if values.is_empty() {
         return Err(MetricsError::Empty { what: "sample" });

@@ -48,7 +48,7 @@ pub(super) fn nci_of_step(errors: &[f64], nees: &[f64], dim: usize) -> Result<Nc
     let (quad, rank) = pinv_quad_forms(errors, dim)?;
     // sum_i [log10 q_p - log10 q_sigma] = log10(prod_i q_p / prod_i q_sigma): the products
     // are kept as a mantissa and a power of two each ([`Product`]), so a step costs two
-    // logarithms instead of two per run (they were half of NCI's time). The products round
+    // logarithms instead of two per run. The products round
     // once per run, as the sum of logarithms did; only the last bits differ from it.
     let (mut p, mut sigma) = (Product::ONE, Product::ONE);
     let mut used = 0usize;
@@ -148,8 +148,8 @@ pub(super) fn pinv_quad_forms(
     };
 
     // Every component active at the common small dimensions: the same arithmetic on arrays
-    // of known length (the loops over the runs below cost some 500 instructions per run
-    // through the slices' iterators at n = 4).
+    // of known length, cheaper than the loops over the runs below through the slices'
+    // iterators (`fixed_quad_forms_equal_the_generic_ones_to_the_bit` checks the bits).
     macro_rules! sizes {
         ($($n:literal)*) => {
             match dim {
