@@ -30,6 +30,13 @@
 //! definite (the information form needs `Q^-1`; a rank-deficient `Q` is reported as an error,
 //! not regularised). The bound itself, `J^-1`, is formed explicitly because it is the output.
 //!
+//! # Where each job lives
+//! * `crlb`: the PCRLB recursion ([`Pcrlb`], [`MeasurementSample`]).
+//! * `observability`: [`observability_singular_values`].
+//! * `surrogate`: the surrogate bound ([`Surrogate`], [`ErgodicAverage`], [`Ellipsoid`],
+//!   [`gaussian_half_widths`]).
+//! * `error`: [`BoundsError`].
+//!
 //! # Example
 //! ```
 //! use kalibra_bounds::Pcrlb;

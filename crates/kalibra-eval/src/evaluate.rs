@@ -29,12 +29,12 @@ const STRIP_STEPS: usize = 32;
 /// `strip_steps` steps ([`STRIP_STEPS`]; the whole block is one pass run after run): each
 /// strip run after run, the strips in step order. Each step still
 /// takes the runs in run order and each run its steps in step order, so every sum is the one
-/// a pass run after run gives, to the bit. Why strips: NCI keeps each step's errors in a
-/// vector of its own ([`kalibra_metrics::Credibility`]), so a run's pass over 128 steps stored
-/// to 256 places far apart, cell after cell, and under perf those stores stalled about a
-/// quarter of the time of a 1000 x 1000 log; a strip of 32 steps stores to 64, still reads 32
-/// cells of each array in a row, and took 1.34-1.52 s of CPU per 8 calls against 1.60-1.67 s
-/// (strips of 8 and 16 read too little in a row and were slower: 1.99 s, 1.55-1.82 s).
+/// a pass run after run gives, to the bit (the test
+/// `blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count`). Why strips: NCI keeps
+/// each step's errors in a vector of its own ([`kalibra_metrics::Credibility`]), so a run's
+/// pass over a whole block stores to places far apart, cell after cell, while a strip of 32
+/// steps stores to few places and still reads 32 cells of each array in a row
+/// (`cargo xtask bench eval` times it).
 ///
 /// # Errors
 /// The first failing cell in the order fed (not necessarily the first run after run).
@@ -301,13 +301,17 @@ impl Evaluation {
         report: &mut Report,
     ) -> Result<(), EvalError> {
         report.findings.state = findings.finish();
-        let (per_step, band, counts) = per_step_stats(means, n, bands)?;
-        report.summary.anees_fraction_inside = fraction_inside(&per_step, &band);
-        report.anees_per_step = per_step;
-        report.anees_band = band;
-        report.nees_runs_per_step = counts;
-        report.summary.anees_test = consistency_test("anees", n, per_run, self.confidence)?;
-        report.summary.anees = report.summary.anees_test.as_ref().map(|t| t.value);
+        let anees = self.mean_report("anees", n, means, per_run, bands)?;
+        report.summary.anees = anees.test.as_ref().map(|t| t.value);
+        (
+            report.summary.anees_fraction_inside,
+            report.summary.anees_test,
+        ) = (anees.fraction_inside, anees.test);
+        (
+            report.anees_per_step,
+            report.anees_band,
+            report.nees_runs_per_step,
+        ) = (anees.per_step, anees.band, anees.runs_per_step);
         if runs >= 2 {
             // Each step's summary stands alone (an eigen-decomposition and a median over the
             // runs): computed on every core, collected in step order.
@@ -411,13 +415,17 @@ impl Evaluation {
             normalized[step] = Some(w);
         }
         report.findings.innovation = findings.finish();
-        let (per_step, band, counts) = per_step_stats(means, m, bands)?;
-        report.summary.anis_fraction_inside = fraction_inside(&per_step, &band);
-        report.anis_per_step = per_step;
-        report.anis_band = band;
-        report.nis_runs_per_step = counts;
-        report.summary.anis_test = consistency_test("anis", m, per_run, self.confidence)?;
-        report.summary.anis = report.summary.anis_test.as_ref().map(|t| t.value);
+        let anis = self.mean_report("anis", m, means, per_run, bands)?;
+        report.summary.anis = anis.test.as_ref().map(|t| t.value);
+        (
+            report.summary.anis_fraction_inside,
+            report.summary.anis_test,
+        ) = (anis.fraction_inside, anis.test);
+        (
+            report.anis_per_step,
+            report.anis_band,
+            report.nis_runs_per_step,
+        ) = (anis.per_step, anis.band, anis.runs_per_step);
         let present = normalized.iter().flatten().count();
         let lags = self.lags.min(present.saturating_sub(2));
         if lags > 0 {
@@ -482,6 +490,39 @@ impl BandCache {
 }
 
 type PerStep = (Vec<Option<f64>>, Vec<Option<Band>>, Vec<usize>);
+
+/// A side's mean normalised statistic (ANEES or ANIS) as the report holds it: per step with
+/// its band and the runs behind it, the fraction of steps inside their band, and the test of
+/// the runs' time averages.
+struct MeanReport {
+    per_step: Vec<Option<f64>>,
+    band: Vec<Option<Band>>,
+    runs_per_step: Vec<usize>,
+    fraction_inside: Option<f64>,
+    test: Option<ConsistencyTest>,
+}
+
+impl Evaluation {
+    /// The [`MeanReport`] of `statistic` (`"anees"`, `"anis"`) with `dof` degrees of freedom
+    /// per sample, from its per-step means and its per-run sums.
+    fn mean_report(
+        &self,
+        statistic: &str,
+        dof: usize,
+        means: &StepMean,
+        per_run: &[(f64, usize)],
+        bands: &mut BandCache,
+    ) -> Result<MeanReport, EvalError> {
+        let (per_step, band, runs_per_step) = per_step_stats(means, dof, bands)?;
+        Ok(MeanReport {
+            fraction_inside: fraction_inside(&per_step, &band),
+            test: consistency_test(statistic, dof, per_run, self.confidence)?,
+            per_step,
+            band,
+            runs_per_step,
+        })
+    }
+}
 
 fn per_step_stats(
     means: &StepMean,

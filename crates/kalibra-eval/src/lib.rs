@@ -62,6 +62,19 @@
 //! `B_k = H_k Q_k H_k^T` and `C_k = H_k P+_k H_k^T`, where `F_k`, `Q_k` are logged at the step
 //! they predict into; they are averaged over every update of every run.
 //!
+//! # Where each job lives
+//! * `log`: [`FilterLog`] and its arrays ([`Vectors`], [`Matrices`]), the log as held.
+//! * `evaluate`: [`Evaluation`] and its options, the whole-log evaluation in parallel blocks
+//!   of steps, and the report's statistics from the accumulated sums (bands, tests, verdict).
+//! * `stream`: the cell-by-cell [`Evaluator`] that every evaluation runs on; in it `cell`
+//!   (the cell types and their checks), `factor` and `fixed` (the NEES/NIS factorisation,
+//!   `Dyn` and fixed-size), `j` (`J1`/`J2` over consecutive steps), `sides` (the state and
+//!   innovation sides' sums), `per_run` (the runs' time-average sums) and `state`
+//!   ([`EvaluatorState`], an evaluator as data for a shard).
+//! * `report`: the serialisable [`Report`] and its parts.
+//! * `tune`: the offline `Q` tuning ([`Tuning`], [`TuneProblem`], [`TuneReport`]).
+//! * `error`: [`EvalError`].
+//!
 //! # Example
 //! ```
 //! use kalibra_eval::{Evaluation, FilterLog, Matrices, Vectors, VerdictKind};

@@ -1,4 +1,4 @@
-//! The property of issue 15, point 7: the report of a log equals kalibra-metrics' own
+//! The report of a log equals kalibra-metrics' own
 //! functions on the same arrays. Random small logs (1 to 5 runs, 1 to 20 steps, n of 1 to 3,
 //! m of 1 or 2, random positive definite covariances, each cell of each array missing at
 //! random) are evaluated, and every per-step series, band, window and headline number is

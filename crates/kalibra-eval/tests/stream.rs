@@ -457,9 +457,9 @@ fn the_rectangle_is_enforced_and_a_failed_cell_leaves_no_trace() {
     ));
 }
 
-/// A run or step index at the limit is refused before anything grows (issue 19, point 6): an
-/// index of usize::MAX used to size the evaluator's per-run and per-step state. The cell
-/// just below the limit is taken.
+/// A run or step index at the limit is refused before anything grows, so that an index of
+/// usize::MAX cannot size the evaluator's per-run and per-step state. The cell just below
+/// the limit is taken.
 #[test]
 fn indices_beyond_the_limits_are_refused_before_anything_grows() {
     use kalibra_eval::{EvalError, MAX_RUNS, MAX_STEPS};

@@ -27,6 +27,24 @@ pub trait Merge {
     }
 }
 
+/// The check every shaped accumulator's [`Merge::merge`] makes first: panics unless `other`
+/// [`Merge::fits`] `acc`.
+#[track_caller]
+pub(crate) fn assert_fits<A: Merge>(acc: &A, other: &A) {
+    assert!(acc.fits(other), "merging accumulators of different shapes");
+}
+
+/// Adds `other`'s per-step sums and counts to `sum` and `count`, entry by entry: the merge of
+/// [`StepMean`] and [`SquaredErrors`].
+fn add_sums(sum: &mut [f64], count: &mut [u64], other_sum: &[f64], other_count: &[u64]) {
+    for (a, b) in sum.iter_mut().zip(other_sum) {
+        *a += b;
+    }
+    for (a, b) in count.iter_mut().zip(other_count) {
+        *a += b;
+    }
+}
+
 impl<A: Merge, B: Merge> Merge for (A, B) {
     fn merge(&mut self, other: &Self) {
         self.0.merge(&other.0);
@@ -273,9 +291,8 @@ impl StepMean {
         self.count.get(step).copied().unwrap_or(0)
     }
 
-    /// The mean at `step`, finite; `None` where nothing was pushed (and beyond the horizon).
-    /// (Before issue 19 an empty step's mean was NaN, which looked like a number to every
-    /// caller that did not test for it.)
+    /// The mean at `step`, finite; `None` where nothing was pushed (and beyond the horizon),
+    /// rather than a NaN that would look like a number to a caller that did not test for it.
     ///
     /// ```
     /// use kalibra_metrics::StepMean;
@@ -306,17 +323,8 @@ impl Merge for StepMean {
     }
 
     fn merge(&mut self, other: &Self) {
-        assert_eq!(
-            self.steps(),
-            other.steps(),
-            "merging accumulators of different horizons"
-        );
-        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
-            *a += b;
-        }
-        for (a, b) in self.count.iter_mut().zip(&other.count) {
-            *a += b;
-        }
+        assert_fits(self, other);
+        add_sums(&mut self.sum, &mut self.count, &other.sum, &other.count);
     }
 }
 
@@ -632,17 +640,8 @@ impl Merge for SquaredErrors {
     }
 
     fn merge(&mut self, other: &Self) {
-        assert_eq!(
-            (self.steps(), self.dim),
-            (other.steps(), other.dim),
-            "merging accumulators of different shapes"
-        );
-        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
-            *a += b;
-        }
-        for (a, b) in self.count.iter_mut().zip(&other.count) {
-            *a += b;
-        }
+        assert_fits(self, other);
+        add_sums(&mut self.sum, &mut self.count, &other.sum, &other.count);
     }
 }
 
@@ -660,7 +659,7 @@ impl Merge for SquaredErrors {
 /// ```
 ///
 /// # Errors
-/// [`MetricsError::Empty`] for an empty series (before issue 19 it was NaN);
+/// [`MetricsError::Empty`] for an empty series (rather than a NaN mean);
 /// [`MetricsError::NonFiniteSample`] naming the first NaN or infinite value.
 pub fn time_average(series: &[f64]) -> Result<f64, MetricsError> {
     if series.is_empty() {

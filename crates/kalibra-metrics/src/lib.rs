@@ -50,6 +50,22 @@
 //! small p-values keep their digits (which is why the t and Kolmogorov-Smirnov tests are not
 //! statrs' own; see [`hypothesis`]).
 //!
+//! # Where each job lives
+//! * `consistency`: [`nees`], [`nis`] and the chi-square bands ([`ChiSquareBand`]).
+//! * `accumulate`: the per-step accumulators [`StepMean`] and [`SquaredErrors`], [`Merge`],
+//!   [`time_average`].
+//! * `credibility`: the [`Credibility`] accumulator (ANEES, median NEES, per-step statistics);
+//!   its `nci` module holds the NCI numerics (`Sigma`, its pseudo-inverse quadratic forms, the
+//!   runs' log ratios).
+//! * `innovation`: `J1`/`J2` ([`j_step`], [`JHorizon`]) and the sweep's [`crossover`].
+//! * `whiteness`: the normalised innovations and their autocorrelation test.
+//! * `window`: RMSE and sliding-window statistics of one run.
+//! * `itse`: [`itse`].
+//! * [`hypothesis`]: batch means, runs, t and Kolmogorov-Smirnov tests.
+//! * [`packed`]: the byte-string serde form of the accumulators' arrays.
+//! * `scale`: exact power-of-two scaling that keeps statistics of extreme values finite.
+//! * `error`: [`MetricsError`].
+//!
 //! # Example
 //! ```
 //! use kalibra_metrics::{ChiSquareBand, StepMean};

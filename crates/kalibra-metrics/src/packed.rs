@@ -1,8 +1,8 @@
 //! Serde forms of the accumulators' number arrays: a sequence of numbers in human-readable
 //! formats (JSON), and in binary formats (CBOR, which the shard files use) one byte string of
 //! little-endian 8-byte values. A shard's partial result is mostly such arrays, and reading a
-//! byte string is a copy where a sequence costs a decoder call per number: the merge of W1's
-//! 10^5-run partials took 12 ms with sequences and the byte strings make it a fraction of that.
+//! byte string is a copy where a sequence costs a decoder call per number (`cargo xtask bench
+//! shards` times the merge of shard files).
 //!
 //! Public so that other crates' serialised accumulators (the evaluator's state in
 //! `kalibra-eval`) share the one encoding: `#[serde(with = "kalibra_metrics::packed")]` on a

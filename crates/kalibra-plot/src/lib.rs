@@ -13,6 +13,10 @@
 //! machine (text is set by the viewer, never measured from system fonts): see
 //! `docs/ARCHITECTURE.md`, Decisions.
 //!
+//! # Where each job lives
+//! * [`figure`]: the figure as data ([`Figure`], [`Series`], [`Annotation`], [`Style`]).
+//! * `svg`: the deterministic SVG writer ([`ToSvg`]).
+//!
 //! # Example
 //! ```
 //! use kalibra_plot::{Annotation, Figure, Series, ToSvg};
