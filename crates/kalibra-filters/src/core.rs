@@ -12,7 +12,7 @@ use crate::as_given::lu_solve;
 use crate::record::Unchecked;
 use crate::{Estimate, FilterError, StepRecord};
 
-/// Checks the shape of what a user's model returned at step `k` (issue 19, point 3): a `Dyn`
+/// Checks the shape of what a user's model returned at step `k`: a `Dyn`
 /// model answering with a vector or matrix of the wrong size is a
 /// [`FilterError::DimensionMismatch`] naming both sizes, before anything is computed from it,
 /// not a panic inside nalgebra. Nothing to check for fixed sizes, whose types hold the shape.
@@ -66,9 +66,8 @@ pub enum InitialCheck {
     /// The opt-in is a constructor, [`Kf::as_given`](crate::Kf::as_given) or
     /// [`Ekf::as_given`](crate::Ekf::as_given), which makes a filter of type
     /// `Kf<N, M, D, H, AsGiven>`: the algebra is chosen by the type ([`Checking`]), so the
-    /// checked filters carry no trace of it (a run-time flag tested in the update cost the W1
-    /// step about 120 instructions under callgrind: the update stopped inlining into its
-    /// caller). Every `with_options` constructor returns [`FilterError::Unsupported`] for
+    /// checked filters carry no trace of it (a run-time flag tested in the update stops the
+    /// update inlining into its caller and lengthens the step: `cargo xtask bench w1`). Every `with_options` constructor returns [`FilterError::Unsupported`] for
     /// this variant; the UKF (whose sigma points need a square root of `P`), the SRF and the
     /// constant-gain KF have no as-given form.
     AsGiven,
@@ -415,9 +414,8 @@ where
         let prior = self.update_prior();
         // Run-time sizes go through the kernels, which may hand them to faer. Fixed sizes keep
         // the expressions written out: the same arithmetic as the kernels' nalgebra branch,
-        // but W1's step measured 60 instructions (1.5%) shorter under callgrind than through
-        // the kernel calls, whose faer branches are dead for fixed sizes yet change how the
-        // compiler inlines the update.
+        // in a shorter step than through the kernel calls (`cargo xtask bench w1`), whose faer
+        // branches are dead for fixed sizes yet change how the compiler inlines the update.
         let dynamic = N::try_to_usize().is_none() || M::try_to_usize().is_none();
         let (pht, mut s);
         if dynamic {

@@ -42,13 +42,6 @@ pub enum FilterError {
         /// What was asked for.
         what: &'static str,
     },
-    /// An instruction set name that [`Isa`](crate::batch::Isa)'s parser does not know (its
-    /// [`LinalgError::UnknownIsa`], converted).
-    #[error("parse instruction set {name:?} (expected avx512, avx2, neon, scalar or auto)")]
-    UnknownIsa {
-        /// The text given.
-        name: String,
-    },
     /// A dynamically sized input has the wrong size.
     #[error("{what} has dimension {found}, expected {expected}")]
     DimensionMismatch {
@@ -106,7 +99,6 @@ impl FilterError {
                 FilterError::NotPositiveDefinite { what, step }
             }
             LinalgError::Unsupported { what } => FilterError::Unsupported { what },
-            LinalgError::UnknownIsa { name } => FilterError::UnknownIsa { name },
             // LinalgError is non-exhaustive: report any future variant as a definiteness failure
             // of an unnamed matrix rather than panic.
             _ => FilterError::NotPositiveDefinite {

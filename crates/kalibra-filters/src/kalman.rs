@@ -173,7 +173,7 @@ macro_rules! constructors {
 constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
 
-/// Checks that the measurement model is built for the dynamics' state (issue 19, point 3): a
+/// Checks that the measurement model is built for the dynamics' state: a
 /// `Dyn` model of another state size is a [`FilterError::DimensionMismatch`] naming both sizes
 /// at construction, not a panic inside nalgebra at the first step. Models that do not say
 /// their state size ([`Measurement::expected_state_dim`] is `None`) pass.

@@ -25,6 +25,18 @@
 //!
 //! Every filter yields the same [`StepRecord`].
 //!
+//! # Where each job lives
+//! * `filter.rs`: [`Filter`] and its runs; `record.rs`: [`StepRecord`]; `error.rs`:
+//!   [`FilterError`].
+//! * `core.rs`: the numerical core the KF, EKF and constant-gain KF share; `kalman.rs`: [`Kf`]
+//!   and [`Ekf`]; `as_given.rs`: the as-given algebra; `constant_gain.rs`; `steady.rs`.
+//! * `ukf/`: the UKF, one idea per file (`sigma.rs`, `kappa.rs`, `space.rs`, `filter.rs`,
+//!   `predict.rs`, `update.rs`; see [`Ukf`]).
+//! * `srf.rs` and `rayleigh.rs`: the shifted Rayleigh filter and its moments.
+//! * [`batch`]: the batched KF, EKF and UKF, stepping many Monte Carlo runs at once (its module
+//!   docs list its files); the SIMD vocabulary they use is kalibra-linalg's
+//!   [`simd`](kalibra_linalg::simd).
+//!
 //! # Notation
 //! `x-_k, P-_k` the prior (predicted) estimate at step `k`, `x+_k, P+_k` the posterior;
 //! `nu_k = z_k - h_k(x-_k)` the innovation, `S_k = H_k P-_k H_k^T + R_k`, `K_k = P-_k H_k^T S_k^-1`.

@@ -53,8 +53,8 @@ where
     pub(crate) process_noise: OMatrix<f64, N, N>,
     /// What was not checked, for a filter started with less than the default check; `None`
     /// (the default check) for the others, whose hot path never touches it. Boxed: a plain
-    /// one-byte field for the check, or an inline `S`, changed the record's layout and cost
-    /// the W1 step 11 to 40 instructions under callgrind; a pointer costs nothing.
+    /// one-byte field for the check, or an inline `S`, changes the record's layout and
+    /// lengthens the checked filters' step (`cargo xtask bench w1`); a pointer costs nothing.
     pub(crate) unchecked: Option<Box<Unchecked<M>>>,
 }
 

@@ -1,4 +1,4 @@
-//! Issue 19, point 3: every `Dyn` size is checked where it enters. Filters built from models
+//! Every `Dyn` size is checked where it enters. Filters built from models
 //! whose sizes disagree (an `H` for another state, a bearing sensor whose coordinates lie
 //! outside the state) are a `DimensionMismatch` naming both sizes at construction; before,
 //! the constructors accepted them and nalgebra panicked at the first step.
@@ -113,7 +113,7 @@ fn a_linearisation_point_of_another_size_is_refused() {
 }
 
 /// A bearing sensor of a `Dyn` state whose Jacobian or position selection has one column too
-/// many (issue 19, point 3): the SRF's update is a `DimensionMismatch` naming both sizes, and
+/// many: the SRF's update is a `DimensionMismatch` naming both sizes, and
 /// the filter is left as it was, where nalgebra panicked in the products.
 #[test]
 fn srf_refuses_a_bearing_sensor_answering_with_the_wrong_size() {

@@ -485,9 +485,8 @@ fn constant_gain_kf_rejects_a_bad_gain_and_keeps_its_gain() {
     assert_eq!(*cgkf.gain(), gain);
 }
 
-/// Issue 19: `steady_state` accepted noise covariances that are not covariances (asymmetric,
-/// indefinite, negative) and returned `Ok`; now they are refused at step 0 by the shared
-/// check, naming the matrix.
+/// `steady_state` refuses noise covariances that are not covariances (asymmetric, indefinite,
+/// negative) at step 0 by the shared check, naming the matrix, rather than returning `Ok`.
 #[test]
 fn steady_state_refuses_noise_that_is_not_a_covariance() {
     use kalibra_filters::steady_state;
@@ -521,7 +520,7 @@ fn steady_state_refuses_noise_that_is_not_a_covariance() {
     ));
 }
 
-/// Issue 19, point 3: `Dyn` sizes that disagree are a `DimensionMismatch` naming both sizes,
+/// `Dyn` sizes that disagree are a `DimensionMismatch` naming both sizes,
 /// not a panic inside nalgebra.
 #[test]
 fn steady_state_checks_dyn_sizes() {

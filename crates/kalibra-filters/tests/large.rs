@@ -1,6 +1,5 @@
 //! Filters on run-time sizes around the faer threshold agree with nalgebra's code: after 100
-//! steps the posterior covariances of the two paths differ by at most 1e-12 relative (issue 18,
-//! point 3). Each case runs the same filter twice, once with the default kernel policy (faer
+//! steps the posterior covariances of the two paths differ by at most 1e-12 relative. Each case runs the same filter twice, once with the default kernel policy (faer
 //! from `FAER_MIN_DIM`) or with faer at every size, once with `KernelPolicy::NALGEBRA` (the code
 //! before faer).
 
@@ -13,7 +12,7 @@ use kalibra_linalg::{
 use kalibra_models::{LinearGaussian, LinearObservation};
 use proptest::prelude::*;
 
-/// The agreement the issue asks for, relative in the Frobenius norm.
+/// The agreement required of the two paths, relative in the Frobenius norm.
 const TOLERANCE: f64 = 1e-12;
 
 /// Steps per run.

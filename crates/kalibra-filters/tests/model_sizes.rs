@@ -1,4 +1,4 @@
-//! A `Dyn` model whose answers have the wrong size (issue 19, point 3): the EKF and the UKF
+//! A `Dyn` model whose answers have the wrong size: the EKF and the UKF
 //! (plain and adaptive) check every vector and matrix the user's model returns, and a wrong
 //! one is a `DimensionMismatch` naming both sizes at that step, with the filter left as it
 //! was; before, nalgebra panicked inside the sigma-point sums or the covariance products.

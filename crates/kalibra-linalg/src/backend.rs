@@ -61,11 +61,10 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 /// dimension of a kernel's operands (`n` for a state covariance, `m` for the factor of `S`)
 /// must reach it.
 ///
-/// Measured with `cargo xtask bench w4 --kernels` (one Kalman step with dense `F`,
-/// `m = max(2, n / 4)`, one thread; figures in `docs/ARCHITECTURE.md`): faer's step is level
-/// with nalgebra's at `n = 6`, 5-8% faster at 8 and 10 (where faer's Cholesky alone is still
-/// 5-17% slower), about 16% faster from 12 on, and the margin grows with `n` (1.5x at 64,
-/// 2x at 256). Below the threshold the results are nalgebra's to the bit, as before faer.
+/// The size from which faer's Kalman step is clearly faster than nalgebra's, its margin
+/// growing with `n` (`cargo xtask bench w4 --kernels`: one Kalman step with dense `F`,
+/// `m = max(2, n / 4)`, one thread). Below the threshold the results are nalgebra's to the
+/// bit.
 pub const FAER_MIN_DIM: usize = 12;
 
 /// The smallest dimension at which a [`KernelPolicy::with_threads`] policy runs faer's

@@ -199,8 +199,8 @@ where
         crate::check_dim(self.dim(), v.nrows(), "vector")?;
         let mut w = v.clone_owned();
         // The factor is non-singular by construction, so the solve cannot fail. nalgebra's
-        // at every size: an O(n^2) solve gains nothing measurable from faer, and routing it
-        // cost the W1 step 20 instructions under callgrind.
+        // at every size: an O(n^2) solve gains nothing from faer, and routing it lengthens
+        // the small step (`cargo xtask bench w4 --kernels`).
         self.chol
             .l_dirty()
             .solve_lower_triangular_unchecked_mut(&mut w);

@@ -26,9 +26,9 @@
 //!   by repeated squaring).
 //! * Large run-time sizes through faer ([`backend`]): from [`FAER_MIN_DIM`] on, the `Dyn`
 //!   kernels run faer's blocked, vectorised products and Cholesky factorisation on views of
-//!   nalgebra's storage (a Kalman step about 1.5x as fast as nalgebra's at `n = 64` and
-//!   1.9-2.3x from 128 on: `cargo xtask bench w4`), with nalgebra types at every interface. Fixed sizes never leave nalgebra. Which code
-//!   runs is one decision per kernel call, by the calling thread's [`KernelPolicy`]
+//!   nalgebra's storage (faster than nalgebra's from that size on: `cargo xtask bench w4`),
+//!   with nalgebra types at every interface (`backend.rs`). Fixed sizes never leave nalgebra.
+//!   Which code runs is one decision per kernel call, by the calling thread's [`KernelPolicy`]
 //!   ([`with_kernel_policy`]), which can also let faer use several threads within a step for
 //!   `n >= ` [`PARALLEL_MIN_DIM`].
 //!
@@ -37,6 +37,10 @@
 //!   ([`simd::BATCH`], [`simd::Lanes`]), lane-wise `atan2`, `sin`/`cos` and `exp`
 //!   ([`simd::math`]), and the lane-wise Cholesky factor and triangular solves
 //!   ([`simd::LaneCholesky`]).
+//!
+//! Files: `covariance.rs` ([`Covariance`]), `psd.rs` ([`PsdMatrix`], [`sigma_sqrt`]),
+//! `kernels.rs` (the filter kernels), `backend.rs` (the faer dispatch), `lyapunov.rs`,
+//! `gaussian.rs`, `scale.rs`, `alloc.rs`, `error.rs` ([`LinalgError`]), and the folder `simd/`.
 //!
 //! It is not a general linear-algebra library: it has no per-operation backend traits, and
 //! faer sits underneath the kernels, not beside them in the API.

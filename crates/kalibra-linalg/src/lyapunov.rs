@@ -221,9 +221,9 @@ mod tests {
         assert!((rho - 11.595119079207477).abs() < 1e-12, "{rho}");
     }
 
-    /// Issue 19, point 5: right from subnormal to 1e308 scales, against nalgebra's
-    /// eigenvalues. Before, `1e308 I`, `1e-308 I` and subnormal matrices gave 0 (the Frobenius
-    /// norm overflowed or underflowed).
+    /// Right from subnormal to 1e308 scales, against nalgebra's eigenvalues: `1e308 I`,
+    /// `1e-308 I` and subnormal matrices must not give 0 through a Frobenius norm that
+    /// overflows or underflows.
     #[test]
     fn spectral_radius_agrees_with_eigenvalues_at_every_scale() {
         use crate::ldexp;
@@ -284,8 +284,8 @@ mod tests {
         );
     }
 
-    /// Issue 19: an indefinite or negative noise covariance was accepted and gave an
-    /// indefinite "stationary covariance" as `Ok`.
+    /// An indefinite or negative noise covariance is refused, not turned into an indefinite
+    /// "stationary covariance" returned as `Ok`.
     #[test]
     fn a_noise_covariance_that_is_not_one_is_refused() {
         let a = Matrix2::identity() * 0.5;

@@ -1,4 +1,4 @@
-//! The hot-path kernels' documented panic (issue 19, point 3): mismatched `Dyn` sizes panic
+//! The hot-path kernels' documented panic: mismatched `Dyn` sizes panic
 //! at once, on nalgebra's path and on faer's (from `FAER_MIN_DIM`), and never return a
 //! result computed from the wrong entries (faer's `innovation_covariance` did, for an `R`
 //! larger than `H`'s rows). The filters check sizes before calling them

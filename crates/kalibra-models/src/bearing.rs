@@ -15,7 +15,7 @@ use crate::{Measurement, ModelError};
 /// interval. A NaN or infinite angle has no direction, and comes back NaN: it is not an error
 /// here because this is a hot-path arithmetic helper, and its callers refuse non-finite input
 /// before it: the filters refuse a non-finite measurement, and a non-finite state or sigma
-/// point reaches their posterior, whose finiteness check fails the step (issue 19, point 1).
+/// point reaches their posterior, whose finiteness check fails the step.
 ///
 /// ```
 /// use kalibra_models::wrap_angle;
@@ -679,7 +679,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_chacha::rand_core::SeedableRng;
 
-    /// Issue 19: every finite angle, at the extremes of f64 and at and across +-pi, wraps to a
+    /// Every finite angle, at the extremes of f64 and at and across +-pi, wraps to a
     /// finite angle in (-pi, pi]; a NaN or infinite one is NaN, as the docs say (the callers
     /// refuse it before).
     #[test]

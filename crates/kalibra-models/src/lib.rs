@@ -22,6 +22,18 @@
 //!
 //! It holds no filters and no metrics.
 //!
+//! # Where each job lives
+//! * `traits.rs`: the model traits; `jacobian.rs`: the finite-difference checks; `noise.rs`:
+//!   noise draws through a factor; `simulate.rs`: truth simulation; `error.rs`:
+//!   [`ModelError`].
+//! * `kinematic.rs`, `linear.rs`, `bearing.rs`, `ballistic.rs`, `angle.rs`, `target3d.rs`: the
+//!   concrete models, each with its lane-wise implementation where it has one.
+//! * `lanes/`: the lane-wise model traits ([`lanes::LaneDynamics`],
+//!   [`lanes::LaneMeasurement`], [`lanes::LaneSigmaMeasurement`], [`lanes::PerLane`]) and
+//!   `lanes/math.rs` ([`lanes::math::wrap_angle_lanes`]); the lane layout and the lane-wise
+//!   `atan2`, `sin`/`cos` and `exp` are kalibra-linalg's [`simd`](kalibra_linalg::simd),
+//!   re-exported there.
+//!
 //! # Notation
 //! `x_{k+1} = f_k(x_k) + w_k`, `w_k ~ N(0, Q_k)`; `z_k = h_k(x_k) + v_k`, `v_k ~ N(0, R_k)`.
 //! `k` is a step index; models that need time hold their own sampling period or time table.

@@ -1,4 +1,5 @@
-//! Times [`ChaCha8Lanes`]' draws on one thread, for the figures quoted in `lanes.rs`: 6 million
+//! Times [`ChaCha8Lanes`]' draws on one thread, the measurement behind `lanes.rs`' choice of
+//! lane-wise draws on AVX-512 only (`ChaCha8Lanes::for_batch`): 6 million
 //! standard normals (W1's: 1000 runs x 1000 steps, in groups of 8 runs, a call of 2 rows and
 //! one of 4 per step) lane-wise on every instruction set the CPU has and through the runs' own
 //! generators ([`Isa::Scalar`]), then 6 million `u64` the same ways, alternating the modes and

@@ -368,8 +368,8 @@ impl<const N: usize, const M: usize> WithSimd for Affine<'_, N, M> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) -> bool {
         let t = self.truth;
-        // Here rather than before the dispatch: compiled for the baseline, the 256-byte copy
-        // of W1's state was a call to memcpy every step.
+        // Here rather than before the dispatch: compiled for the baseline, the copy of the
+        // state is a call to memcpy every step (`cargo xtask bench w1`).
         t.current = t.x;
         affine(simd, &t.h, &t.current, &t.lr, self.nv, &mut t.z);
         affine(simd, &t.f, &t.current, &t.lq, self.nw, &mut t.x);
@@ -401,8 +401,8 @@ fn rows<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> [[f64; C]; R]
 
 /// `out = a v + l n`, lane by lane, each product summed over columns in order, one vector of
 /// lanes at a time with the matrices' entries broadcast. Written with pulp's vectors rather
-/// than as loops over `[f64; 8]`: the compiler vectorised those with transposes (under perf,
-/// 14% of W1's scheduled AVX-512 study went to these two products).
+/// than as loops over `[f64; 8]`, which the compiler vectorised with transposes that made
+/// these two products a large part of the scheduled study (`cargo xtask bench w1`).
 #[inline(always)]
 fn affine<S: Simd, const R: usize, const C: usize, const D: usize>(
     simd: S,

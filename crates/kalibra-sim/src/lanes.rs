@@ -17,15 +17,12 @@
 //! lane at a time, as the batched filters' scalar fallback).
 //!
 //! # Cost
-//! Measured on one shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 million
-//! normals, calls of 2 and 4 rows, on one thread, best of 7): lane-wise 14.0-14.3 ms
-//! (AVX-512) and 22.4-22.7 ms (AVX2) against 23.8-23.9 ms for [`StandardNormal`] on the runs'
-//! own generators; 6 million `u64` 12.0-12.3 ms and 15.2-15.6 ms against 13.9-14.4 ms. On
-//! AVX-512 the ziggurat's
-//! fast path runs across the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe`
-//! code: pulp offers gathers only as `unsafe`; 18.7 ms lane by lane before it); on AVX2 the
-//! same with two halves measured slower than lane by lane (26.2 ms against 23.3 ms), so AVX2
-//! draws lane by lane.
+//! Lane-wise draws make the batched study faster than each run's own generator on AVX-512,
+//! and not on AVX2 (example `lane_normals` times the draws on every instruction set the CPU
+//! has, `cargo xtask bench w1` the batched study). On AVX-512 the ziggurat's fast path runs across
+//! the 8 lanes with gathers (`lanes/gather.rs`, the crate's one `unsafe` code: pulp offers
+//! gathers only as `unsafe`); on AVX2 the same pass over two halves is slower than lane by
+//! lane (example `lane_normals`), so AVX2 draws lane by lane.
 //!
 //! # Exactness
 //! A ChaCha8 stream is a fixed sequence of 32-bit words (block `b` of stream `s` under key
@@ -254,15 +251,12 @@ impl ChaCha8Lanes {
         self.lanes == 0
     }
 
-    /// The generators of a batch stepped on `isa`, drawing the way that measured faster there:
-    /// lane-wise on AVX-512 (6 M normals on one thread: 14.0-14.3 ms against 23.8-23.9 ms
-    /// through the runs' own generators; W1's batched study, before its covariance schedule,
-    /// 0.053-0.056 s against 0.058 s lane by lane),
-    /// through the runs' own generators ([`Isa::Scalar`]) on every other instruction set (on
-    /// AVX2, lane-wise draws alone took 22.7 ms, but W1's batched AVX2 study took the same
-    /// 0.067 s either way, its draws 0.023 s lane-wise against 0.024 s). The numbers drawn are
-    /// the same either way; only the time differs, so a study passes its batch's instruction
-    /// set and this chooses.
+    /// The generators of a batch stepped on `isa`, drawing the way that is faster there:
+    /// lane-wise on AVX-512, through the runs' own generators ([`Isa::Scalar`]) on every other
+    /// instruction set, where lane-wise draws do not make the batched study faster
+    /// (`cargo xtask bench w1` times both; example `lane_normals` the draws alone). The
+    /// numbers drawn are the same either way; only the time differs, so a study passes its
+    /// batch's instruction set and this chooses.
     ///
     /// # Errors
     /// As [`ChaCha8Lanes::new`].
@@ -396,8 +390,8 @@ impl ChaCha8Lanes {
         }
         // rand's `StandardUniform` for f64 (the top 53 bits of the next `u64`, scaled by
         // 2^-53) and a fresh try through this lane's own fast path, rather than rand's generic
-        // code through `LaneRng` (under perf, `LaneRng`'s calls were 1.6% of W1's batched
-        // time): the same words in the same order, so the same numbers, which the tests check
+        // code through `LaneRng`, whose calls cost the batched study time (`cargo xtask bench
+        // w1`): the same words in the same order, so the same numbers, which the tests check
         // against rand's `StandardNormal` on the scalar generators, slow draws included.
         let draw = (self.next_u64(lane) >> 11) as f64 * (1.0 / (1u64 << 53) as f64);
         if ZIG_NORM_F[i + 1] + (ZIG_NORM_F[i] - ZIG_NORM_F[i + 1]) * draw < (-x * x / 2.0).exp() {
@@ -469,8 +463,8 @@ impl ChaCha8Lanes {
             }
         }
         // Each lane's chunk goes to its next slot: one kernel call per slot asked for. The
-        // usual case, one slot (no lane has skipped a refill), needs no mask per slot (under
-        // perf the masks made `refill` 4% of W1's batched time).
+        // usual case, one slot (no lane has skipped a refill), needs no mask per slot, which
+        // keeps `refill` off the batched study's profile (`cargo xtask bench w1`).
         if slots.count_ones() == 1 {
             self.isa.dispatch(Blocks {
                 input: &self.input,

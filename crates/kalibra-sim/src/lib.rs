@@ -23,6 +23,21 @@
 //! [`ChaCha8Lanes::standard_normals`] exactly the ziggurat normals) its own [`ChaCha8Rng`]
 //! would give, on every instruction set. Results stay those of the one-run studies.
 //!
+//! # Where each job lives
+//! * `lib.rs`: [`MonteCarlo`], its blocks and the one-run loops ([`MonteCarlo::accumulate`],
+//!   [`MonteCarlo::map`]), [`SimError`].
+//! * `batch.rs`: the batched loops ([`MonteCarlo::accumulate_batched`]) and the lane-wise
+//!   truths ([`LinearTruthBatch`], [`TruthBatch`]).
+//! * `lanes.rs`: lane-wise ChaCha8 draws ([`ChaCha8Lanes`], [`LaneRng`]); `lanes/gather.rs`
+//!   the AVX-512 ziggurat pass, the crate's one module with `unsafe` code;
+//!   `ziggurat_tables.rs` rand_distr's tables.
+//! * `shard.rs`: studies split across processes and merged ([`Shard`], [`Partial`],
+//!   [`merge`]).
+//! * `tuning.rs`: noise-tuning sweeps and grids ([`sweep`], [`grid`], [`q_ad`], [`p_ad`]).
+//!
+//! The SIMD vocabulary (the instruction set, [`BATCH`](kalibra_linalg::simd::BATCH) and the
+//! lane type) is kalibra-linalg's [`simd`](kalibra_linalg::simd) module.
+//!
 //! # Example
 //! ```
 //! use kalibra_sim::MonteCarlo;

@@ -337,8 +337,8 @@ mod tests {
         assert!(q_ad(&wide_guess, [(&wide, &wide)]).is_err());
     }
 
-    /// Issue 19, point 4: `q_ad`'s covariances go through the shared check (before, an
-    /// indefinite or asymmetric guess or pair was averaged into an `Ok`).
+    /// `q_ad`'s covariances go through the shared check, so an indefinite or asymmetric
+    /// guess or pair is an error rather than averaged into an `Ok`.
     #[test]
     fn q_ad_refuses_matrices_that_are_not_covariances() {
         let q = Matrix2::new(1.0, 0.0, 0.0, 1.0);

@@ -1,4 +1,4 @@
-//! Shards of a Monte Carlo study merge into the one-process result to the bit (issue 20), and
+//! Shards of a Monte Carlo study merge into the one-process result to the bit, and
 //! merging refuses partials that are not exactly the shards of one study.
 
 use kalibra_metrics::{Credibility, SquaredErrors, StepMean};

@@ -160,6 +160,40 @@ fn store_mat<S: Simd, const R: usize, const C: usize>(
     }
 }
 
+/// The weighted scatter of sigma points about `mean`, in the scalar UKF's order: the central
+/// point's deviation `d0` weighted `cov_center`, then every point of `sets` (the `+` points,
+/// then the `-` points) weighted `other`, each term `(d_a d_b) W` without fused
+/// multiply-adds. The unscented prediction's covariance and the update's `Pz` both call it.
+#[inline(always)]
+fn scatter<S: Simd, const D: usize, const P: usize>(
+    simd: S,
+    d0: &[S::f64s; D],
+    sets: [&[[S::f64s; D]; P]; 2],
+    mean: &[S::f64s; D],
+    cov_center: S::f64s,
+    other: S::f64s,
+) -> [[S::f64s; D]; D] {
+    let mut cov = [[simd.splat_f64s(0.0); D]; D];
+    for a in 0..D {
+        for b in 0..D {
+            cov[a][b] = simd.mul_f64s(simd.mul_f64s(d0[a], d0[b]), cov_center);
+        }
+    }
+    let mut d = *d0;
+    for point in sets.into_iter().flatten() {
+        for i in 0..D {
+            d[i] = simd.sub_f64s(point[i], mean[i]);
+        }
+        for a in 0..D {
+            for b in 0..D {
+                let t = simd.mul_f64s(simd.mul_f64s(d[a], d[b]), other);
+                cov[a][b] = simd.add_f64s(cov[a][b], t);
+            }
+        }
+    }
+    cov
+}
+
 /// The linearised prediction as a pulp operation: the model's `f(x)`, `F`, `Q` per lane, then
 /// `F P F^T + Q` symmetrised (`KalmanCore::predict`'s order, the batch kernel's products).
 struct Predict<'a, const N: usize, D> {
@@ -258,27 +292,11 @@ impl<const N: usize, const M: usize, D: LaneDynamics<N>> WithSimd
                     mean[i] = simd.add_f64s(mean[i], simd.mul_f64s(xi[i], other));
                 }
             }
-            let mut cov = [[zero; N]; N];
-            let mut d = [zero; N];
+            let mut d0 = [zero; N];
             for i in 0..N {
-                d[i] = simd.sub_f64s(x0[i], mean[i]);
+                d0[i] = simd.sub_f64s(x0[i], mean[i]);
             }
-            for a in 0..N {
-                for b in 0..N {
-                    cov[a][b] = simd.mul_f64s(simd.mul_f64s(d[a], d[b]), cov_center);
-                }
-            }
-            for xi in plus.iter().chain(minus.iter()) {
-                for i in 0..N {
-                    d[i] = simd.sub_f64s(xi[i], mean[i]);
-                }
-                for a in 0..N {
-                    for b in 0..N {
-                        let t = simd.mul_f64s(simd.mul_f64s(d[a], d[b]), other);
-                        cov[a][b] = simd.add_f64s(cov[a][b], t);
-                    }
-                }
-            }
+            let mut cov = scatter(simd, &d0, [&plus, &minus], &mean, cov_center, other);
             symmetrize(simd, &mut cov);
             let q = load_mat(simd, &st.q, c);
             let mut p = add(simd, &cov, &q);
@@ -510,24 +528,8 @@ fn candidate<S: Simd, const N: usize, const M: usize, H: LaneSigmaMeasurement<N,
             }
         }
         // Pz = dbar dbar^T W0c + sum W (d - dbar)(d - dbar)^T + R, symmetrised.
-        let mut pz = [[zero; M]; M];
-        for a in 0..M {
-            for b in 0..M {
-                pz[a][b] = simd.mul_f64s(simd.mul_f64s(dbar[a], dbar[b]), cov_center);
-            }
-        }
-        for d in dp.iter().chain(dm.iter()) {
-            let mut dd = [zero; M];
-            for a in 0..M {
-                dd[a] = simd.sub_f64s(d[a], dbar[a]);
-            }
-            for a in 0..M {
-                for b in 0..M {
-                    let t = simd.mul_f64s(simd.mul_f64s(dd[a], dd[b]), other);
-                    pz[a][b] = simd.add_f64s(pz[a][b], t);
-                }
-            }
-        }
+        // (The central residual's deviation is `-dbar`, whose products are dbar's exactly.)
+        let pz = scatter(simd, &dbar, [&dp, &dm], &dbar, cov_center, other);
         let r = load_mat(simd, &st.r, c);
         let mut pz = add(simd, &pz, &r);
         symmetrize(simd, &mut pz);

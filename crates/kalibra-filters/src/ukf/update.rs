@@ -197,7 +197,7 @@ where
     };
     // Fixed sizes write the sigma-point sums out, run-time sizes call the kernels (which may
     // hand them to faer): the same arithmetic below the faer threshold, but the kernel calls
-    // changed how the compiler inlined the fixed-size update (W2's UKF step, callgrind).
+    // change how the compiler inlines the fixed-size update (`cargo xtask bench w2`).
     let fixed = N::try_to_usize().is_some() && M::try_to_usize().is_some();
     let (zhat, mut pz) = match spaces.measurement_mean {
         None => {

@@ -11,26 +11,19 @@
 //! per-lane one to the bit, which the tests check on every instruction set the CPU has.
 //!
 //! The positions advance as if every try were accepted, and the branch to a row's leaving
-//! lanes is seldom taken (11% of W1's rows, 1.5% of its draws rejected: an instrumented run of
-//! the study, 1000 x 1000), so a row's words need not wait for the
-//! previous row's table look-ups: the gathers' latency (about 30 cycles each) overlaps. The
-//! first version let a lane that left draw the rest of its call per lane, after the pass:
-//! with the leaving lanes skipped (wrong values, timing only) the 6 M normals below took 11 ms
-//! instead of 15.5 ms; resolving them row by row took them to 14.0 ms (`lane_normals`, best of
-//! 7, twice) and W1's batched AVX-512 study from 106-110 ms to 103-105 ms for 4 x 10^6
-//! run-steps (`perf stat`, four alternations).
+//! lanes is seldom taken (the fast path accepts about 99% of tries), so a row's words need
+//! not wait for the previous row's table look-ups: the gathers' latency overlaps. A lane that
+//! leaves is resolved in its row rather than after the pass, which keeps the other lanes'
+//! pass going (example `lane_normals`; `cargo xtask bench w1`).
 //!
 //! # Why `unsafe`
 //! The gathers: pulp 0.22 exposes them only as `unsafe` functions of raw pointers (the rest of
 //! the arithmetic goes through pulp's safe wrappers, whose target features the `V4` token
-//! proves). Measured on the shared 2-core AVX-512 machine (example `lane_normals`: W1's 6 M
-//! normals, calls of 2 and 4 rows, one thread, best of 7, three runs alternating with the
-//! per-lane build): 15.5-16.5 ms against 18.7-19.4 ms per lane; `cargo xtask bench w1`, three
-//! runs alternating: the draws 0.016 s against 0.019-0.020 s, the batched AVX-512 study
-//! 0.053-0.056 s against 0.058 s. With AVX2 (two ymm halves of 4 lanes, 8 gathers a row)
-//! the same pass measured 26.2 ms against 23.3 ms per lane, so AVX2 draws per lane and this
-//! module has no AVX2 code. Every index is masked into its array just before the gather (see
-//! the `SAFETY` comments), so no lane, whatever its state, reads outside.
+//! proves), and they make the draws faster than the per-lane code (example `lane_normals`;
+//! `cargo xtask bench w1`). With AVX2 (two ymm halves of 4 lanes, 8 gathers a row) the same
+//! pass is slower than per lane, so AVX2 draws per lane and this module has no AVX2 code.
+//! Every index is masked into its array just before the gather (see the `SAFETY` comments),
+//! so no lane, whatever its state, reads outside.
 #![allow(unsafe_code)]
 
 use std::arch::x86_64::__m512i;
@@ -214,7 +207,7 @@ impl NullaryFnOnce for RowsV4<'_> {
                 f._mm512_mask_blend_pd(accept, cast(*row), x)
             });
             read = f._mm512_mask_add_epi64(read, take, read, two);
-            // The lanes not taken or rejected (11% of W1's rows): each draws this row
+            // The lanes not taken or rejected (a minority of rows): each draws this row
             // per lane from its position (past the rejected `u64`, or at the row's draw), and
             // the pass goes on from where they leave the positions. The branch is rarely
             // taken, so the next row's words need not wait for this row's table look-ups.
