@@ -1,7 +1,7 @@
 //! Reproduction tests for papers 000 and 003 (ballistic re-entry, J1/J2 metrics), at reduced
-//! Monte Carlo size; `cargo xtask reproduce` runs the full size. Tolerances are the issue's:
-//! each compares a computed value with the published one; the plain readings are reported by
-//! the reproduction, not asserted here.
+//! Monte Carlo size; `cargo xtask reproduce` runs the full size. Each test compares a computed
+//! value with the published one within the claim's tolerance; the plain readings are reported
+//! by the reproduction, not asserted here.
 
 use kalibra::filters::{Ekf, Filter, Start};
 use kalibra::models::RadarRates;
