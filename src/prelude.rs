@@ -1,4 +1,7 @@
-//! What a first program needs, in one `use`.
+//! What a first program needs, in one `use`: models, filters, metrics, bounds, Monte Carlo,
+//! and the entry points of the two jobs that start from data, judging a log
+//! ([`Evaluation::evaluate`] on a [`FilterLog`]) and tuning Q ([`Tuning::tune`] on a
+//! [`TuneProblem`]).
 //!
 //! ```
 //! use kalibra::prelude::*;
@@ -46,3 +49,8 @@ pub use kalibra_metrics::{
 pub use kalibra_bounds::{ErgodicAverage, Pcrlb, Surrogate};
 
 pub use kalibra_sim::{ChaCha8Rng, MonteCarlo, grid, sweep};
+
+pub use kalibra_eval::{
+    Evaluation, Evaluator, FilterLog, Matrices, Report, TuneProblem, TuneReport, Tuning, Vectors,
+    VerdictKind,
+};

@@ -1,4 +1,4 @@
-//! The adversarial suite (issue 19, point 7): the public entry points of the library crates,
+//! The adversarial suite: the public entry points of the library crates,
 //! fed what a hostile caller would feed them, through the public API alone. Strategies
 //! generate NaN, infinities, extremes (1e308, 1e-308, subnormals), non-symmetric, indefinite,
 //! singular and negative matrices, mismatched `Dyn` shapes, empty and single-sample series and

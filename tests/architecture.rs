@@ -225,7 +225,7 @@ fn declared_item(line: &str) -> Option<&str> {
     })
 }
 
-/// Issue 14, point 1: library crates carry no paper. Outside the studies crate, no file and no
+/// Architecture invariant: library crates carry no paper. Outside the studies crate, no file and no
 /// declared item (function, type, constant, module, test) is named after a paper, one of its
 /// problems or one of its readings; the library's models have neutral names and the papers'
 /// numbers live with their studies.

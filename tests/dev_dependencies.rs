@@ -1,5 +1,5 @@
 //! Every dev-dependency of every manifest is used by the package's tests, examples, benches or
-//! doc tests (issue 14, point 6). `cargo udeps` needs a nightly toolchain; this reads the
+//! doc tests, so no manifest drags in a crate nothing uses. `cargo udeps` needs a nightly toolchain; this reads the
 //! source instead: a dev-dependency `foo-bar` counts as used when some Rust file of the
 //! package names the path `foo_bar::` (a `use`, a path or a macro's crate), not through a
 //! re-export such as `kalibra::linalg::nalgebra::`.

@@ -89,7 +89,7 @@ fn the_counter_detects_dynamic_allocations() {
 }
 
 /// On `Dyn` sizes from the faer threshold on, a step (predict, Joseph update, NEES) allocates
-/// no more than on nalgebra's path (issue 18): faer's operands are views of nalgebra's storage,
+/// no more than on nalgebra's path: faer's operands are views of nalgebra's storage,
 /// its Cholesky scratch is a per-thread buffer kept between calls, and its products write into
 /// the result instead of into a temporary plus a transposed copy.
 #[test]

@@ -30,7 +30,7 @@ fn w1_is_bit_identical_for_1_2_and_8_threads() {
     assert_ne!(one.anees, other.anees);
 }
 
-/// A Monte Carlo study on `Dyn` sizes that run through faer (issue 18) is bit-identical for 1,
+/// A Monte Carlo study on `Dyn` sizes that run through faer is bit-identical for 1,
 /// 2 and 8 threads too: every run's kernels run sequentially on whichever thread holds it.
 #[test]
 fn faer_sized_runs_are_bit_identical_for_1_2_and_8_threads() {

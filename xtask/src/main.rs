@@ -7,15 +7,12 @@
 //!   Monte Carlo and writes its partial result to `DIR/<study>/shard-I-of-S.cbor`;
 //!   `cargo xtask merge DIR... [--out DIR]` merges all shards into the reports and index the
 //!   unsharded run writes, bit for bit (docs/distributed.md).
-//! * `cargo xtask bench [w1|w2|w3|all] [--runs N] [--steps N] [--threads N] [--repeats N]`: runs
-//!   the benchmark workloads through the public API and through hand-written nalgebra loops in
-//!   the same process, and prints steps per second and their ratio.
-//! * `cargo xtask bench eval [--runs N] [--steps N] [--seed N] [--repeats N]`: generates a W1
-//!   log of `--runs` x `--steps` (default 1000 x 1000, n = 4, m = 2) as CSV, NPZ and JSON under
-//!   `target/bench-eval/`, installs pandas and numpy from PyPI into a virtual environment
-//!   there, and times the release `kalibra eval` against `xtask/bench/eval_pandas.py` on each
-//!   file: wall time, rows per second and peak memory of both, their agreement, and the goals
-//!   of issue 15 (not part of `all`, which needs no Python).
+//! * `cargo xtask bench [w1|w2|w3|w4|eval|shards|all] [--out DIR] ...`: runs the benchmark
+//!   workloads through the public API and through hand-written nalgebra loops in the same
+//!   process, prints steps per second and their ratio, and writes the figures as JSON into
+//!   `DIR` (default `docs/benchmarks/`) with the Markdown table generated from them
+//!   (`bench/mod.rs` lists the workloads; `eval` times the release `kalibra eval` against a
+//!   pandas + numpy script and is not part of `all`, which needs no Python).
 //!
 //! The studies live in `kalibra-studies`; this binary parses arguments, loops over the
 //! registry, renders figure data to SVG, writes files and times.
@@ -23,11 +20,6 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
-mod bench_eval;
-mod bench_shards;
-mod bench_w2;
-mod bench_w3;
-mod bench_w4;
 mod reproduce;
 
 use clap::{Parser, Subcommand};

@@ -26,7 +26,8 @@ pub struct Args {
     #[arg(long, value_name = "DIR", value_parser = non_empty_dir)]
     out: Option<PathBuf>,
     /// Seed for every study, replacing each study's own.
-    // Negative numbers are taken as values, so that their error names the option (issue 19).
+    // Negative numbers are taken as values, so that their error names the option
+    // (`xtask/tests/cli.rs`).
     #[arg(long, allow_negative_numbers = true)]
     seed: Option<u64>,
     /// Worker threads (0: every core); the results do not depend on it.
@@ -87,7 +88,7 @@ fn known_study(id: &str) -> Result<String, String> {
         .map_err(|e| e.to_string())
 }
 
-fn git_revision() -> String {
+pub(crate) fn git_revision() -> String {
     std::process::Command::new("git")
         .args(["rev-parse", "--short=12", "HEAD"])
         .current_dir(crate::workspace_root())

@@ -1,4 +1,4 @@
-//! `cargo xtask`'s command line (issue 19, point 9): `--help` on every command and
+//! `cargo xtask`'s command line: `--help` on every command and
 //! subcommand (`bench` had none), every option named in its parse error, and an empty or
 //! unwritable `reproduce --out` refused before any study runs. The binary is the one cargo
 //! built for these tests; nothing here runs a study or a benchmark.

@@ -1,4 +1,4 @@
-//! Issue 20, point 3: a study run as three shards in three separate processes (as three
+//! A study run as three shards in three separate processes (as three
 //! machines would), merged by a fourth, writes the files of the one-process run byte for byte.
 
 use std::path::{Path, PathBuf};

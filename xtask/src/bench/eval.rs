@@ -1,5 +1,4 @@
-//! `cargo xtask bench eval`: `kalibra eval` against a pandas + numpy script on the same logs
-//! (issue 15, point 6).
+//! `cargo xtask bench eval`: `kalibra eval` against a pandas + numpy script on the same logs.
 //!
 //! `cargo xtask bench eval [--runs R] [--steps K] [--seed S] [--repeats N]` (defaults 1000 x
 //! 1000, seed 2012, best of 3):
@@ -13,8 +12,8 @@
 //!    float64, stored uncompressed) and JSON (nested lists). Values are written in Rust's
 //!    shortest round-trip decimal form, so all three hold the same numbers bit for bit. Files
 //!    go to `target/bench-eval/log-rR-kK-sS.{csv,npz,json}` and are reused when present (they
-//!    are written under a temporary name and renamed, so a present file is complete). At full
-//!    size they take 261, 240 and 275 MB.
+//!    are written under a temporary name and renamed, so a present file is complete); the bench
+//!    prints their sizes.
 //! 2. **Python.** Creates the virtual environment `target/bench-eval/venv` with `python3 -m
 //!    venv` and installs pandas and numpy into it from PyPI with pip, unless they import
 //!    already. Needs python3 with its venv module and network to PyPI the first time; Unix only
@@ -26,8 +25,8 @@
 //!    each under a fresh `xtask/bench/measure.py`, which records the wall time and the peak
 //!    resident memory of that one child (`getrusage(RUSAGE_CHILDREN)`). The best wall time
 //!    and the largest peak are reported. Every peak includes the driver's own resident
-//!    memory (about 11 MB), which the child holds until it executes the command; the bench
-//!    prints it, measured on `true`. kalibra's time includes writing report.md,
+//!    memory, which the child holds until it executes the command; the bench prints it,
+//!    measured on `true`. kalibra's time includes writing report.md,
 //!    report.html and the SVG figures; the script's includes starting Python and importing
 //!    pandas. Outputs go to `target/bench-eval/out/`.
 //! 5. **Agreement.** Compares kalibra's `report.json` with the script's results: per-step
@@ -37,7 +36,7 @@
 //!    everything: a speed-up between programs that did different work means nothing. The
 //!    chi-square bands are printed for information only (the script approximates them).
 //! 6. **Report.** A table per format (file size, rows, wall time, rows per second and peak
-//!    memory of both, the speed-up), then the issue's three goals with the measured figure
+//!    memory of both, the speed-up), then the three goals with the measured figure
 //!    and "met" or "not met": kalibra at least 5x the script on the CSV, at least 20x on the
 //!    NPZ, and kalibra's peak memory on the CSV under a quarter of the CSV's size. A missed
 //!    goal does not fail the bench: it is a measurement.
@@ -49,7 +48,6 @@ use std::fs::{self, File};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::Instant;
 
 use anyhow::{Context, Result, bail, ensure};
 use kalibra_filters::{Filter, Kf};
@@ -59,7 +57,7 @@ use kalibra_studies::w1;
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 use serde_json::Value;
 
-use crate::bench::Args;
+use super::{Args, Figures, timed};
 
 /// The largest difference allowed between kalibra's statistics and the script's, relative to
 /// the largest magnitude of the series compared (or of the two values, for a scalar).
@@ -232,21 +230,20 @@ fn ensure_log(size: LogSize, format: Format, path: &Path) -> Result<()> {
         return Ok(());
     }
     let tmp = path.with_extension(format!("{}.partial", format.ext()));
-    let started = Instant::now();
     let file = File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
     let writer = BufWriter::with_capacity(1 << 20, file);
-    match format {
+    let (seconds, written) = timed(|| match format {
         Format::Csv => write_csv(size, writer),
         Format::Npz => write_npz(size, writer),
         Format::Json => write_json(size, writer),
-    }
-    .with_context(|| format!("writing {}", tmp.display()))?;
+    });
+    written.with_context(|| format!("writing {}", tmp.display()))?;
     fs::rename(&tmp, path).with_context(|| format!("renaming {} into place", tmp.display()))?;
     println!(
         "  wrote {} ({:.1} MB) in {:.1} s",
         path.display(),
         megabytes(fs::metadata(path)?.len()),
-        started.elapsed().as_secs_f64()
+        seconds
     );
     Ok(())
 }
@@ -373,7 +370,7 @@ fn write_list(w: &mut impl Write, values: &[f64]) -> Result<()> {
 }
 
 /// Runs `cmd` to completion, failing with its output if it fails.
-fn run(cmd: &mut Command) -> Result<()> {
+fn run_command(cmd: &mut Command) -> Result<()> {
     let out = cmd.output().with_context(|| format!("starting {cmd:?}"))?;
     ensure!(
         out.status.success(),
@@ -392,7 +389,7 @@ pub(crate) fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
     let python = venv.join("bin").join("python");
     if !python.exists() {
         println!("  creating the virtual environment {}", venv.display());
-        run(Command::new("python3").args(["-m", "venv"]).arg(&venv)).context(
+        run_command(Command::new("python3").args(["-m", "venv"]).arg(&venv)).context(
             "creating the Python virtual environment (the eval bench needs python3 with its \
              venv module)",
         )?;
@@ -413,7 +410,7 @@ pub(crate) fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
             "  installing pandas and numpy from PyPI into {}",
             venv.display()
         );
-        run(Command::new(&python).args([
+        run_command(Command::new(&python).args([
             "-m",
             "pip",
             "install",
@@ -641,7 +638,8 @@ struct Row {
     script: Measured,
 }
 
-pub(crate) fn eval_bench(args: &Args) -> Result<()> {
+/// Runs the eval workload, prints its figures and returns them.
+pub(crate) fn run(args: &Args) -> Result<Figures> {
     let size = LogSize {
         runs: args.runs,
         steps: args.steps,
@@ -660,10 +658,12 @@ pub(crate) fn eval_bench(args: &Args) -> Result<()> {
     let dir = root.join("target").join("bench-eval");
     let out_dir = dir.join("out");
     fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    println!(
-        "eval: kalibra eval against pandas + numpy on a W1 log of {} runs x {} steps (n = 4, m = 2), seed {}, window {window}, best of {}",
+    let title = format!(
+        "kalibra eval against pandas + numpy on a W1 log of {} runs x {} steps (n = 4, m = 2), seed {}, window {window}, best of {}",
         size.runs, size.steps, size.seed, args.repeats
     );
+    println!("eval: {title}");
+    let mut figures = Figures::new("eval", title);
     for format in FORMATS {
         ensure_log(size, format, &dir.join(size.file_name(format)))?;
     }
@@ -776,7 +776,28 @@ pub(crate) fn eval_bench(args: &Args) -> Result<()> {
             disagreements.join(", ")
         );
     }
-    Ok(())
+    for r in &rows {
+        let f = r.format.ext();
+        figures.push(format!("{f}: log size"), megabytes(r.size_bytes), "MB");
+        figures.push(format!("{f}: kalibra eval"), r.kalibra.wall_s, "s");
+        figures.push(
+            format!("{f}: kalibra eval peak memory"),
+            megabytes(r.kalibra.peak_bytes),
+            "MB",
+        );
+        figures.push(format!("{f}: pandas + numpy script"), r.script.wall_s, "s");
+        figures.push(
+            format!("{f}: pandas + numpy peak memory"),
+            megabytes(r.script.peak_bytes),
+            "MB",
+        );
+        figures.push(
+            format!("{f}: script / kalibra eval"),
+            r.script.wall_s / r.kalibra.wall_s,
+            "x",
+        );
+    }
+    Ok(figures)
 }
 
 fn print_table(rows: &[Row], n_rows: usize) {

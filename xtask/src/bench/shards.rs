@@ -1,4 +1,4 @@
-//! `cargo xtask bench shards`: what cutting W1 into shards costs and buys (issue 20, point 5).
+//! `cargo xtask bench shards`: what cutting W1 into shards costs and buys.
 //!
 //! The study (`--shard-runs` runs, default 10^5, of `--steps` steps) runs once in one process,
 //! then as S = 1, 2 and 4 shards, one after the other on this machine, each with every core
@@ -9,29 +9,29 @@
 //! Partials are encoded as the shard files hold them (CBOR, `study::write_partial`).
 //! Last, a projection to 100 machines from the measured per-run cost and merge.
 
-use std::time::Instant;
-
 use anyhow::{Result, ensure};
 use kalibra_sim::Shard;
 use kalibra_studies::w1;
 
-use crate::bench::Args;
+use super::{Args, Figures, timed};
 
-/// Runs the benchmark and prints its table.
-pub fn shards_bench(args: &Args) -> Result<()> {
+/// Runs the benchmark, prints its table and returns its figures.
+pub(crate) fn run(args: &Args) -> Result<Figures> {
     let config = w1::Config {
         runs: args.shard_runs,
         steps: args.steps,
         threads: 0,
         ..w1::Config::paper()
     };
-    println!(
-        "Shards: W1 (KF, NEES, NIS, RMSE), {} runs x {} steps; shards run one after the other, each on every core",
+    let title = format!(
+        "W1 (KF, NEES, NIS, RMSE), {} runs x {} steps; shards run one after the other, each on every core",
         config.runs, config.steps
     );
-    let start = Instant::now();
-    let whole = w1::run(&config)?;
-    let one_process = start.elapsed().as_secs_f64();
+    println!("Shards: {title}");
+    let mut figures = Figures::new("shards", title);
+    let (one_process, whole) = timed(|| w1::run(&config));
+    let whole = whole?;
+    figures.push("one process", one_process, "s");
     let whole_bits = serde_json::to_string(&whole)?;
     println!("one process: {one_process:.2} s");
     println!(
@@ -43,22 +43,28 @@ pub fn shards_bench(args: &Args) -> Result<()> {
         let mut slowest = 0f64;
         let mut texts = Vec::with_capacity(count);
         for index in 0..count {
-            let start = Instant::now();
-            let part = w1::run_shard(&config, Shard::new(index, count)?)?;
-            texts.push(kalibra_studies::study::write_partial(&part)?);
-            slowest = slowest.max(start.elapsed().as_secs_f64());
+            let (seconds, text) = timed(|| -> Result<Vec<u8>> {
+                let part = w1::run_shard(&config, Shard::new(index, count)?)?;
+                Ok(kalibra_studies::study::write_partial(&part)?)
+            });
+            texts.push(text?);
+            slowest = slowest.max(seconds);
         }
         let bytes: usize = texts.iter().map(Vec::len).sum();
-        let start = Instant::now();
-        let parts = kalibra_studies::study::read_partials("w1", texts)?;
-        let merged = w1::merge(&config, parts)?;
-        let merge = start.elapsed().as_secs_f64();
+        let (merge, merged) = timed(|| -> Result<_> {
+            let parts = kalibra_studies::study::read_partials("w1", texts)?;
+            Ok(w1::merge(&config, parts)?)
+        });
+        let merged = merged?;
         let identical = serde_json::to_string(&merged)? == whole_bits;
         ensure!(
             identical,
             "the merged report of {count} shards differs from the one-process report"
         );
         merge_costs.push(merge);
+        figures.push(format!("{count} shards: slowest shard"), slowest, "s");
+        figures.push(format!("{count} shards: merge"), merge, "s");
+        figures.push(format!("{count} shards: partials"), bytes as f64, "bytes");
         println!(
             "| {count} | {slowest:.2} | {merge:.3} | {:.2} | {:.2}x | {:.2}% | {} | yes |",
             slowest + merge,
@@ -77,5 +83,5 @@ pub fn shards_bench(args: &Args) -> Result<()> {
         one_process / (per_machine + merge),
         one_process * 1e7 / config.runs as f64 / 100.0,
     );
-    Ok(())
+    Ok(figures)
 }

@@ -1,23 +1,11 @@
-//! `cargo xtask bench`: library against hand-written nalgebra loops, in one process.
-//!
-//! `cargo xtask bench [w1|w2|w3|w4|eval|all] [--runs N] [--steps N] [--threads N] [--repeats N]
-//! [--seed N] [--sizes N,N,...] [--kernels] [--ukf] [--no-python]`: W1 (KF, `--runs` x `--steps`) then W2 (paper 001's problem III, EKF and UKF,
-//! `--runs` x 51 steps, in `bench_w2`) and W3 (paper 003's re-entry EKF with J1/J2, 41 values
-//! of Q x 100 runs x 59 steps, in `bench_w3`) by default, or only the one named. `--steps` applies to
-//! W1 and eval, `--threads` to W1, W2 and W4, `--seed` to eval only.
-//!
-//! `eval` (in `bench_eval`) times the `kalibra` executable against a pandas + numpy script
-//! on generated logs. `all` leaves it out: it needs Python, a virtual environment installed
-//! from PyPI and over a gigabyte of logs, which the in-process workloads do not.
-//!
-//! `shards` (in `bench_shards`) runs W1 as 1, 2 and 4 shards and times the slowest shard and
-//! the merge against the one-process run (`--shard-runs`, default 10^5 runs).
-//!
-//! `w4` (in `bench_w4`) times one Kalman filter at the run-time sizes `--sizes` through
-//! faer's kernels and nalgebra's, and a numpy script beside them (`--no-python` skips it). It
-//! is not part of `all` either: it takes minutes at n = 1024.
-
-use std::time::Instant;
+//! W1: a Kalman filter on a 2-D constant-velocity target (`[x, y, vx, vy]`, `T = 1`,
+//! `R = 100 I2`), `--runs` x `--steps`, per-step NEES and NIS averaged over the runs, timed
+//! four ways in one process: the scalar library (`w1::run_scalar`), a hand-written nalgebra
+//! `SMatrix` loop on the same draws, and the batched study (`w1::run_batched`) on the detected
+//! instruction set and with AVX2 and the scalar fallback forced, each with and without the
+//! covariance schedule the runs share. Then the batched time's parts (the truth simulation and
+//! its draws alone) and the thread checks: every path must give the results it gives on one
+//! thread, to the bit, and the batched reports with and without the schedule must be equal.
 
 use anyhow::{Result, bail};
 use kalibra_filters::batch::{BATCH, Isa};
@@ -28,134 +16,17 @@ use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
-/// Which workloads to run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum Workloads {
-    /// W1, W2 then W3 (not eval, which needs Python and PyPI).
-    All,
-    /// W1: 2-D constant-velocity KF with per-step NEES and NIS.
-    #[value(alias = "W1")]
-    W1,
-    /// W2: paper 001's problem III, EKF and UKF, 51 steps.
-    #[value(alias = "W2")]
-    W2,
-    /// W3: paper 003's re-entry EKF with J1/J2 at every step, 41 values of Q x 100 runs x 59
-    /// steps: library, hand-written loop and batched.
-    #[value(alias = "W3")]
-    W3,
-    /// `kalibra eval` on CSV, NPZ and JSON logs against a pandas + numpy script.
-    Eval,
-    /// W4: one KF at run-time sizes n = 8 .. 1024, faer's kernels against nalgebra's, and a
-    /// numpy script.
-    #[value(alias = "W4")]
-    W4,
-    /// W1 cut into 1, 2 and 4 shards: slowest shard plus merge against one process
-    /// (`--shard-runs` runs, default 10^5).
-    Shards,
-}
+use super::{Args, Best, Figures, best_of};
 
-/// `cargo xtask bench` arguments.
-#[derive(Debug, clap::Args)]
-pub(crate) struct Args {
-    /// Which workload to run.
-    #[arg(value_enum, default_value = "all")]
-    workloads: Workloads,
-    /// Monte Carlo runs per workload.
-    #[arg(long, default_value_t = 1000, value_parser = positive, allow_negative_numbers = true)]
-    pub(crate) runs: usize,
-    /// Steps per run (W1 and eval; W2 has 51).
-    #[arg(long, default_value_t = 1000, value_parser = positive, allow_negative_numbers = true)]
-    pub(crate) steps: usize,
-    /// Threads for the multi-thread comparison of W1 and W2, and for W4's within-step
-    /// parallelism at n >= 512 (default: every core).
-    #[arg(long, default_value_t = cores(), allow_negative_numbers = true)]
-    pub(crate) threads: usize,
-    /// Timed repeats; the best is reported.
-    #[arg(long, default_value_t = 3, value_parser = positive, allow_negative_numbers = true)]
-    pub(crate) repeats: usize,
-    /// Seed of the eval workload's generated logs (W1 and W2 keep their fixed seeds).
-    #[arg(long, default_value_t = 2012, allow_negative_numbers = true)]
-    pub(crate) seed: u64,
-    /// W4: the state dimensions measured (default 8, 16, ..., 1024).
-    #[arg(long, value_delimiter = ',', default_values_t = crate::bench_w4::SIZES, allow_negative_numbers = true)]
-    pub(crate) sizes: Vec<usize>,
-    /// W4: also time the kernels of the step one by one, faer against nalgebra.
-    #[arg(long)]
-    pub(crate) kernels: bool,
-    /// W4: also time a UKF on the same problems (n <= 256), faer against nalgebra.
-    #[arg(long)]
-    pub(crate) ukf: bool,
-    /// W4: skip the numpy script (no Python, no PyPI).
-    #[arg(long)]
-    pub(crate) no_python: bool,
-    /// Shards: the study's runs.
-    #[arg(long, default_value_t = 100_000, value_parser = positive)]
-    pub(crate) shard_runs: usize,
-}
-
-/// A count of at least one.
-fn positive(text: &str) -> Result<usize, String> {
-    match text.parse::<usize>() {
-        Ok(0) => Err("must be at least 1".into()),
-        Ok(n) => Ok(n),
-        Err(e) => Err(e.to_string()),
-    }
-}
-
-fn cores() -> usize {
-    std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
-}
-
-pub fn main(args: &Args) -> Result<()> {
-    if args.workloads == Workloads::Eval {
-        return crate::bench_eval::eval_bench(args);
-    }
-    if args.workloads == Workloads::W4 {
-        return crate::bench_w4::w4_bench(args);
-    }
-    if args.workloads == Workloads::Shards {
-        return crate::bench_shards::shards_bench(args);
-    }
-    let all = args.workloads == Workloads::All;
-    if all || args.workloads == Workloads::W1 {
-        w1_bench(args)?;
-    }
-    if all || args.workloads == Workloads::W2 {
-        if all {
-            println!();
-        }
-        crate::bench_w2::w2_bench(args)?;
-    }
-    if all || args.workloads == Workloads::W3 {
-        if all {
-            println!();
-        }
-        crate::bench_w3::w3_bench(args)?;
-    }
-    Ok(())
-}
-
-/// Best wall time of `repeats` calls, and the last result.
-pub(crate) fn best_of<T>(repeats: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
-    let mut best = f64::INFINITY;
-    let mut out = None;
-    for _ in 0..repeats {
-        let t = Instant::now();
-        let r = f()?;
-        best = best.min(t.elapsed().as_secs_f64());
-        out = Some(r);
-    }
-    Ok((best, out.expect("repeats > 0")))
-}
-
-fn w1_bench(args: &Args) -> Result<()> {
+/// Runs W1, prints its figures and returns them.
+pub(crate) fn run(args: &Args) -> Result<Figures> {
     let total = (args.runs * args.steps) as f64;
-    println!(
-        "W1: KF on [x, y, vx, vy], T = 1, R = 100 I2, {} runs x {} steps, per-step NEES and NIS averaged over runs (best of {})",
+    let title = format!(
+        "KF on [x, y, vx, vy], T = 1, R = 100 I2, {} runs x {} steps, per-step NEES and NIS averaged over runs (best of {})",
         args.runs, args.steps, args.repeats
     );
+    println!("W1: {title}");
+    let mut figures = Figures::new("w1", title);
     let config = |threads| w1::Config {
         runs: args.runs,
         steps: args.steps,
@@ -166,7 +37,7 @@ fn w1_bench(args: &Args) -> Result<()> {
     };
     // The batched path on the instruction set detected (or KALIBRA_SIMD's), then AVX2 and the
     // scalar fallback forced, where the CPU has them.
-    let detected = crate::simd_from_env()?.unwrap_or_else(Isa::detect);
+    let detected = super::isa()?;
     let mut isas = vec![detected];
     isas.extend(
         [Isa::Avx2, Isa::Scalar]
@@ -174,32 +45,26 @@ fn w1_bench(args: &Args) -> Result<()> {
             .filter(|i| *i != detected && i.is_available()),
     );
     // Interleave them all so that machine noise hits each alike.
-    let mut lib_best = f64::INFINITY;
-    let mut hand_best = f64::INFINITY;
-    let mut batched_best = vec![f64::INFINITY; isas.len()];
+    let mut lib_best = Best::default();
+    let mut hand_best = Best::default();
+    let mut batched_best = vec![Best::default(); isas.len()];
     let mut batched_reports = vec![None; isas.len()];
     // The same batches computing every lane's covariances themselves (the dense kernel),
     // without the schedule the runs share.
-    let mut per_lane_best = vec![f64::INFINITY; isas.len()];
+    let mut per_lane_best = vec![Best::default(); isas.len()];
     let mut per_lane_reports = vec![None; isas.len()];
     let mut lib_report = None;
     let mut hand_out = None;
     for _ in 0..args.repeats {
-        let t = Instant::now();
-        lib_report = Some(w1::run_scalar(&config(1))?);
-        lib_best = lib_best.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        hand_out = Some(hand_w1(args.runs, args.steps, 2012));
-        hand_best = hand_best.min(t.elapsed().as_secs_f64());
+        lib_report = Some(lib_best.time(|| w1::run_scalar(&config(1)))?);
+        hand_out = Some(hand_best.time(|| hand_w1(args.runs, args.steps, 2012)));
         for (i, isa) in isas.iter().enumerate() {
-            let t = Instant::now();
-            batched_reports[i] = Some(w1::run_batched(&config(1), *isa)?);
-            batched_best[i] = batched_best[i].min(t.elapsed().as_secs_f64());
-            let t = Instant::now();
-            per_lane_reports[i] = Some(w1::run_batched_per_lane(&config(1), *isa)?);
-            per_lane_best[i] = per_lane_best[i].min(t.elapsed().as_secs_f64());
+            batched_reports[i] = Some(batched_best[i].time(|| w1::run_batched(&config(1), *isa))?);
+            per_lane_reports[i] =
+                Some(per_lane_best[i].time(|| w1::run_batched_per_lane(&config(1), *isa))?);
         }
     }
+    let (lib_best, hand_best) = (lib_best.seconds(), hand_best.seconds());
     let (lib_report, hand_out) = (
         lib_report.expect("repeats > 0"),
         hand_out.expect("repeats > 0"),
@@ -224,11 +89,19 @@ fn w1_bench(args: &Args) -> Result<()> {
         "  ratio library / hand-written (1 thread): {:.3}",
         lib_rate / hand_rate
     );
+    figures.push("library, 1 thread", lib_rate, "steps/s");
+    figures.push("hand-written nalgebra loop, 1 thread", hand_rate, "steps/s");
+    figures.push("library / hand-written", lib_rate / hand_rate, "x");
     println!(
         "  library, {} threads   : {:>12.0} steps/s ({t_par:.3} s), speed-up {:.2}x over 1 thread",
         args.threads,
         par_rate,
         par_rate / lib_rate
+    );
+    figures.push(
+        format!("library, {} threads", args.threads),
+        par_rate,
+        "steps/s",
     );
     // Largest relative difference over the per-step ANEES, ANIS and RMSE series.
     let rel_diff = |a: &w1::Report, b: &w1::Report| {
@@ -244,28 +117,35 @@ fn w1_bench(args: &Args) -> Result<()> {
         .fold(0.0f64, f64::max)
     };
     for (i, isa) in isas.iter().enumerate() {
-        let rate = total / batched_best[i];
+        let rate = total / batched_best[i].seconds();
         let report = batched_reports[i].as_ref().expect("repeats > 0");
         println!(
             "  batched ({:<6} {} lanes/vector), 1 thread: {:>12.0} steps/s ({:.3} s), {:.2}x hand-written, {:.2}x library; max rel. diff. to library {:.1e}{}",
             format!("{isa},"),
             isa.lanes(),
             rate,
-            batched_best[i],
+            batched_best[i].seconds(),
             rate / hand_rate,
             rate / lib_rate,
             rel_diff(report, &lib_report),
             if i == 0 { " (detected)" } else { " (forced)" },
         );
+        figures.push(format!("batched, {isa}, 1 thread"), rate, "steps/s");
+        figures.push(
+            format!("batched, {isa} / hand-written"),
+            rate / hand_rate,
+            "x",
+        );
+        figures.push(format!("batched, {isa} / library"), rate / lib_rate, "x");
     }
     for (i, isa) in isas.iter().enumerate() {
-        let rate = total / per_lane_best[i];
+        let rate = total / per_lane_best[i].seconds();
         let same = per_lane_reports[i] == batched_reports[i];
         println!(
             "  batched ({:<6} per-lane covariances, no schedule), 1 thread: {:>12.0} steps/s ({:.3} s), {:.2}x hand-written, {:.2}x library; {}",
             format!("{isa},"),
             rate,
-            per_lane_best[i],
+            per_lane_best[i].seconds(),
             rate / hand_rate,
             rate / lib_rate,
             if same {
@@ -277,6 +157,11 @@ fn w1_bench(args: &Args) -> Result<()> {
         if !same {
             bail!("the covariance schedule changes W1's results on {isa}");
         }
+        figures.push(
+            format!("batched without the schedule, {isa} / hand-written"),
+            rate / hand_rate,
+            "x",
+        );
     }
     // Where the batched time goes: the truth alone (draws and truth arithmetic, accumulating
     // nothing), and the draws alone.
@@ -292,12 +177,24 @@ fn w1_bench(args: &Args) -> Result<()> {
     } else {
         "lane-wise"
     };
+    let batched0 = batched_best[0].seconds();
     println!(
         "  of the batched ({detected}) time: truth simulation {:.3} s ({:.0}%), of which the {draws} ChaCha8 normal draws {:.3} s ({:.0}%)",
         t_truth,
-        100.0 * t_truth / batched_best[0],
+        100.0 * t_truth / batched0,
         t_draws,
-        100.0 * t_draws / batched_best[0],
+        100.0 * t_draws / batched0,
+    );
+    figures.push(format!("batched, {detected}: study"), batched0, "s");
+    figures.push(
+        format!("batched, {detected}: its truth simulation"),
+        t_truth,
+        "s",
+    );
+    figures.push(
+        format!("batched, {detected}: its {draws} normal draws"),
+        t_draws,
+        "s",
     );
     let (t_bpar, mut bpar_report) = best_of(args.repeats, || {
         Ok(w1::run_batched(&config(args.threads), detected)?)
@@ -316,6 +213,11 @@ fn w1_bench(args: &Args) -> Result<()> {
     if Some(&bpar_report) != batched_reports[0].as_ref() {
         bail!("batched results depend on the thread count");
     }
+    figures.push(
+        format!("batched, {detected}, {} threads", args.threads),
+        total / t_bpar,
+        "steps/s",
+    );
     let max_diff = lib_report
         .anees
         .iter()
@@ -338,7 +240,7 @@ fn w1_bench(args: &Args) -> Result<()> {
     if par_report != lib_report {
         bail!("results depend on the thread count");
     }
-    Ok(())
+    Ok(figures)
 }
 
 /// W1's batched truth alone (`simulate`), or only its draws (the initial states' from the

@@ -14,7 +14,6 @@
 //! and on the scalar models called per lane, timed against the hand loop beside it.
 
 use std::f64::consts::PI;
-use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use kalibra_filters::batch::{
@@ -28,7 +27,7 @@ use kalibra_studies::paper001::{BotRun, BotScenario};
 use nalgebra::{Matrix2, RowVector2, Vector2};
 use rayon::prelude::*;
 
-use crate::bench::{Args, best_of};
+use super::{Args, Best, Figures, best_of, timed};
 
 /// Seed of the simulated truths (run `i` on ChaCha8 stream `i`, as every kalibra study).
 const SEED: u64 = 2012;
@@ -62,27 +61,29 @@ struct Outcome {
     parallel: Option<(f64, Vec<f64>)>,
 }
 
-pub(crate) fn w2_bench(args: &Args) -> Result<()> {
+/// Runs W2, prints its figures and returns them.
+pub(crate) fn run(args: &Args) -> Result<Figures> {
     let threads = match args.threads {
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
         t => t,
     };
     let scenario = BotScenario::problem_iii()?;
     let steps = scenario.steps;
-    println!(
-        "W2: paper 001 problem III (bearings-only, [x, y], platform on the unit circle), EKF (Joseph) and UKF \
+    let title = format!(
+        "paper 001 problem III (bearings-only, [x, y], platform on the unit circle), EKF (Joseph) and UKF \
          (kappa = 1, linearised prediction), {} runs x {} steps, per-step mean NEES over runs (best of {})",
         args.runs, steps, args.repeats
     );
-    let t = Instant::now();
+    println!("W2: {title}");
+    let mut figures = Figures::new("w2", title);
     let mc = MonteCarlo::new(args.runs, SEED);
-    let runs = (0..args.runs)
-        .map(|i| scenario.simulate(&mut mc.rng(i)))
-        .collect::<Result<Vec<_>, _>>()?;
-    println!(
-        "  truths simulated once, outside the timed region (seed {SEED}): {:.3} s",
-        t.elapsed().as_secs_f64()
-    );
+    let (t_truths, runs) = timed(|| {
+        (0..args.runs)
+            .map(|i| scenario.simulate(&mut mc.rng(i)))
+            .collect::<Result<Vec<_>, _>>()
+    });
+    let runs = runs?;
+    println!("  truths simulated once, outside the timed region (seed {SEED}): {t_truths:.3} s");
     let pool = if threads > 1 {
         Some(
             rayon::ThreadPoolBuilder::new()
@@ -114,18 +115,15 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
             library(Some(pool))?;
         }
         // Interleave the two so that machine noise hits both alike.
-        let mut lib_best = f64::INFINITY;
-        let mut hand_best = f64::INFINITY;
+        let mut lib_best = Best::default();
+        let mut hand_best = Best::default();
         let mut lib_nees = Vec::new();
         let mut hand_nees = Vec::new();
         for _ in 0..args.repeats {
-            let t = Instant::now();
-            lib_nees = library(None)?;
-            lib_best = lib_best.min(t.elapsed().as_secs_f64());
-            let t = Instant::now();
-            hand_nees = hand()?;
-            hand_best = hand_best.min(t.elapsed().as_secs_f64());
+            lib_nees = lib_best.time(|| library(None))?;
+            hand_nees = hand_best.time(hand)?;
         }
+        let (lib_best, hand_best) = (lib_best.seconds(), hand_best.seconds());
         let parallel = match &pool {
             Some(pool) => Some(best_of(args.repeats, || library(Some(pool)))?),
             None => None,
@@ -139,6 +137,17 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
             "  {name} ratio library / hand-written (1 thread): {:.3}",
             lib_rate / hand_rate
         );
+        figures.push(format!("{name} library, 1 thread"), lib_rate, "steps/s");
+        figures.push(
+            format!("{name} hand-written loop, 1 thread"),
+            hand_rate,
+            "steps/s",
+        );
+        figures.push(
+            format!("{name} library / hand-written"),
+            lib_rate / hand_rate,
+            "x",
+        );
         if let Some((t_par, _)) = &parallel {
             let par_rate = total / t_par;
             println!(
@@ -150,7 +159,7 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
             // The batched filter (eight runs per group), with the scenario's lane-wise models
             // (the bearing's arctangent in SIMD) and with the scalar models called per lane,
             // interleaved with the hand loop again so that noise hits all alike.
-            let isa = crate::simd_from_env()?.unwrap_or_else(Isa::detect);
+            let isa = super::isa()?;
             let (d, m) = (&scenario.dynamics, &scenario.measurement);
             let lane_wise = || match kind {
                 Kind::Ekf => batched_ekf(d, m, &runs, steps, isa),
@@ -162,19 +171,14 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
             };
             lane_wise()?;
             per_lane()?;
-            let mut best = [f64::INFINITY; 3];
+            let mut timers = [Best::default(); 3];
             let mut results = [Vec::new(), Vec::new()];
             for _ in 0..args.repeats {
-                let t = Instant::now();
-                results[0] = lane_wise()?;
-                best[0] = best[0].min(t.elapsed().as_secs_f64());
-                let t = Instant::now();
-                results[1] = per_lane()?;
-                best[1] = best[1].min(t.elapsed().as_secs_f64());
-                let t = Instant::now();
-                hand()?;
-                best[2] = best[2].min(t.elapsed().as_secs_f64());
+                results[0] = timers[0].time(lane_wise)?;
+                results[1] = timers[1].time(per_lane)?;
+                timers[2].time(hand)?;
             }
+            let best = timers.map(Best::seconds);
             for (i, what) in ["lane-wise models", "models per lane"].iter().enumerate() {
                 let rate = total / best[i];
                 let diff = max_relative_difference(&results[i], &hand_nees);
@@ -190,6 +194,12 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
                         "W2 batched {name} ({what}): disagrees with the hand-written loop ({diff:.2e})"
                     );
                 }
+                figures.push(format!("{name} batched, {what}, {isa}"), rate, "steps/s");
+                figures.push(
+                    format!("{name} batched, {what}, {isa} / hand-written"),
+                    best[2] / best[i],
+                    "x",
+                );
             }
         }
         outcomes.push(Outcome {
@@ -260,7 +270,7 @@ pub(crate) fn w2_bench(args: &Args) -> Result<()> {
             );
         }
     }
-    Ok(())
+    Ok(figures)
 }
 
 fn max_relative_difference(a: &[f64], b: &[f64]) -> f64 {

@@ -1,4 +1,4 @@
-//! W3 (issue 17): paper 003's re-entry EKF with the J1/J2 terms at every step, swept over 41
+//! W3: paper 003's re-entry EKF with the J1/J2 terms at every step, swept over 41
 //! values of `Q = 10^p Q_nom` (`p = -10, -9.5, ..., 10`), [`RUNS`] Monte Carlo runs of 59
 //! steps at each, three ways in one process:
 //!
@@ -15,8 +15,6 @@
 //! The truths (the study's, seed 2003) are simulated once outside the timed region. The paths
 //! must agree on every `p`'s horizon J1 and J2 to [`TOLERANCE`]; the bench fails otherwise.
 
-use std::time::Instant;
-
 use anyhow::{Context, Result, bail};
 use kalibra_filters::batch::{BATCH, EkfBatch, Isa, LaneDynamics, LaneMeasurement, PerLane};
 use kalibra_filters::{Ekf, Filter};
@@ -28,9 +26,9 @@ use kalibra_studies::paper003::{p0_table, q_nom, qt, r, x0_table};
 use kalibra_studies::reentry;
 use nalgebra::{Matrix3, Matrix4, SMatrix, Vector3, Vector4};
 
-use crate::bench::Args;
+use super::{Args, Best, Figures};
 
-/// Monte Carlo runs per value of `p` (the issue's 100).
+/// Monte Carlo runs per value of `p`.
 const RUNS: usize = 100;
 /// Seed of the truths (paper 003's study seed).
 const SEED: u64 = 2003;
@@ -46,7 +44,8 @@ struct Truth {
 /// Horizon sums of J1k and J2k per value of `p`, and the updates behind them.
 type Sums = Vec<(f64, f64)>;
 
-pub(crate) fn w3_bench(args: &Args) -> Result<()> {
+/// Runs W3, prints its figures and returns them.
+pub(crate) fn run(args: &Args) -> Result<Figures> {
     let radar = RadarRates::new(r())?;
     let truth_model = reentry::dynamics(qt())?;
     let horizon = reentry::noise_free_truth()?.len() - 1;
@@ -74,33 +73,34 @@ pub(crate) fn w3_bench(args: &Args) -> Result<()> {
             Ok(t)
         })
         .collect::<Result<Vec<_>, kalibra_models::ModelError>>()?;
-    let isa = crate::simd_from_env()?.unwrap_or_else(Isa::detect);
+    let isa = super::isa()?;
     let steps = (grid.len() * RUNS * horizon) as f64;
-    println!(
-        "W3: paper 003's re-entry EKF with J1/J2 at every step, {} values of Q = 10^p Q_nom x {RUNS} runs x {horizon} steps (best of {})",
+    let title = format!(
+        "paper 003's re-entry EKF with J1/J2 at every step, {} values of Q = 10^p Q_nom x {RUNS} runs x {horizon} steps (best of {})",
         grid.len(),
         args.repeats
     );
+    println!("W3: {title}");
+    let mut figures = Figures::new("w3", title);
 
     // Warm up each path once, then interleave them so that machine noise hits all alike.
-    let mut best = [f64::INFINITY; 4];
+    let mut best = [Best::default(); 4];
     let mut sums: [Sums; 4] = [Vec::new(), Vec::new(), Vec::new(), Vec::new()];
     for repeat in 0..=args.repeats {
         for (i, best) in best.iter_mut().enumerate() {
-            let t = Instant::now();
-            let s = match i {
-                0 => library(&models, &radar, &truths)?,
-                1 => hand(&models, &radar, &truths)?,
-                2 => batched(&models, &radar, &truths, isa, true)?,
-                _ => batched(&models, &radar, &truths, isa, false)?,
-            };
+            let (t, s) = super::timed(|| match i {
+                0 => library(&models, &radar, &truths),
+                1 => hand(&models, &radar, &truths),
+                2 => batched(&models, &radar, &truths, isa, true),
+                _ => batched(&models, &radar, &truths, isa, false),
+            });
             if repeat > 0 {
-                *best = best.min(t.elapsed().as_secs_f64());
+                best.add(t);
             }
-            sums[i] = s;
+            sums[i] = s?;
         }
     }
-    let [lib, hand_t, batch_t, per_lane_t] = best;
+    let [lib, hand_t, batch_t, per_lane_t] = best.map(Best::seconds);
     println!(
         "  library (scalar Ekf), 1 thread: {:>12.0} steps/s ({lib:.4} s)",
         steps / lib
@@ -124,6 +124,29 @@ pub(crate) fn w3_bench(args: &Args) -> Result<()> {
         hand_t / batch_t,
         hand_t / per_lane_t
     );
+    figures.push("library (scalar Ekf), 1 thread", steps / lib, "steps/s");
+    figures.push("hand-written loop, 1 thread", steps / hand_t, "steps/s");
+    figures.push(
+        format!("batched, {isa}, lane-wise models, 1 thread"),
+        steps / batch_t,
+        "steps/s",
+    );
+    figures.push(
+        format!("batched, {isa}, models per lane, 1 thread"),
+        steps / per_lane_t,
+        "steps/s",
+    );
+    figures.push("library / hand-written", hand_t / lib, "x");
+    figures.push(
+        format!("batched, {isa}, lane-wise models / hand-written"),
+        hand_t / batch_t,
+        "x",
+    );
+    figures.push(
+        format!("batched, {isa}, models per lane / hand-written"),
+        hand_t / per_lane_t,
+        "x",
+    );
     let mut worst = 0.0f64;
     for other in &sums[1..] {
         for ((a1, a2), (b1, b2)) in sums[0].iter().zip(other) {
@@ -138,7 +161,7 @@ pub(crate) fn w3_bench(args: &Args) -> Result<()> {
     if worst.is_nan() || worst > TOLERANCE {
         bail!("W3: the three paths disagree on J1/J2 ({worst:.2e} > {TOLERANCE:.0e})");
     }
-    Ok(())
+    Ok(figures)
 }
 
 /// The scalar library, as paper 003's study runs it.

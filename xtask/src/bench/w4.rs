@@ -27,7 +27,6 @@
 use std::num::NonZeroUsize;
 use std::path::Path as FsPath;
 use std::process::Command;
-use std::time::Instant;
 
 use anyhow::{Context, Result, bail, ensure};
 use kalibra_filters::{Filter, Kf, SigmaSet, Ukf};
@@ -40,7 +39,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::bench::Args;
+use super::{Args, Budget, Figures, timed};
 
 /// State dimensions measured.
 pub(crate) const SIZES: [usize; 8] = [8, 16, 32, 64, 128, 256, 512, 1024];
@@ -191,8 +190,8 @@ pub(crate) fn measure(
     for path in &mut paths {
         path.run(problem, WARM_UP)?;
     }
-    let start = Instant::now();
-    while paths[0].blocks < min_blocks || start.elapsed().as_secs_f64() < budget {
+    let clock = Budget::new(budget);
+    while clock.more(paths[0].blocks, min_blocks) {
         for path in &mut paths {
             let t = path.run(problem, STEPS)?;
             path.best = path.best.min(t / STEPS as f64);
@@ -241,7 +240,6 @@ struct Lane<'a> {
 impl Lane<'_> {
     /// Runs `steps` steps on the path's policy; returns the wall time.
     fn run(&mut self, problem: &Problem, steps: usize) -> Result<f64> {
-        let start = Instant::now();
         let Self {
             policy,
             kf,
@@ -249,18 +247,21 @@ impl Lane<'_> {
             nees,
             ..
         } = self;
-        with_kernel_policy(*policy, || -> Result<()> {
-            for _ in 0..steps {
-                let i = *k % problem.truth.measurements.len();
-                kf.predict()?;
-                let rec = kf.update(&problem.truth.measurements[i])?;
-                let e = &problem.truth.states[i] - &rec.posterior().mean;
-                *nees += rec.nees(&e)?;
-                *k += 1;
-            }
-            Ok(())
-        })?;
-        Ok(start.elapsed().as_secs_f64())
+        let (seconds, done) = timed(|| {
+            with_kernel_policy(*policy, || -> Result<()> {
+                for _ in 0..steps {
+                    let i = *k % problem.truth.measurements.len();
+                    kf.predict()?;
+                    let rec = kf.update(&problem.truth.measurements[i])?;
+                    let e = &problem.truth.states[i] - &rec.posterior().mean;
+                    *nees += rec.nees(&e)?;
+                    *k += 1;
+                }
+                Ok(())
+            })
+        });
+        done?;
+        Ok(seconds)
     }
 }
 
@@ -274,17 +275,17 @@ fn time_kernel(budget: f64, mut f: impl FnMut()) -> (f64, f64) {
     for policy in policies {
         with_kernel_policy(policy, &mut f);
     }
-    let start = Instant::now();
+    let clock = Budget::new(budget);
     let mut batches = 0;
-    while batches < 3 || start.elapsed().as_secs_f64() < budget {
+    while clock.more(batches, 3) {
         let mut shortest = f64::INFINITY;
         for (policy, best) in policies.iter().zip(&mut best) {
-            let elapsed = with_kernel_policy(*policy, || {
-                let t = Instant::now();
-                for _ in 0..calls {
-                    f();
-                }
-                t.elapsed().as_secs_f64()
+            let (elapsed, ()) = with_kernel_policy(*policy, || {
+                timed(|| {
+                    for _ in 0..calls {
+                        f();
+                    }
+                })
             });
             *best = best.min(elapsed / calls as f64);
             shortest = shortest.min(elapsed);
@@ -376,13 +377,16 @@ fn ukf_step(problem: &Problem, policy: KernelPolicy, budget: f64) -> Result<f64>
         };
         step(&mut ukf)?;
         step(&mut ukf)?;
-        let (mut best, mut blocks, start) = (f64::INFINITY, 0, Instant::now());
-        while blocks < 3 || start.elapsed().as_secs_f64() < budget {
-            let t = Instant::now();
-            for _ in 0..5 {
-                step(&mut ukf)?;
-            }
-            best = best.min(t.elapsed().as_secs_f64() / 5.0);
+        let (mut best, mut blocks, clock) = (f64::INFINITY, 0, Budget::new(budget));
+        while clock.more(blocks, 3) {
+            let (t, done) = timed(|| -> Result<()> {
+                for _ in 0..5 {
+                    step(&mut ukf)?;
+                }
+                Ok(())
+            });
+            done?;
+            best = best.min(t / 5.0);
             blocks += 1;
         }
         Ok(best)
@@ -395,8 +399,7 @@ fn numpy_times(
     sizes: &[usize],
     min_blocks: usize,
 ) -> Result<(Vec<(usize, f64)>, String)> {
-    let (python, versions) =
-        crate::bench_eval::python_env(&root.join("target").join("bench-eval"))?;
+    let (python, versions) = super::eval::python_env(&root.join("target").join("bench-eval"))?;
     let script = root.join("xtask").join("bench").join("w4_numpy.py");
     let sizes: Vec<String> = sizes.iter().map(usize::to_string).collect();
     let out = Command::new(&python)
@@ -435,15 +438,18 @@ fn us(seconds: f64) -> f64 {
     seconds * 1e6
 }
 
-pub(crate) fn w4_bench(args: &Args) -> Result<()> {
+/// Runs W4, prints its figures and returns them.
+pub(crate) fn run(args: &Args) -> Result<Figures> {
     let sizes = &args.sizes;
     ensure!(sizes.iter().all(|&n| n >= 1), "W4 sizes must be at least 1");
-    println!(
-        "W4: one KF step at run-time size (dense F, rho(F) = 0.95; m = max(2, n/4)): predict, \
+    let title = format!(
+        "one KF step at run-time size (dense F, rho(F) = 0.95; m = max(2, n/4)): predict, \
          Joseph update, NEES by Cholesky; one thread; best block of {STEPS} steps after {WARM_UP} \
          warm-up steps, at least {} blocks and {BUDGET} s per size",
         args.repeats
     );
+    println!("W4: {title}");
+    let mut figures = Figures::new("w4", title);
     println!(
         "  faer = every kernel through faer; nalgebra = no kernel through faer (the code before \
          faer); library = the default (faer from n = {})",
@@ -488,6 +494,20 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
             row.difference,
             row.steps,
         );
+        let n = row.n;
+        figures.push(format!("n = {n}: nalgebra step"), us(row.nalgebra), "us");
+        figures.push(format!("n = {n}: faer step"), us(row.faer), "us");
+        figures.push(
+            format!("n = {n}: library step (default policy)"),
+            us(row.library),
+            "us",
+        );
+        figures.push(
+            format!("n = {n}: faer speed-up over nalgebra"),
+            row.nalgebra / row.faer,
+            "x",
+        );
+        figures.push(format!("n = {n}: faer"), flops / row.faer / 1e9, "GFLOP/s");
         rows.push(row);
     }
     for row in &rows {
@@ -504,6 +524,11 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
                 same,
                 "within-step parallelism changed the results at n = {}",
                 row.n
+            );
+            figures.push(
+                format!("n = {}: library, {threads} threads within the step", row.n),
+                us(t),
+                "us",
             );
         }
     }
@@ -553,8 +578,9 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
                 println!("{header}");
             }
             let mut line = format!("  {n:>5}");
-            for (_, ratio) in &ratios {
+            for (name, ratio) in &ratios {
                 line.push_str(&format!(" {ratio:>16.2}"));
+                figures.push(format!("n = {n}: {name}, nalgebra / faer"), *ratio, "x");
             }
             println!("{line}");
         }
@@ -575,10 +601,12 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
                 us(faer),
                 nalgebra / faer
             );
+            figures.push(format!("n = {n}: UKF, nalgebra step"), us(nalgebra), "us");
+            figures.push(format!("n = {n}: UKF, faer step"), us(faer), "us");
         }
     }
     if args.no_python {
-        return Ok(());
+        return Ok(figures);
     }
     println!("  numpy (xtask/bench/w4_numpy.py, the same step, BLAS on one thread):");
     let (numpy, versions) = numpy_times(&crate::workspace_root(), sizes, args.repeats)?;
@@ -599,8 +627,9 @@ pub(crate) fn w4_bench(args: &Args) -> Result<()> {
             t / row.faer,
             t / row.library,
         );
+        figures.push(format!("n = {n}: numpy step"), us(t), "us");
     }
-    Ok(())
+    Ok(figures)
 }
 
 #[cfg(test)]

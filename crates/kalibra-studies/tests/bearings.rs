@@ -10,12 +10,10 @@
 //! independent Python implementation (numpy, float64). Two independent implementations agreed
 //! on it to about 1e-11; we compare to 1e-9 relative.
 
-use kalibra::filters::{
-    Ekf, Filter, KappaCriterion, SigmaSet, Srf, StepRecord, Ukf, UkfPrediction,
-};
-use kalibra::linalg::{Matrix2, U1, U2, U4, Vector1, Vector2};
-use kalibra::models::{Bearing, BearingReference, LinearGaussian, Moving};
-use kalibra::sim::MonteCarlo;
+use kalibra_filters::{Ekf, Filter, KappaCriterion, SigmaSet, Srf, StepRecord, Ukf, UkfPrediction};
+use kalibra_linalg::{Matrix2, U1, U2, U4, Vector1, Vector2};
+use kalibra_models::{Bearing, BearingReference, LinearGaussian, Moving};
+use kalibra_sim::MonteCarlo;
 use kalibra_studies::claims::Verdict;
 use kalibra_studies::paper001::{self, BotProblem, BotScenario, Config, FILTERS, kappa_grid};
 use kalibra_studies::study::Study;
@@ -23,7 +21,7 @@ use serde_json::Value;
 
 fn trace() -> Value {
     serde_json::from_str(include_str!(
-        "../crates/kalibra-studies/src/paper001/data/bot-problem3-traces.json"
+        "../src/paper001/data/bot-problem3-traces.json"
     ))
     .expect("the trace parses")
 }
@@ -60,7 +58,7 @@ fn models(config: &Value) -> (LinearGaussian<U2>, Bearing<U2, Platform>) {
 
 /// Runs `filter` over the run's bearings (updating first at k = 0) and compares every
 /// posterior (and chosen kappa) with the trace.
-fn replay<F: Filter<U2, kalibra::linalg::U1>>(
+fn replay<F: Filter<U2, kalibra_linalg::U1>>(
     mut filter: F,
     run: &Value,
     name: &str,
@@ -261,7 +259,7 @@ fn problem2_covariances_stay_positive_definite_and_bearings_do_not_jump() {
             .map(|(k, z)| Vector1::new(z[0] + tau * [0.0, 1.0, -1.0][k % 3]))
             .collect();
         let (x0, p0) = (run.init_mean, run.init_cov);
-        let start = kalibra::filters::Start::PredictFirst;
+        let start = kalibra_filters::Start::PredictFirst;
         let ukf = || {
             Ukf::new(f, h, x0, p0, SigmaSet::recommended(4))
                 .unwrap()

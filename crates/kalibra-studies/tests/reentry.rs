@@ -1,10 +1,10 @@
 //! Reproduction tests for papers 000 and 003 (ballistic re-entry, J1/J2 metrics), at reduced
-//! Monte Carlo size; `cargo xtask reproduce` runs the full size. Tolerances are the issue's:
-//! each compares a computed value with the published one; the plain readings are reported by
-//! the reproduction, not asserted here.
+//! Monte Carlo size; `cargo xtask reproduce` runs the full size. Each test compares a computed
+//! value with the published one within the claim's tolerance; the plain readings are reported
+//! by the reproduction, not asserted here.
 
-use kalibra::filters::{Ekf, Filter, Start};
-use kalibra::models::RadarRates;
+use kalibra_filters::{Ekf, Filter, Start};
+use kalibra_models::RadarRates;
 use kalibra_studies::{paper000, paper003, reentry};
 
 /// Paper 000, Table I: with the paper reading every J1/J2 entry of the KF and the EKF is
@@ -95,7 +95,7 @@ fn j_identity_and_bounds_along_the_003_ekf() {
     let radar = RadarRates::new(paper003::r()).unwrap();
     let zs: Vec<_> = truth[1..]
         .iter()
-        .map(|x| kalibra::models::Measurement::measure(&radar, 0, x))
+        .map(|x| kalibra_models::Measurement::measure(&radar, 0, x))
         .collect();
     let m = 3.0;
     for p in [-4.0, 1.3, 6.0] {

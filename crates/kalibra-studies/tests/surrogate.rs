@@ -2,14 +2,14 @@
 //! against the truth where it is exact (a linear model with a constant gain), and the quick
 //! reproduction's claims.
 
-use kalibra::bounds::{ErgodicAverage, Surrogate};
-use kalibra::filters::{ConstantGainKf, Ekf, Filter, Start};
-use kalibra::linalg::nalgebra::{SMatrix, SVector};
-use kalibra::linalg::{Matrix2, U1, U2, Vector2, Vector3};
-use kalibra::models::{
+use kalibra_bounds::{ErgodicAverage, Surrogate};
+use kalibra_filters::{ConstantGainKf, Ekf, Filter, Start};
+use kalibra_linalg::nalgebra::{SMatrix, SVector};
+use kalibra_linalg::{Matrix2, U1, U2, Vector2, Vector3};
+use kalibra_models::{
     AccelAxis, Dynamics, LinearGaussian, LinearObservation, Measurement, Target3d, standard_normal,
 };
-use kalibra::sim::MonteCarlo;
+use kalibra_sim::MonteCarlo;
 use kalibra_studies::claims::Verdict;
 use kalibra_studies::paper004::{self, Config, READINGS};
 use kalibra_studies::study::Study;
@@ -39,13 +39,13 @@ fn the_nine_state_ekf_is_three_axis_ekfs() {
         let h = AccelAxis::position_measurement(0.2).unwrap();
         let z: Vec<_> = zs
             .iter()
-            .map(|z| kalibra::linalg::Vector1::new(z[a]))
+            .map(|z| kalibra_linalg::Vector1::new(z[a]))
             .collect();
         let mut ekf3 = Ekf::new(
             axis,
             &h,
             Vector3::zeros(),
-            kalibra::linalg::Matrix3::identity(),
+            kalibra_linalg::Matrix3::identity(),
         )
         .unwrap();
         let part = ekf3
@@ -85,8 +85,8 @@ fn surrogate_half_widths_match_the_truth_where_the_surrogate_is_exact() {
     )
     .unwrap();
     let h = LinearObservation::<U2, U1>::new(
-        kalibra::linalg::nalgebra::Matrix1x2::new(1.0, 0.0),
-        kalibra::linalg::Matrix1::new(0.5),
+        kalibra_linalg::nalgebra::Matrix1x2::new(1.0, 0.0),
+        kalibra_linalg::Matrix1::new(0.5),
     )
     .unwrap();
     let gain = ConstantGainKf::steady_state_gain(&f, &h, 0, &Vector2::zeros()).unwrap();
@@ -110,7 +110,7 @@ fn surrogate_half_widths_match_the_truth_where_the_surrogate_is_exact() {
                 cgkf.predict()?;
                 cgkf.update(&z)?;
             }
-            Ok::<_, kalibra::filters::FilterError>(x - cgkf.mean())
+            Ok::<_, kalibra_filters::FilterError>(x - cgkf.mean())
         })
         .unwrap();
     for i in 0..2 {

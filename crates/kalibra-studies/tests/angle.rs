@@ -6,10 +6,10 @@
 //! replay needs no random numbers. Two independent implementations agreed on it to about
 //! 1e-11; we compare to 1e-9 relative.
 
-use kalibra::filters::{Ekf, Filter, FilterOptions, Kf, Start, UpdateForm};
-use kalibra::linalg::{Matrix3, Vector1, Vector3};
-use kalibra::metrics::{instantaneous_errors, rmse_per_state, sliding_window};
-use kalibra::models::{AngularTarget, ManoeuvringTarget, ManoeuvringTargetParams};
+use kalibra_filters::{Ekf, Filter, FilterOptions, Kf, Start, UpdateForm};
+use kalibra_linalg::{Matrix3, Vector1, Vector3};
+use kalibra_metrics::{instantaneous_errors, rmse_per_state, sliding_window};
+use kalibra_models::{AngularTarget, ManoeuvringTarget, ManoeuvringTargetParams};
 use kalibra_studies::claims::Verdict;
 use kalibra_studies::paper002::{self, Config, Q_SETS, R};
 use kalibra_studies::study::Study;
@@ -173,7 +173,7 @@ fn the_trace_metric_unit_case_holds() {
 #[test]
 fn ekf_equals_kf_on_the_angle_model() {
     let target = paper002::target();
-    let mut rng = kalibra::sim::MonteCarlo::new(1, 11).rng(0);
+    let mut rng = kalibra_sim::MonteCarlo::new(1, 11).rng(0);
     let truth = target.truth(&mut rng);
     let z: Vec<Vector1<f64>> = ManoeuvringTarget::measurements(&truth, R, &mut rng).unwrap();
     for set in &Q_SETS {
