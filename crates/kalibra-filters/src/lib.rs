@@ -20,6 +20,8 @@
 //!   kappa chosen per update on a [`KappaGrid`] by a [`KappaCriterion`] (UKF-ML, UKF-MPP).
 //! * [`Srf`]: the shifted Rayleigh filter for bearings (paper 001, Alg. 2, typos fixed) on any
 //!   [`BearingSensor`], with [`shifted_rayleigh_moments`] evaluated stably.
+//! * [`smooth`]: Rauch-Tung-Striebel smoothers over the [`Kf`], [`Ekf`] and [`Ukf`] ([`Smoothable`]),
+//!   full and fixed-lag, with the lag-one covariances EM needs.
 //!
 //! Every filter yields the same [`StepRecord`].
 //!
@@ -71,6 +73,7 @@ mod filter;
 mod kalman;
 mod rayleigh;
 mod record;
+pub mod smooth;
 mod srf;
 mod steady;
 mod ukf;
@@ -82,6 +85,7 @@ pub use filter::{Filter, Start, Trajectory, TrajectoryEntry};
 pub use kalman::{Ekf, Kf};
 pub use rayleigh::{ShiftedRayleigh, shifted_rayleigh_moments};
 pub use record::{Estimate, StepRecord};
+pub use smooth::{FixedLagSmoother, ForwardPass, Smoothable, Smoothed, SmoothedStep};
 pub use srf::{BearingSensor, Srf};
 pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};
 pub use ukf::{

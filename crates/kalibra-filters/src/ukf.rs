@@ -546,6 +546,11 @@ where
         &self.measurement
     }
 
+    /// The prediction and the state space, for the unscented smoother (`smooth::unscented`).
+    pub(crate) fn smoother_parts(&self) -> (UkfPrediction, Option<&Arc<dyn SigmaSpace<N>>>) {
+        (self.prediction, self.state_space.as_ref())
+    }
+
     fn unscented_predict(&mut self) -> Result<(), FilterError> {
         let k = self.core.step();
         let n = self.dynamics.state_dim().value();
