@@ -7,7 +7,7 @@ use std::sync::Arc;
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OVector};
 
 use super::Smoothable;
-use super::forward::{FilteredStep, Prediction, Recorder};
+use super::forward::{Event, FilteredStep, Prediction, Recorder};
 use super::rts::{SmoothedStep, smooth_chain};
 use crate::{FilterError, SigmaSpace, Start};
 
@@ -40,15 +40,17 @@ where
         smooth_chain(filtered, &predictions[..links], self.space.as_deref())
     }
 
-    /// Adds a step and the prediction leaving it (`None` for the last step of the run), and
-    /// returns the step `lag` steps before it, smoothed, once there is one.
-    fn push(
-        &mut self,
-        step: FilteredStep<N>,
-        prediction: Option<Prediction<N>>,
-    ) -> Result<Option<SmoothedStep<N>>, FilterError> {
+    /// Takes what the filter handed over, and returns the step `lag` steps before a new one,
+    /// smoothed, once there is one.
+    fn push(&mut self, event: Event<N>) -> Result<Option<SmoothedStep<N>>, FilterError> {
+        let step = match event {
+            Event::Predicted(prediction) => {
+                self.predictions.push_back(prediction);
+                return Ok(None);
+            }
+            Event::Filtered(step) => step,
+        };
         self.filtered.push_back(step);
-        self.predictions.extend(prediction);
         let target = usize::from(self.front_emitted);
         if self.filtered.len() < target + self.lag + 1 {
             return Ok(None);
@@ -113,7 +115,9 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     filter: F,
-    recorder: Recorder<N>,
+    start: Start,
+    // `None` until the first measurement: the recorder begins then, with the filter as given.
+    recorder: Option<Recorder>,
     window: Window<N>,
     measurement: std::marker::PhantomData<M>,
 }
@@ -127,7 +131,6 @@ where
     /// each step with the measurements up to `lag` steps later (`lag = 0`: the filtered
     /// estimates, with their lag-one covariances).
     pub fn new(filter: F, lag: usize, start: Start) -> Self {
-        let recorder = Recorder::new(&filter, start);
         let window = Window {
             lag,
             filtered: VecDeque::with_capacity(lag + 2),
@@ -137,7 +140,8 @@ where
         };
         Self {
             filter,
-            recorder,
+            start,
+            recorder: None,
             window,
             measurement: std::marker::PhantomData,
         }
@@ -149,8 +153,9 @@ where
     }
 
     /// Steps the filter with the next element of the measurement sequence (`None`: no
-    /// measurement at this step), and returns the step `lag` steps back, smoothed, once there
-    /// is one.
+    /// measurement at this step), and returns the steps that now have `lag` later steps,
+    /// smoothed: the one `lag` steps back, once there is one (and with [`Start::PredictFirst`]
+    /// and `lag = 0`, the initial estimate's step before it at the first call).
     ///
     /// # Errors
     /// The filter's [`FilterError`] (then the smoother must not be stepped further), or the
@@ -158,15 +163,21 @@ where
     pub fn step(
         &mut self,
         z: Option<&OVector<f64, M>>,
-    ) -> Result<Option<SmoothedStep<N>>, FilterError> {
-        let mut out = None;
+    ) -> Result<Vec<SmoothedStep<N>>, FilterError> {
+        let mut ready = Vec::new();
         let window = &mut self.window;
-        self.recorder
-            .step(&mut self.filter, z, &mut |step, prediction| {
-                out = window.push(step, prediction)?;
-                Ok(())
-            })?;
-        Ok(out)
+        let mut emit = |event| {
+            ready.extend(window.push(event)?);
+            Ok(())
+        };
+        let recorder = match &mut self.recorder {
+            Some(recorder) => recorder,
+            None => self
+                .recorder
+                .insert(Recorder::begin(&self.filter, self.start, &mut emit)?),
+        };
+        recorder.step(&mut self.filter, z, &mut emit)?;
+        Ok(ready)
     }
 
     /// Ends the log: returns the filter and the steps not yet returned, smoothed with every
@@ -177,16 +188,21 @@ where
     pub fn finish(self) -> Result<(F, Vec<SmoothedStep<N>>), FilterError> {
         let Self {
             filter,
+            start,
             recorder,
             mut window,
             ..
         } = self;
-        let mut last = None;
-        recorder.finish(&filter, &mut |step, prediction| {
-            last = window.push(step, prediction)?;
+        let mut steps = Vec::new();
+        let mut emit = |event| {
+            steps.extend(window.push(event)?);
             Ok(())
-        })?;
-        let mut steps: Vec<_> = last.into_iter().collect();
+        };
+        let recorder = match recorder {
+            Some(recorder) => recorder,
+            None => Recorder::begin(&filter, start, &mut emit)?,
+        };
+        recorder.finish(&filter, &mut emit)?;
         steps.extend(window.finish()?);
         Ok((filter, steps))
     }

@@ -122,43 +122,54 @@ where
     }
 }
 
-/// Steps a filter one measurement at a time, handing each step's filtered estimate, with the
-/// prediction that leaves it, to `emit` as soon as both are known (one step late).
-#[derive(Debug)]
-pub(crate) struct Recorder<N: Dim>
+/// What a [`Recorder`] hands over as the filter runs: a step's filtered estimate, or the
+/// prediction leaving the last one (always followed by the next step's estimate).
+pub(crate) enum Event<N: Dim>
 where
     DefaultAllocator: Alloc<N>,
 {
-    start: Start,
-    started: bool,
-    pending: Option<FilteredStep<N>>,
+    Filtered(FilteredStep<N>),
+    Predicted(Prediction<N>),
 }
 
-impl<N: Dim> Recorder<N>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    /// A recorder for `filter` at its current estimate.
-    pub(crate) fn new<M: Dim, F: Smoothable<N, M> + ?Sized>(filter: &F, start: Start) -> Self
+/// Steps a filter one measurement at a time, handing each prediction and each step's
+/// filtered estimate to `emit` as soon as it is known.
+#[derive(Debug)]
+pub(crate) struct Recorder {
+    start: Start,
+    started: bool,
+    emitted: bool,
+}
+
+impl Recorder {
+    /// A recorder for `filter` at its current estimate. With [`Start::PredictFirst`] the
+    /// initial estimate is a step of its own (`x0` at step 0, smoothed as EM needs it), handed
+    /// over now; with [`Start::UpdateFirst`] it is the prior of the first measurement's step.
+    pub(crate) fn begin<N: Dim, M: Dim, F: Smoothable<N, M> + ?Sized>(
+        filter: &F,
+        start: Start,
+        emit: &mut impl FnMut(Event<N>) -> Result<(), FilterError>,
+    ) -> Result<Self, FilterError>
     where
         DefaultAllocator: Alloc<N, M>,
     {
-        // With PredictFirst the initial estimate is a step of its own (x0 at step 0, smoothed
-        // as EM needs it); with UpdateFirst it is the prior of the first measurement's step.
-        let pending = (start == Start::PredictFirst).then(|| FilteredStep::current(filter, false));
-        Self {
+        let emitted = start == Start::PredictFirst;
+        if emitted {
+            emit(Event::Filtered(FilteredStep::current(filter, false)))?;
+        }
+        Ok(Self {
             start,
             started: false,
-            pending,
-        }
+            emitted,
+        })
     }
 
     /// One element of the measurement sequence, as [`crate::Filter::run`] steps it.
-    pub(crate) fn step<M: Dim, F: Smoothable<N, M> + ?Sized>(
+    pub(crate) fn step<N: Dim, M: Dim, F: Smoothable<N, M> + ?Sized>(
         &mut self,
         filter: &mut F,
         z: Option<&OVector<f64, M>>,
-        emit: &mut impl FnMut(FilteredStep<N>, Option<Prediction<N>>) -> Result<(), FilterError>,
+        emit: &mut impl FnMut(Event<N>) -> Result<(), FilterError>,
     ) -> Result<(), FilterError>
     where
         DefaultAllocator: Alloc<N, M>,
@@ -169,31 +180,30 @@ where
                 mean: filter.mean().clone(),
                 cov: filter.covariance().clone(),
             };
-            if let Some(done) = self.pending.take() {
-                emit(done, Some(Prediction { prior, cross }))?;
-            }
+            emit(Event::Predicted(Prediction { prior, cross }))?;
         }
         self.started = true;
         if let Some(z) = z {
             filter.update(z)?;
         }
-        self.pending = Some(FilteredStep::current(filter, z.is_some()));
-        Ok(())
+        self.emitted = true;
+        emit(Event::Filtered(FilteredStep::current(filter, z.is_some())))
     }
 
-    /// Hands over the last step (the filter's current estimate if no step ran).
-    pub(crate) fn finish<M: Dim, F: Smoothable<N, M> + ?Sized>(
+    /// Ends the sequence: an empty one started [`Start::UpdateFirst`] hands over the initial
+    /// estimate as its one step.
+    pub(crate) fn finish<N: Dim, M: Dim, F: Smoothable<N, M> + ?Sized>(
         self,
         filter: &F,
-        emit: &mut impl FnMut(FilteredStep<N>, Option<Prediction<N>>) -> Result<(), FilterError>,
+        emit: &mut impl FnMut(Event<N>) -> Result<(), FilterError>,
     ) -> Result<(), FilterError>
     where
         DefaultAllocator: Alloc<N, M>,
     {
-        let last = self
-            .pending
-            .unwrap_or_else(|| FilteredStep::current(filter, false));
-        emit(last, None)
+        if self.emitted {
+            return Ok(());
+        }
+        emit(Event::Filtered(FilteredStep::current(filter, false)))
     }
 }
 
@@ -212,12 +222,14 @@ where
     let capacity = 1 + measurements.size_hint().0;
     let (mut filtered, mut predictions) =
         (Vec::with_capacity(capacity), Vec::with_capacity(capacity));
-    let mut emit = |step, prediction: Option<Prediction<N>>| {
-        filtered.push(step);
-        predictions.extend(prediction);
+    let mut emit = |event| {
+        match event {
+            Event::Filtered(step) => filtered.push(step),
+            Event::Predicted(prediction) => predictions.push(prediction),
+        }
         Ok(())
     };
-    let mut recorder = Recorder::new(filter, start);
+    let mut recorder = Recorder::begin(filter, start, &mut emit)?;
     for z in measurements {
         recorder.step(filter, z, &mut emit)?;
     }

@@ -106,9 +106,7 @@ where
     {
         let mut smoother = FixedLagSmoother::new(self, lag, start);
         for z in measurements {
-            if let Some(step) = smoother.step(z)? {
-                visit(&step);
-            }
+            smoother.step(z)?.iter().for_each(&mut visit);
         }
         smoother.finish()?.1.iter().for_each(visit);
         Ok(())
