@@ -6,14 +6,8 @@ import pytest
 
 import kalibra
 
-DT = 1.0
-F = np.array([[1, 0, DT, 0], [0, 1, 0, DT], [0, 0, 1, 0], [0, 0, 0, 1]], float)
-G = np.array([[DT**2 / 2, 0], [0, DT**2 / 2], [DT, 0], [0, DT]])
-Q = G @ G.T * 0.5
-H = np.array([[1, 0, 0, 0], [0, 1, 0, 0]], float)
-R = np.array([[25.0, 3.0], [3.0, 16.0]])
-X0 = np.array([0.0, 0.0, 5.0, -2.0])
-P0 = np.diag([100.0, 100.0, 9.0, 9.0])
+# The model of test_filters.py (W1 with a correlated R).
+from test_filters import F, G, H, P0, Q, R, X0
 
 
 def measurements(steps=25, seed=7):
