@@ -22,6 +22,8 @@
 //!   [`BearingSensor`], with [`shifted_rayleigh_moments`] evaluated stably.
 //! * [`SqrtKf`] and [`SqrtUkf`] ([`sqrt`]): the KF and the UKF carrying a Cholesky factor of the
 //!   covariance, for problems where the standard filters' covariance loses definiteness.
+//! * [`smooth`]: Rauch-Tung-Striebel smoothers over the [`Kf`], [`Ekf`] and [`Ukf`] ([`Smoothable`]),
+//!   full and fixed-lag, with the lag-one covariances EM needs.
 //!
 //! Every filter yields the same [`StepRecord`].
 //!
@@ -85,6 +87,7 @@ mod filter;
 mod kalman;
 mod rayleigh;
 mod record;
+pub mod smooth;
 pub mod sqrt;
 mod srf;
 mod steady;
@@ -97,6 +100,7 @@ pub use filter::{Filter, Start, Trajectory, TrajectoryEntry};
 pub use kalman::{Ekf, Kf};
 pub use rayleigh::{ShiftedRayleigh, shifted_rayleigh_moments};
 pub use record::{Estimate, StepRecord};
+pub use smooth::{FixedLagSmoother, ForwardPass, Smoothable, Smoothed, SmoothedStep};
 pub use sqrt::{SqrtKf, SqrtUkf};
 pub use srf::{BearingSensor, Srf};
 pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};

@@ -2,6 +2,7 @@
 //! `ExtendedKalmanFilter` and `UnscentedKalmanFilter` (kalibra's `Ekf` and `Ukf` on models
 //! whose functions are Python callables, see `callbacks`).
 
+use kalibra_filters::smooth::Smoothable;
 use kalibra_filters::{Ekf, Filter, KappaCriterion, KappaGrid, Kf, SigmaSet, Start, Ukf};
 use kalibra_linalg::{DMatrix, DVector, Dyn};
 use kalibra_models::{LinearGaussian, LinearObservation};
@@ -97,6 +98,8 @@ pub(crate) struct Outputs {
     pub log_likelihood: Vec<f64>,
     /// The UKF's kappa at each update (empty for other filters).
     pub kappa: Vec<f64>,
+    /// The smoothers' lag-one covariance per row (empty for `run`).
+    pub lag_one: Vec<f64>,
 }
 
 /// One field of [`Outputs`].
@@ -362,6 +365,55 @@ impl KalmanFilter {
             self.n, self.m, self.start
         )
     }
+
+    /// Runs the filter from (x0, P0) over (K, m) measurements (a row of NaN: none) or (R, K, m)
+    /// for R runs, and smooths every run with the Rauch-Tung-Striebel smoother (kalibra's
+    /// `smooth` module: Cholesky solves with the predicted covariance, symmetrised).
+    ///
+    /// Returns:
+    ///     dict[str, numpy.ndarray], shaped as `run`'s outputs: "estimate" (K, n) and
+    ///     "covariance" (K, n, n), each row's state given all the measurements of its run;
+    ///     "lag_one_covariance" (K, n, n), Cov(x_k, x_{k-1} | all z) with the row before (for
+    ///     row 0 with the initial state x0 under "predict_first"; NaN under "update_first").
+    ///
+    /// Raises:
+    ///     KalibraError: as `run`, and a predicted covariance without a Cholesky factor
+    ///         (naming the run and step).
+    ///
+    /// Example:
+    ///     >>> import numpy as np, kalibra
+    ///     >>> kf = kalibra.KalmanFilter(F=[[1.0, 1.0], [0.0, 1.0]], H=[[1.0, 0.0]],
+    ///     ...                           Q=0.01 * np.eye(2), R=[[1.0]], x0=[0.0, 1.0], P0=np.eye(2))
+    ///     >>> out = kf.smooth(np.array([[1.1], [np.nan], [2.9], [4.2]]))
+    ///     >>> out["estimate"].shape, out["lag_one_covariance"].shape
+    ///     ((4, 2), (4, 2, 2))
+    ///     >>> bool(np.allclose(out["estimate"][-1], kf.run([[1.1], [np.nan], [2.9], [4.2]])["estimate"][-1]))
+    ///     True
+    fn smooth<'py>(
+        &self,
+        py: Python<'py>,
+        measurements: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let z = read(measurements, "measurements")?;
+        let (runs, k, batch) = layout(&z, self.m)?;
+        let size = k * self.m;
+        let outputs = (0..runs)
+            .map(|r| {
+                let zs = rows(&z.data[r * size..(r + 1) * size], self.m)
+                    .map_err(|e| run_error(batch, r, e))?;
+                let mut kf = Kf::new(
+                    &self.dynamics,
+                    &self.sensor,
+                    self.x0.clone(),
+                    self.p0.clone(),
+                )
+                .map_err(|e| error(e.to_string()))?;
+                smooth_rows(&mut kf, &zs, self.start)
+                    .map_err(|e| run_error(batch, r, format!("{e} (x0 is step 0)")))
+            })
+            .collect::<PyResult<Vec<Outputs>>>()?;
+        smoothed_dict(py, &outputs, (runs, k, batch), self.n)
+    }
 }
 
 /// What the EKF and the UKF share: the callables, the noise and the initial estimate.
@@ -451,16 +503,17 @@ impl CallbackModel {
 
     /// Runs every run of `measurements` through `run_one` (which builds a filter on the
     /// model's callables with this failure cell and runs it), with the GIL held (the callables
-    /// need it). A callable's failure is raised in place of the filter's error.
-    fn run<'py>(
+    /// need it), returning the outputs and their layout `(runs, rows, batch)`. A callable's
+    /// failure is raised in place of the filter's error.
+    fn run_outputs(
         &self,
-        py: Python<'py>,
-        measurements: &Bound<'py, PyAny>,
+        py: Python<'_>,
+        measurements: &Bound<'_, PyAny>,
         run_one: impl Fn(
             &Failure,
             &[Option<DVector<f64>>],
         ) -> Result<Outputs, kalibra_filters::FilterError>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<(Vec<Outputs>, (usize, usize, bool))> {
         let m = self.r.nrows();
         let z = read(measurements, "measurements")?;
         let (runs, k, batch) = layout(&z, m)?;
@@ -482,7 +535,21 @@ impl CallbackModel {
             }
             outputs.push(result.map_err(|e| run_error(batch, r, format!("{e} (x0 is step 0)")))?);
         }
-        outputs_dict(py, &outputs, (runs, k, batch), (self.x0.len(), m))
+        Ok((outputs, (runs, k, batch)))
+    }
+
+    /// [`CallbackModel::run_outputs`] as `run`'s dict of arrays.
+    fn run<'py>(
+        &self,
+        py: Python<'py>,
+        measurements: &Bound<'py, PyAny>,
+        run_one: impl Fn(
+            &Failure,
+            &[Option<DVector<f64>>],
+        ) -> Result<Outputs, kalibra_filters::FilterError>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (outputs, layout) = self.run_outputs(py, measurements, run_one)?;
+        outputs_dict(py, &outputs, layout, (self.x0.len(), self.r.nrows()))
     }
 }
 
@@ -600,6 +667,27 @@ impl ExtendedKalmanFilter {
             self.model.x0.len(),
             self.model.r.nrows()
         )
+    }
+
+    /// Runs the filter and smooths each run with the extended RTS smoother (the forward
+    /// pass's linearisation: F_jacobian at each filtered estimate, the one the prediction
+    /// used); returns the arrays of `KalmanFilter.smooth`.
+    fn smooth<'py>(
+        &self,
+        py: Python<'py>,
+        measurements: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let model = &self.model;
+        let (outputs, layout) = model.run_outputs(py, measurements, |failure, zs| {
+            let mut ekf = Ekf::new(
+                model.dynamics(failure),
+                model.measurement(failure),
+                model.x0.clone(),
+                model.p0.clone(),
+            )?;
+            smooth_rows(&mut ekf, zs, model.start)
+        })?;
+        smoothed_dict(py, &outputs, layout, model.x0.len())
     }
 }
 
@@ -792,6 +880,72 @@ impl UnscentedKalmanFilter {
             self.set
         )
     }
+
+    /// Runs the filter and smooths each run with the unscented RTS smoother (Sarkka 2008,
+    /// the filter's own sigma points through f); returns the arrays of
+    /// `KalmanFilter.smooth`. The unscented prediction calls f at the sigma points a second
+    /// time to form the smoother's cross-covariance.
+    fn smooth<'py>(
+        &self,
+        py: Python<'py>,
+        measurements: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (outputs, layout) = self.model.run_outputs(py, measurements, |failure, zs| {
+            let mut ukf = self.build(&self.model, failure)?;
+            smooth_rows(&mut ukf, zs, self.model.start)
+        })?;
+        smoothed_dict(py, &outputs, layout, self.model.x0.len())
+    }
+}
+
+/// Runs `filter` over `zs` and smooths the run: per row, the smoothed estimate, covariance
+/// and lag-one covariance (NaN where the row has no predecessor in the pass). With
+/// predict_first the pass's first step is x0, which is no row.
+fn smooth_rows<F: Smoothable<Dyn, Dyn>>(
+    filter: &mut F,
+    zs: &[Option<DVector<f64>>],
+    start: Start,
+) -> Result<Outputs, kalibra_filters::FilterError> {
+    let smoothed = filter.smooth(zs.iter().map(Option::as_ref), start)?;
+    let steps = smoothed.steps();
+    let mut out = Outputs::default();
+    for step in &steps[steps.len().saturating_sub(zs.len())..] {
+        out.estimate.extend(step.mean().iter());
+        push_matrix(&mut out.covariance, step.covariance());
+        match step.lag_one() {
+            Some(lag_one) => push_matrix(&mut out.lag_one, lag_one),
+            None => {
+                let n = step.mean().len();
+                out.lag_one.extend(std::iter::repeat_n(f64::NAN, n * n));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The smoothed outputs of every run as a dict of arrays, shaped as `outputs_dict`'s.
+fn smoothed_dict<'py>(
+    py: Python<'py>,
+    outputs: &[Outputs],
+    (runs, rows, batch): (usize, usize, bool),
+    n: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let lead = if batch { vec![runs, rows] } else { vec![rows] };
+    let shape = |tail: &[usize]| [lead.as_slice(), tail].concat();
+    let fields: [(&str, Vec<usize>, Field); 3] = [
+        ("estimate", shape(&[n]), |o| &o.estimate),
+        ("covariance", shape(&[n, n]), |o| &o.covariance),
+        ("lag_one_covariance", shape(&[n, n]), |o| &o.lag_one),
+    ];
+    let dict = PyDict::new(py);
+    for (key, shape, field) in fields {
+        let data = outputs
+            .iter()
+            .flat_map(|o| field(o).iter().copied())
+            .collect();
+        dict.set_item(key, new_array(py, &shape, data))?;
+    }
+    Ok(dict)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -220,6 +220,11 @@ where
     pub fn measurement(&self) -> &H {
         &self.measurement
     }
+
+    /// The prediction and the state space, for the unscented smoother (`smooth::unscented`).
+    pub(crate) fn smoother_parts(&self) -> (UkfPrediction, Option<&Arc<dyn SigmaSpace<N>>>) {
+        (self.prediction, self.state_space.as_ref())
+    }
 }
 
 impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Filter<N, M> for Ukf<N, M, D, H>

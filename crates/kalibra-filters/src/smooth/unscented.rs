@@ -1,0 +1,58 @@
+//! The unscented smoother's prediction (Sarkka 2008): the cross-covariance of the filter's own
+//! sigma points and their images.
+
+use std::sync::Arc;
+
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, sigma_sqrt};
+use kalibra_models::{Dynamics, Measurement};
+
+use super::Smoothable;
+use super::smoothable::linearised_cross;
+use crate::{Filter, FilterError, SigmaSpace, Ukf, UkfPrediction};
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Smoothable<N, M> for Ukf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The unscented prediction's `C_k = sum_i Wc_i (X_i - x_k)(f(X_i) - x-_{k+1})^T` over the
+    /// sigma points the filter drew (the same set, weights and square root of `P_k`), both
+    /// deviations through the state space's residual; `P_k F_k^T` for
+    /// [`UkfPrediction::Linearised`]. The central point's state deviation is zero, so it adds
+    /// nothing.
+    fn predict_with_cross(&mut self) -> Result<OMatrix<f64, N, N>, FilterError> {
+        if self.smoother_parts().0 == UkfPrediction::Linearised {
+            return linearised_cross(self, |ukf, k, x| ukf.dynamics().jacobian(k, x));
+        }
+        let (k, x, p) = (
+            self.step_index(),
+            self.mean().clone(),
+            self.covariance().clone(),
+        );
+        self.predict()?;
+        // The prediction succeeded with these very points, so the weights are valid, the square
+        // root exists and every image has the state's size.
+        let w = self.sigma_set().weights(x.nrows())?;
+        let (l, _) =
+            sigma_sqrt(&p, "covariance for sigma points").map_err(|e| FilterError::at(k, e))?;
+        let space = self.smoother_parts().1;
+        let deviation = |a: &OVector<f64, N>, b: &OVector<f64, N>| match space {
+            None => a - b,
+            Some(space) => space.residual(a, b),
+        };
+        let predicted = self.mean();
+        let (rows, cols) = p.shape_generic();
+        let mut cross = OMatrix::<f64, N, N>::zeros_generic(rows, cols);
+        for j in 0..x.nrows() {
+            let d = l.column(j) * w.spread;
+            for point in [&x + &d, &x - &d] {
+                let image = self.dynamics().transition(k, &point);
+                cross += deviation(&point, &x) * deviation(&image, predicted).transpose() * w.other;
+            }
+        }
+        Ok(cross)
+    }
+
+    fn smoother_space(&self) -> Option<Arc<dyn SigmaSpace<N>>> {
+        self.smoother_parts().1.cloned()
+    }
+}
