@@ -332,7 +332,7 @@ mod tests {
     use kalibra_linalg::{Dyn, Matrix4, SMatrix, U4, U6, U9};
 
     #[test]
-    fn w1_matrices_match_the_paper_scenario() {
+    fn w1_matrices_match_the_scenario() {
         let t = 1.0;
         let m = Kinematic::constant_velocity(2, t).unwrap();
         let f = m.transition_matrix(U4).unwrap();
