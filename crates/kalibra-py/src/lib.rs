@@ -11,7 +11,7 @@
 //! later. Every error is a Python exception (`kalibra.KalibraError`, a `ValueError`, whose
 //! message names the argument and, where one is at fault, the run and step, and whose
 //! attributes `argument`, `run`, `step`, `index`, `file`, `row` and `column` hold the same
-//! facts for a program: [`At`]); nothing panics across the boundary. Long computations release
+//! facts for a program: `At`); nothing panics across the boundary. Long computations release
 //! the GIL.
 
 // Library code returns typed errors; an unwrap or expect must say why it cannot fail
