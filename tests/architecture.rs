@@ -31,8 +31,9 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// Architecture invariant: each crate depends only on the crates the design allows; in
-/// particular metrics never depend on filters, and nothing depends on the papers.
+/// Architecture invariant: each crate depends on exactly the crates the design's table lists
+/// (nothing more, and no entry the manifest has dropped); in particular metrics never depend
+/// on filters, and nothing depends on the papers.
 #[test]
 fn crate_dependencies_follow_the_design() {
     let allowed: &[(&str, &[&str])] = &[
@@ -43,7 +44,10 @@ fn crate_dependencies_follow_the_design() {
         ("kalibra-bounds", &["kalibra-linalg"]),
         // Figures are data and their SVG writer: nothing of the filters or the studies.
         ("kalibra-plot", &[]),
-        // The log evaluation takes data, like the metrics: never filters, models or studies.
+        // The log evaluation takes data, like the metrics, and uses the metrics' statistics.
+        // Its `tune` module alone (the Q sweep of `kalibra tune`) runs a Kalman filter on
+        // recorded measurements, which brings the models, the filters and the simulation's
+        // parallel sweep; the evaluation of logs uses none of them. Never the studies.
         (
             "kalibra-eval",
             &[
@@ -54,15 +58,21 @@ fn crate_dependencies_follow_the_design() {
                 "kalibra-sim",
             ],
         ),
-        // The `kalibra` executable: reads logs, evaluates them, draws and writes the report.
-        ("kalibra-cli", &["kalibra-eval", "kalibra-plot"]),
-        // The Python package: a front end like the executable, whose log reading (the NPZ
-        // rules) and report writing it calls, plus the filters and metrics it exposes on arrays.
+        // Reading logs and tuning inputs into kalibra-eval's types, and writing the report
+        // (kalibra-eval's reports as documents, with kalibra-plot's figures). The one library
+        // that touches files.
+        ("kalibra-io", &["kalibra-eval", "kalibra-plot"]),
+        // The `kalibra` executable: parses arguments, reads and writes through kalibra-io,
+        // evaluates and tunes with kalibra-eval.
+        ("kalibra-cli", &["kalibra-io", "kalibra-eval"]),
+        // The Python package: a front end like the executable, reading arrays with the NPZ
+        // rules and writing reports through kalibra-io, evaluating with kalibra-eval, plus the
+        // filters, models, simulation and metrics it exposes on arrays.
         (
             "kalibra-py",
             &[
                 "kalibra-eval",
-                "kalibra-cli",
+                "kalibra-io",
                 "kalibra-linalg",
                 "kalibra-models",
                 "kalibra-filters",
@@ -96,19 +106,27 @@ fn crate_dependencies_follow_the_design() {
         let Some((_, ok)) = rule else {
             panic!("crate {krate} is not in the design's table")
         };
-        for dep in kalibra_deps(krate) {
+        let deps = kalibra_deps(krate);
+        for dep in &deps {
             assert!(
                 ok.contains(&dep.as_str()),
                 "{krate} must not depend on {dep}"
+            );
+        }
+        for listed in *ok {
+            assert!(
+                deps.iter().any(|d| d == listed),
+                "the table lets {krate} use {listed}, which it does not: drop the entry"
             );
         }
     }
 }
 
 /// Architecture invariant: library crates do no I/O, read no environment and use no global
-/// random generator (printing is caught by clippy's print lints). The executable crate
-/// kalibra-cli is exempt. The Python package (kalibra-py) is checked like a library: its
-/// `Report.save` writes through kalibra-cli's writer, so it needs no file access of its own.
+/// random generator (printing is caught by clippy's print lints). kalibra-io (the readers
+/// and the report writer) and the executable crate kalibra-cli are exempt. The Python package
+/// (kalibra-py) is checked like a library: its `Report.save` writes through kalibra-io's
+/// writer, so it needs no file access of its own.
 #[test]
 fn library_crates_do_no_io() {
     let mut files = Vec::new();
@@ -125,11 +143,12 @@ fn library_crates_do_no_io() {
     for file in files {
         // Tests may touch files, and so may examples (programs beside a crate, such as the
         // profiling drivers that read their instruction set from the command line); so may
-        // the `kalibra` executable, the one crate under crates/ that is not a library (it
-        // reads logs and writes reports, like xtask).
+        // kalibra-io, whose job is reading logs and writing reports, and the `kalibra`
+        // executable, the one crate under crates/ that is not a library (like xtask).
         if file
             .components()
             .any(|c| c.as_os_str() == "tests" || c.as_os_str() == "examples")
+            || file.starts_with(root().join("crates/kalibra-io"))
             || file.starts_with(root().join("crates/kalibra-cli"))
         {
             continue;
@@ -139,6 +158,214 @@ fn library_crates_do_no_io() {
             assert!(!text.contains(word), "{} uses {word}", file.display());
         }
     }
+}
+
+/// The one module allowed `unsafe` code: the lane gathers of the batched simulation's normal
+/// draws, which pulp exposes only as `unsafe` functions of raw pointers (see the module's
+/// docs, "Why `unsafe`").
+const UNSAFE_MODULE: &str = "crates/kalibra-sim/src/lanes/gather.rs";
+
+/// Architecture invariant: `unsafe` is denied workspace-wide (`unsafe_code = "deny"` in the
+/// root manifest, which every crate inherits through `[lints] workspace = true` and none
+/// overrides) and allowed in exactly one module, [`UNSAFE_MODULE`]. A test's counting global
+/// allocator (`no_alloc.rs`, which cannot be written without `unsafe`) is the one exception
+/// outside library code.
+#[test]
+fn unsafe_code_is_allowed_in_one_module_only() {
+    let root_manifest = fs::read_to_string(root().join("Cargo.toml")).unwrap();
+    assert!(
+        root_manifest.contains("unsafe_code = \"deny\""),
+        "the workspace no longer denies unsafe code"
+    );
+    let mut manifests = vec![root().join("xtask/Cargo.toml")];
+    for entry in fs::read_dir(root().join("crates")).unwrap() {
+        manifests.push(entry.unwrap().path().join("Cargo.toml"));
+    }
+    for manifest in manifests {
+        let text = fs::read_to_string(&manifest).unwrap();
+        let lints = text.split("[lints]").nth(1).unwrap_or("");
+        assert!(
+            lints.trim_start().starts_with("workspace = true"),
+            "{} does not take the workspace's lints",
+            manifest.display()
+        );
+        assert!(
+            !text.contains("unsafe_code"),
+            "{} overrides the workspace's unsafe_code lint",
+            manifest.display()
+        );
+    }
+    let mut files = Vec::new();
+    for dir in ["crates", "src", "tests", "examples", "xtask"] {
+        rust_files(&root().join(dir), &mut files);
+    }
+    let mut allowing = Vec::new();
+    for file in &files {
+        let text = fs::read_to_string(file).unwrap();
+        // An attribute line (`#![allow(unsafe_code)]`, `#[allow(..., unsafe_code)]`), not
+        // text that names one.
+        let allows = text.lines().any(|l| {
+            let code = l.trim_start();
+            code.starts_with('#') && code.contains("allow(") && code.contains("unsafe_code")
+        });
+        let test_allocator = file.file_name().is_some_and(|n| n == "no_alloc.rs")
+            && file.components().any(|c| c.as_os_str() == "tests");
+        if allows && !test_allocator {
+            allowing.push(file.strip_prefix(root()).unwrap().to_path_buf());
+        }
+    }
+    assert_eq!(
+        allowing,
+        vec![PathBuf::from(UNSAFE_MODULE)],
+        "unsafe code is allowed in exactly one module"
+    );
+    let gather = fs::read_to_string(root().join(UNSAFE_MODULE)).unwrap();
+    assert!(gather.contains("#![allow(unsafe_code)]"));
+}
+
+/// The `crate::` and `super::` modules the source `text` of module `module` (a top-level
+/// module of its crate) imports: the first path segment after `crate::` or `super::` in its
+/// `use` lines and paths.
+fn imported_modules(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let code = line.trim_start();
+        if code.starts_with("//") {
+            continue;
+        }
+        for prefix in ["crate::", "super::"] {
+            let mut rest = code;
+            while let Some(at) = rest.find(prefix) {
+                rest = &rest[at + prefix.len()..];
+                let name: String = rest
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect();
+                // `crate::{a, b}`: each name in the braces.
+                if name.is_empty() && rest.starts_with('{') {
+                    let inside = rest[1..].split('}').next().unwrap_or("");
+                    for part in inside.split(',') {
+                        let part = part.trim().split("::").next().unwrap_or("").trim();
+                        if !part.is_empty() {
+                            out.push(part.to_string());
+                        }
+                    }
+                } else if !name.is_empty() {
+                    out.push(name);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Architecture invariant: kalibra-io's modules import each other without cycles, leaf first
+/// (the error and the cells at the bottom, one module per format above them, the dispatch on
+/// top), so that each can be read, tested and changed from the bottom up.
+#[test]
+fn kalibra_io_modules_import_without_cycles() {
+    let src = root().join("crates/kalibra-io/src");
+    let mut modules = std::collections::BTreeMap::new();
+    for entry in fs::read_dir(&src).unwrap() {
+        let path = entry.unwrap().path();
+        let Some(name) = path.file_stem().map(|s| s.to_string_lossy().into_owned()) else {
+            continue;
+        };
+        if name == "lib" {
+            continue;
+        }
+        let mut files = Vec::new();
+        if path.is_dir() {
+            rust_files(&path, &mut files);
+        } else {
+            files.push(path.clone());
+        }
+        let mut imports = Vec::new();
+        for file in files {
+            let text = fs::read_to_string(&file).unwrap();
+            // The unit tests inside a module may use anything of their parent.
+            let text = text.split("#[cfg(test)]").next().unwrap_or("");
+            imports.extend(imported_modules(text));
+        }
+        modules.insert(name, imports);
+    }
+    assert!(modules.len() > 5, "kalibra-io's modules were not found");
+    // Imports of names the crate root re-exports (`crate::Error`) go to their module.
+    let module_of = |name: &str| match name {
+        "Error" => "error".to_string(),
+        "ARRAY_NAMES" => "raw".to_string(),
+        other => other.to_string(),
+    };
+    let graph: std::collections::BTreeMap<String, Vec<String>> = modules
+        .iter()
+        .map(|(m, imports)| {
+            let mut to: Vec<String> = imports
+                .iter()
+                .map(|i| module_of(i))
+                .filter(|i| i != m && modules.contains_key(i))
+                .collect();
+            to.sort();
+            to.dedup();
+            (m.clone(), to)
+        })
+        .collect();
+    // Depth-first search for a cycle, reporting the path around it.
+    fn visit(
+        m: &str,
+        graph: &std::collections::BTreeMap<String, Vec<String>>,
+        path: &mut Vec<String>,
+        done: &mut std::collections::BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(at) = path.iter().position(|p| p == m) {
+            let mut cycle = path[at..].to_vec();
+            cycle.push(m.to_string());
+            return Some(cycle);
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m.to_string());
+        for next in &graph[m] {
+            if let Some(cycle) = visit(next, graph, path, done) {
+                return Some(cycle);
+            }
+        }
+        path.pop();
+        done.insert(m.to_string());
+        None
+    }
+    let mut done = std::collections::BTreeSet::new();
+    for m in graph.keys() {
+        if let Some(cycle) = visit(m, &graph, &mut Vec::new(), &mut done) {
+            panic!(
+                "kalibra-io's modules import in a cycle: {}",
+                cycle.join(" -> ")
+            );
+        }
+    }
+    // The bottom of the order imports nothing of the crate.
+    assert!(
+        graph["error"].is_empty(),
+        "error imports {:?}",
+        graph["error"]
+    );
+    assert!(
+        graph["finite"].is_empty(),
+        "finite imports {:?}",
+        graph["finite"]
+    );
+}
+
+/// The import scanner finds `crate::` and `super::` paths, braces included, and skips
+/// comments, so the cycle check above can fail.
+#[test]
+fn imported_modules_reads_use_lines() {
+    let text = "use crate::error::Error;\nuse crate::{raw::KNOWN, input};\n\
+                // use crate::output;\nlet x = super::csv_rows::Rows::new();";
+    assert_eq!(
+        imported_modules(text),
+        vec!["error", "raw", "input", "csv_rows"]
+    );
 }
 
 /// Architecture invariant: the copy of the design kept in docs/ lists every crate present.

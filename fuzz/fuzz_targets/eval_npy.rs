@@ -3,7 +3,7 @@
 
 #![no_main]
 
-use kalibra_cli::input::LogFormat;
+use kalibra_io::input::LogFormat;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -8,11 +8,11 @@
 //!   [--out DIR] [--threads N]` sweeps `Q = 10^p Q_nom` with `kalibra_eval::Tuning` and writes
 //!   the crossover, the recommended `Q` and the sweep's figures the same way.
 //!
-//! This binary is a thin layer: it parses arguments, reads files into a
-//! `kalibra_eval::FilterLog`, and writes what `kalibra_eval` and `kalibra_plot` return. Exit
-//! codes: 0 success, 1 the run failed (bad input, or a report that could not be written), 2 bad
-//! usage (clap's own errors). Errors are one message naming the file and the row and column
-//! (CSV) or the array and index (JSON, NPZ); never a panic or a backtrace.
+//! This binary is a thin layer: it parses arguments, reads the files and writes the report
+//! through `kalibra_io`, and evaluates and tunes with `kalibra_eval`. Exit codes: 0 success, 1
+//! the run failed (bad input, or a report that could not be written), 2 bad usage (clap's own
+//! errors). Errors are one message naming the file and the row and column (CSV), the array and
+//! index (JSON, NPZ), the key (MODEL.toml) or the option; never a panic or a backtrace.
 
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 #![deny(clippy::unwrap_used, clippy::expect_used)]
@@ -21,8 +21,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use kalibra_cli::{document, input, output, tune_input};
-use kalibra_eval::{Evaluation, Tuning};
+use kalibra_eval::{EvalError, Evaluation, Tuning};
+use kalibra_io::{Error, document, input, output, tune_input};
 
 /// Judge a Kalman-type filter from its logs: is its covariance telling the truth?
 #[derive(Debug, Parser)]
@@ -177,14 +177,32 @@ fn main() -> ExitCode {
     }
 }
 
+/// The one message of a reader's or the writer's error. A `--group` naming a component the
+/// log's state does not have is the option's fault, not the log's, and says so.
+fn message(e: Error) -> String {
+    match e {
+        Error::Evaluate {
+            file,
+            source: EvalError::GroupIndex { group, index, dim },
+            ..
+        } => format!(
+            "--group {group}: component {index} is not in the state of {}, which has {dim} \
+             components (0 to {})",
+            file.display(),
+            dim.saturating_sub(1)
+        ),
+        other => other.to_string(),
+    }
+}
+
 /// `kalibra eval`: read, evaluate, write. The error is the one message to print.
 fn eval(args: &EvalArgs) -> Result<(), String> {
     let evaluation = evaluation(args)?;
     // The output first: an unwritable --out fails before a long evaluation.
-    let target = output::Target::prepare(&args.out)?;
-    let report = input::evaluate_log(&args.log, &evaluation)?;
+    let target = output::Target::prepare(&args.out).map_err(message)?;
+    let report = input::evaluate_log(&args.log, &evaluation).map_err(message)?;
     let doc = document::Document::new(&args.log, &report);
-    target.write(&report, &doc)?;
+    target.write(&report, &doc).map_err(message)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());
     Ok(())
@@ -193,20 +211,24 @@ fn eval(args: &EvalArgs) -> Result<(), String> {
 /// `kalibra tune`: read the model and the sequences, sweep, write.
 fn tune(args: &TuneArgs) -> Result<(), String> {
     // The output first: an unwritable --out fails before any work.
-    let target = output::Target::prepare(&args.out)?;
-    let model = tune_input::read_model(&args.model)?;
+    let target = output::Target::prepare(&args.out).map_err(message)?;
+    let model = tune_input::read_model(&args.model).map_err(message)?;
     let m = model.meas_dim();
     let measurements =
-        tune_input::read_series(&args.measurements, "z", m, &format!("H has {m} row(s)"))?;
+        tune_input::read_series(&args.measurements, "z", m, &format!("H has {m} row(s)"))
+            .map_err(message)?;
     let truth = match &args.truth {
         Some(path) => {
             let n = model.state_dim();
-            let t = tune_input::read_series(path, "x", n, &format!("F has {n} row(s)"))?;
+            let t = tune_input::read_series(path, "x", n, &format!("F has {n} row(s)"))
+                .map_err(message)?;
             Some((path.as_path(), t))
         }
         None => None,
     };
-    let problem = model.problem(&args.model, measurements, truth)?;
+    let problem = model
+        .problem(&args.model, measurements, truth)
+        .map_err(message)?;
     let (from, to, step) = args.grid;
     let mut tuning = Tuning::new()
         .exponents(from, to, step)
@@ -219,7 +241,7 @@ fn tune(args: &TuneArgs) -> Result<(), String> {
         .tune(&problem)
         .map_err(|e| format!("{}: cannot tune: {e}", args.model.display()))?;
     let doc = document::Document::tune(&args.model, &args.measurements, &report);
-    target.write(&report, &doc)?;
+    target.write(&report, &doc).map_err(message)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());
     Ok(())

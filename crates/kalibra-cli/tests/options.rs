@@ -117,10 +117,11 @@ fn an_empty_out_is_refused_before_any_work() {
 /// `save`): an empty path is an error, not the current directory.
 #[test]
 fn the_report_target_refuses_an_empty_path() {
-    let Err(message) = kalibra_cli::output::Target::prepare(std::path::Path::new("")) else {
+    let Err(error) = kalibra_io::output::Target::prepare(std::path::Path::new("")) else {
         panic!("an empty path was accepted");
     };
-    assert!(message.contains("empty path"), "{message}");
+    assert!(matches!(error, kalibra_io::Error::EmptyOutput), "{error}");
+    assert!(error.to_string().contains("empty path"), "{error}");
 }
 
 #[test]

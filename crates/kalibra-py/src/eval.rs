@@ -2,14 +2,14 @@
 
 use std::path::{Path, PathBuf};
 
-use kalibra_cli::document::Document;
 use kalibra_eval::Evaluation;
+use kalibra_io::document::Document;
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::arrays::{read_in_place, read_opt};
-use crate::error;
+use crate::{error, eval_error, io_error};
 
 /// The consistency report of a filter log: what `kalibra eval` writes as `report.json`, with
 /// its verdict, and the files of the command's report directory on request.
@@ -109,8 +109,8 @@ impl Report {
     ///     OSError: `dir` holds something other than a report, or cannot be written.
     fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
         let doc = self.document();
-        py.detach(|| kalibra_cli::output::write_report(&dir, &self.report, &doc))
-            .map_err(PyOSError::new_err)
+        py.detach(|| kalibra_io::output::write_report(&dir, &self.report, &doc))
+            .map_err(|e| PyOSError::new_err(e.to_string()))
     }
 
     fn __repr__(&self) -> String {
@@ -232,12 +232,10 @@ fn evaluate(
         .iter()
         .map(|(array, a)| (array.to_string(), a.shape(), a.data()))
         .collect();
-    let report = py
-        .detach(|| {
-            let log = kalibra_cli::input::log_from_arrays(arrays)?;
-            evaluation.evaluate(&log).map_err(|e| e.to_string())
-        })
-        .map_err(error)?;
+    let report = py.detach(|| {
+        let log = kalibra_io::input::log_from_arrays(arrays).map_err(|e| io_error(&e))?;
+        evaluation.evaluate(&log).map_err(|e| eval_error(&e))
+    })?;
     drop(held);
     Ok(Report::new(report, name))
 }
@@ -263,7 +261,7 @@ pub(crate) fn evaluation(
             named.push((group, components));
         }
     }
-    evaluation_of(confidence, window, &named, lags).map_err(|e| error(e.to_string()))
+    evaluation_of(confidence, window, &named, lags).map_err(|e| eval_error(&e))
 }
 
 /// The evaluation of options already read from Python (the groups in the order given): also

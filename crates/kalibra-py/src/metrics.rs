@@ -7,7 +7,7 @@ use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
 use crate::arrays::{Array, new_array, read};
-use crate::error;
+use crate::{error, eval_error, io_error};
 
 /// `index` (a flat index over `shape`) as the tuple numpy prints, `(r, k)`.
 fn index_text(shape: &[usize], mut index: usize) -> String {
@@ -201,15 +201,13 @@ fn nci<'py>(
     .into_iter()
     .map(|(name, obj)| read(obj, name).map(|a| (name.to_string(), a.shape, a.data)))
     .collect::<PyResult<_>>()?;
-    let values = py
-        .detach(|| {
-            let log = kalibra_cli::input::log_from_arrays(arrays)?;
-            let report = kalibra_eval::Evaluation::new()
-                .evaluate(&log)
-                .map_err(|e| e.to_string())?;
-            Ok::<_, String>(report.nci_per_step)
-        })
-        .map_err(error)?;
+    let values = py.detach(|| {
+        let log = kalibra_io::input::log_from_arrays(arrays).map_err(|e| io_error(&e))?;
+        let report = kalibra_eval::Evaluation::new()
+            .evaluate(&log)
+            .map_err(|e| eval_error(&e))?;
+        Ok::<_, PyErr>(report.nci_per_step)
+    })?;
     let k = values.len();
     let values = values.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect();
     Ok(new_array(py, &[k], values))

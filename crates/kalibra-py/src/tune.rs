@@ -2,14 +2,14 @@
 
 use std::path::{Path, PathBuf};
 
-use kalibra_cli::document::Document;
 use kalibra_eval::{DMatrix, DVector, Start, TuneProblem, Tuning};
+use kalibra_io::document::Document;
 use numpy::PyArrayDyn;
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 
 use crate::arrays::{new_array, read};
-use crate::error;
+use crate::{error, tune_error};
 
 /// The J1/J2 sweep of `Q = 10^p Q_nom` and its recommendation: what `kalibra tune` writes as
 /// `report.json`, with the command's report files on request.
@@ -102,8 +102,8 @@ impl TuneReport {
     /// Raises:
     ///     OSError: `dir` holds something other than a report, or cannot be written.
     fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
-        py.detach(|| kalibra_cli::output::write_report(&dir, &self.report, &self.doc))
-            .map_err(PyOSError::new_err)
+        py.detach(|| kalibra_io::output::write_report(&dir, &self.report, &self.doc))
+            .map_err(|e| PyOSError::new_err(e.to_string()))
     }
 
     fn __repr__(&self) -> String {
@@ -238,7 +238,7 @@ fn sweep_q(
     } else {
         TuneProblem::new
     };
-    let tune_error = |e: kalibra_eval::TuneError| error(e.to_string());
+    let tune_error = |e: kalibra_eval::TuneError| tune_error(&e);
     let mut problem = build(
         matrix(F, "F")?,
         matrix(H, "H")?,

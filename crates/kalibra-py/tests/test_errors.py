@@ -110,3 +110,71 @@ def test_building_block_arguments():
         kalibra.rmse(np.zeros((2, 2)), np.zeros((2, 2)), over="space")
     with pytest.raises(kalibra.KalibraError, match="argument innovation_cov has shape"):
         kalibra.nis(np.zeros((4, 2)), np.zeros((4, 2)))
+
+
+def raised(call):
+    """The KalibraError `call` raises."""
+    with pytest.raises(kalibra.KalibraError) as info:
+        call()
+    return info.value
+
+
+PLACES = ("argument", "run", "step", "index", "file", "row", "column")
+
+
+def test_error_attributes_name_the_argument_run_and_step():
+    e = raised(lambda: kalibra.evaluate(**{**good(), "truth": np.full((3, 4, 2), np.inf)}))
+    assert (e.argument, e.run, e.step) == ("truth", 0, 0)
+    # Arrays in memory have no file, and the error no index inside the argument.
+    assert (e.index, e.file, e.row, e.column) == (None, None, None, None)
+
+
+@pytest.mark.parametrize(
+    "change, argument, step",
+    [
+        (dict(covariance=np.eye(2)), "covariance", None),
+        # The later array disagrees with the first: the estimate is named.
+        (dict(estimate=np.zeros((3, 5, 2))), "estimate", None),
+        # A model given in part: the first array missing is named.
+        (dict(F=np.eye(2)), "H", None),
+        (dict(time=np.zeros(4)), "time", 1),
+        (dict(truth=np.array([["a", "b"]])), "truth", None),
+    ],
+)
+def test_error_attributes_of_evaluate(change, argument, step):
+    e = raised(lambda: kalibra.evaluate(**{**good(), **change}))
+    assert (e.argument, e.step, e.run) == (argument, step, None)
+
+
+@pytest.mark.parametrize(
+    "option, argument, index",
+    [
+        (dict(confidence=1.5), "confidence", None),
+        (dict(window=1), "window", None),
+        (dict(lags=0), "lags", None),
+        (dict(groups={"pos": [0, 7]}), "groups", (7,)),
+        (dict(groups={"pos": "x"}), "groups", None),
+    ],
+)
+def test_error_attributes_of_options(option, argument, index):
+    e = raised(lambda: kalibra.evaluate(**good(), **option))
+    assert (e.argument, e.index) == (argument, index)
+    assert (e.run, e.step, e.file) == (None, None, None)
+
+
+def test_error_attributes_of_sweep_q_name_the_matrix():
+    F = np.array([[1.0, 1.0], [0.0, 1.0]])
+    H = np.array([[1.0, 0.0]])
+    asymmetric = np.array([[1.0, 0.5], [0.0, 1.0]])
+    z = np.zeros((10, 1))
+    e = raised(lambda: kalibra.sweep_q(F, H, asymmetric, np.eye(1), np.zeros(2), np.eye(2), z))
+    assert e.argument == "Q_nom", str(e)
+    assert "Q_nom" in str(e)
+
+
+def test_error_attributes_default_to_none():
+    e = kalibra.KalibraError("made by hand")
+    assert all(getattr(e, name) is None for name in PLACES)
+    # Set on one error, not on the class.
+    raised(lambda: kalibra.evaluate(**{**good(), "truth": np.full((3, 4, 2), np.inf)}))
+    assert kalibra.KalibraError.argument is None

@@ -30,7 +30,16 @@ J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command. Simulation:
 all in Rust and bit-identical for any thread count; with ``shard=(i, S)`` it returns a
 picklable ``Partial`` and ``merge`` of all S gives the one-process report to the bit (Dask,
 job arrays). Errors are ``kalibra.KalibraError`` (a ``ValueError``) naming the
-argument and, where one is at fault, the index.
+argument and, where one is at fault, the index; its attributes ``argument``, ``run``,
+``step``, ``index``, ``file``, ``row`` and ``column`` hold the same facts (None where they
+do not apply), so a program can tell which input to fix:
+
+    >>> try:
+    ...     kalibra.evaluate(truth=np.full((2, 3, 1), np.inf), estimate=np.zeros((2, 3, 1)),
+    ...                      covariance=np.ones((2, 3, 1, 1)))
+    ... except kalibra.KalibraError as e:
+    ...     print(e.argument, e.run, e.step)
+    truth 0 0
 """
 
 from ._kalibra import (

@@ -44,7 +44,27 @@ __all__ = [
 ]
 
 class KalibraError(ValueError):
-    """Bad input: the message names the argument and, where one is at fault, the index."""
+    """Bad input: the message names the argument and, where one is at fault, the index.
+
+    The same facts as attributes, for a program to act on; each is None where it does not
+    apply (an error of an option has no run, an error of arrays no file).
+    """
+
+    argument: str | None
+    """The argument at fault (``"truth"``, ``"Q_nom"``, ``"groups"``, ...)."""
+    run: int | None
+    """The run at fault, from 0."""
+    step: int | None
+    """The step at fault, from 0."""
+    index: tuple[int, ...] | None
+    """Where inside the argument, outermost axis first, from 0 (a matrix's row or pivot, a
+    group's component, a grid point)."""
+    file: str | None
+    """The file at fault."""
+    row: int | None
+    """The row (CSV) or line (JSON, TOML) of the file, from 1."""
+    column: int | None
+    """The column of the file, from 1."""
 
 @final
 class Report:

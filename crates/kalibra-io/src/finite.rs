@@ -3,8 +3,8 @@
 //! `serde_json` writes NaN and the infinities as `null`, the same `null` an absent optional
 //! value gets, so a report's JSON cannot tell "not computed" from "computed as NaN". This
 //! walks any serialisable value with a serializer that only looks at its floats, so the fuzz
-//! targets and the readers' property test (issue 19) can assert that a log read and evaluated
-//! without error holds finite numbers only.
+//! targets and the readers' property test (`tests/readers_fuzz.rs`) can assert that a log
+//! read and evaluated without error holds finite numbers only.
 
 use std::fmt::Display;
 
@@ -19,9 +19,9 @@ use serde::ser;
 /// #[derive(serde::Serialize)]
 /// struct Stats { mean: f64, spread: Vec<Option<f64>> }
 /// let good = Stats { mean: 1.0, spread: vec![Some(2.0), None] };
-/// assert_eq!(kalibra_cli::finite::first_non_finite(&good), None);
+/// assert_eq!(kalibra_io::finite::first_non_finite(&good), None);
 /// let bad = Stats { mean: 1.0, spread: vec![None, Some(f64::NAN)] };
-/// assert_eq!(kalibra_cli::finite::first_non_finite(&bad).as_deref(), Some("spread[1]"));
+/// assert_eq!(kalibra_io::finite::first_non_finite(&bad).as_deref(), Some("spread[1]"));
 /// ```
 pub fn first_non_finite(value: &impl Serialize) -> Option<String> {
     let mut walker = Walker {

@@ -16,6 +16,8 @@ use std::sync::{Mutex, mpsc};
 use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, Report};
 
 use crate::csv_rows::Rows;
+use crate::error::Error;
+
 /// The per-cell arrays, vectors first.
 const ARRAYS: [&str; 5] = [
     "truth",
@@ -74,9 +76,8 @@ fn parse_column(name: &str) -> Option<Column> {
 const PROGRESS_FROM_BYTES: u64 = 64 << 20;
 
 /// Evaluates the CSV log `file` with `evaluation`, reading it once from start to end.
-pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> {
-    let name = file.display();
-    let opened = File::open(file).map_err(|e| format!("{name}: cannot read the file: {e}"))?;
+pub(crate) fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, Error> {
+    let opened = File::open(file).map_err(|e| Error::read(file, e))?;
     // The size of a regular file bounds the rows it can hold (a pipe's is unknown).
     let known_size = opened
         .metadata()
@@ -92,7 +93,7 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
             )
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
-        bar.set_message(format!("reading {name}"));
+        bar.set_message(format!("reading {}", file.display()));
         bar
     });
     let source: Box<dyn Read + Send> = match &progress {
@@ -107,54 +108,57 @@ pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> 
 }
 
 /// Evaluates the CSV log held in `bytes` (the file `file`, as messages name it).
-pub fn evaluate_bytes(
+pub(crate) fn evaluate_bytes(
     file: &Path,
     bytes: &[u8],
     evaluation: &Evaluation,
-) -> Result<Report, String> {
+) -> Result<Report, Error> {
     stream(file, bytes, Some(bytes.len() as u64), evaluation)
 }
 
 /// The header's columns and the arrays' layouts, or the error naming the column at fault.
-fn header<R: Read>(
-    name: &impl std::fmt::Display,
-    rows: &Rows<impl std::fmt::Display, R>,
-) -> Result<(Vec<Column>, Vec<Layout>), String> {
+fn header<R: Read>(file: &Path, rows: &Rows<'_, R>) -> Result<(Vec<Column>, Vec<Layout>), Error> {
     let header = &rows.header;
     let columns = header
         .iter()
         .enumerate()
         .map(|(c, h)| {
             parse_column(h).ok_or_else(|| {
-                format!(
-                    "{name}: row 1, column {}: unknown column `{h}`; the columns are run, step, \
-                     time, truth_i, estimate_i, covariance_i_j, innovation_i, \
-                     innovation_cov_i_j (i, j from 0)",
-                    c + 1
+                rows.header_error(
+                    c,
+                    format!(
+                        "unknown column `{h}`; the columns are run, step, time, truth_i, \
+                         estimate_i, covariance_i_j, innovation_i, innovation_cov_i_j (i, j \
+                         from 0)"
+                    ),
                 )
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
     for (c, col) in columns.iter().enumerate() {
         if let Some(first) = columns[..c].iter().position(|x| x == col) {
-            return Err(format!(
-                "{name}: row 1, column {}: column `{}` repeats column {}",
-                c + 1,
-                &header[c],
-                first + 1
+            return Err(rows.header_error(
+                c,
+                format!("column `{}` repeats column {}", &header[c], first + 1),
             ));
         }
     }
     for (want, label) in [(Column::Run, "run"), (Column::Step, "step")] {
         if !columns.contains(&want) {
-            return Err(format!("{name}: row 1: missing column `{label}`"));
+            return Err(Error::csv(
+                file,
+                Some(1),
+                format!("missing column `{label}`"),
+            ));
         }
     }
-    let layouts = layouts(&columns).map_err(|e| format!("{name}: row 1: {e}"))?;
+    let layouts = layouts(&columns).map_err(|e| Error::csv(file, Some(1), e))?;
     if layouts.is_empty() {
-        return Err(format!(
-            "{name}: row 1: no data columns (truth_i, estimate_i, covariance_i_j, innovation_i, \
-             innovation_cov_i_j)"
+        return Err(Error::csv(
+            file,
+            Some(1),
+            "no data columns (truth_i, estimate_i, covariance_i_j, innovation_i, \
+             innovation_cov_i_j)",
         ));
     }
     Ok((columns, layouts))
@@ -169,9 +173,9 @@ fn number(text: &str) -> Result<Option<f64>, ()> {
 }
 
 /// The fields of one data row as trimmed text. The row's bytes are checked as UTF-8 once,
-/// not field by field (the per-call cost of that check on short numbers was a tenth of the
-/// reading time); a row that is not UTF-8 is read field by field, lossily, so the message
-/// names the field at fault.
+/// not field by field (that check has a cost per call, which short numbers make large); a
+/// row that is not UTF-8 is read field by field, lossily, so the message names the field at
+/// fault.
 struct Fields<'a> {
     record: &'a csv::ByteRecord,
     text: Option<&'a str>,
@@ -199,13 +203,12 @@ impl<'a> Fields<'a> {
 }
 
 /// Bytes of the file handed to a parsing thread at a time: large enough that the hand-over
-/// costs nothing, small enough that the blocks in flight hold a few megabytes. On a 1M-row
-/// log 256 KiB and 1 MiB blocks took the same time, and the peak fell from 64 MB to 52 MB.
+/// costs nothing, small enough that the blocks in flight hold a few megabytes.
 const BLOCK_BYTES: usize = 256 << 10;
 
 /// What every parsing thread needs to know of the header.
-struct Plan {
-    name: String,
+struct Plan<'f> {
+    file: &'f Path,
     header: csv::StringRecord,
     layouts: Vec<Layout>,
     run_col: usize,
@@ -240,12 +243,12 @@ struct Parsed {
 }
 
 /// A block's place in the file and its parse.
-type BlockResult = (usize, Result<Parsed, String>);
+type BlockResult = (usize, Result<Parsed, Error>);
 
-impl Plan {
+impl Plan<'_> {
     /// Parses the rows of `block`, whose first line is row `first_row` of the file.
-    fn parse(&self, block: &[u8], first_row: u64) -> Result<Parsed, String> {
-        let mut rows = Rows::continuing(&self.name, block, self.header.clone(), first_row);
+    fn parse(&self, block: &[u8], first_row: u64) -> Result<Parsed, Error> {
+        let mut rows = Rows::continuing(self.file, block, self.header.clone(), first_row);
         let mut parsed = Parsed {
             rows: Vec::new(),
             values: Vec::new(),
@@ -255,7 +258,7 @@ impl Plan {
             let fields = Fields::new(&record);
             let not_number =
                 |c: usize| rows.cell_error(line, c, format!("`{}` is not a number", fields.get(c)));
-            let index = |c: usize| -> Result<usize, String> {
+            let index = |c: usize| -> Result<usize, Error> {
                 let text = fields.get(c);
                 if text.is_empty() {
                     return Err(rows.cell_error(
@@ -277,12 +280,15 @@ impl Plan {
             if let Some(max) = self.max_rows {
                 let needed = (run as u128 + 1) * (step as u128 + 1);
                 if needed > u128::from(max) {
-                    return Err(format!(
-                        "{}: row {line}: run {run}, step {step}: a log holding it has at least \
-                         {needed} rows (runs times steps), more than the file's {} columns \
-                         per row leave room for (at most {max}); is the run or step wrong?",
-                        self.name,
-                        self.header.len(),
+                    return Err(Error::csv(
+                        self.file,
+                        Some(line),
+                        format!(
+                            "run {run}, step {step}: a log holding it has at least {needed} \
+                             rows (runs times steps), more than the file's {} columns per row \
+                             leave room for (at most {max}); is the run or step wrong?",
+                            self.header.len(),
+                        ),
                     ));
                 }
             }
@@ -410,9 +416,8 @@ fn stream(
     mut source: impl Read + Send,
     size: Option<u64>,
     evaluation: &Evaluation,
-) -> Result<Report, String> {
-    let name = file.display().to_string();
-    let read_error = |e: std::io::Error| format!("{name}: cannot read the file: {e}");
+) -> Result<Report, Error> {
+    let read_error = |e: std::io::Error| Error::read(file, e);
     // The header: everything up to the first record end.
     let mut buf = Vec::new();
     let mut at_end = false;
@@ -426,11 +431,11 @@ fn stream(
         let want = buf.len() + 64 * 1024;
         at_end = fill(&mut source, &mut buf, want).map_err(read_error)?;
     };
-    let rows = Rows::new(name.as_str(), &buf[..header_end])?;
-    let (columns, layouts) = header(&name, &rows)?;
+    let rows = Rows::new(file, &buf[..header_end])?;
+    let (columns, layouts) = header(file, &rows)?;
     let find = |want: Column| columns.iter().position(|c| *c == want);
     let (Some(run_col), Some(step_col)) = (find(Column::Run), find(Column::Step)) else {
-        return Err(format!("{name}: row 1: missing column `run` or `step`"));
+        return Err(Error::csv(file, Some(1), "missing column `run` or `step`"));
     };
     let mut contents = Contents::default();
     let mut offsets = [None; ARRAYS.len()];
@@ -447,7 +452,7 @@ fn stream(
         width += l.columns.len();
     }
     let plan = Plan {
-        name: name.clone(),
+        file,
         header: rows.header.clone(),
         layouts,
         run_col,
@@ -457,7 +462,7 @@ fn stream(
         width,
         max_rows: size.map(|s| s / (rows.header.len().max(1) as u64)),
     };
-    let fail = |e: EvalError| crate::input::evaluation_error(&name, &e);
+    let fail = |e: EvalError| Error::evaluate(file, e);
     let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
     let first_data_row = 1 + buf[..header_end].iter().filter(|&&b| b == b'\n').count() as u64;
     buf.drain(..header_end);
@@ -468,7 +473,7 @@ fn stream(
     let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(workers + 1);
     let mut times: Vec<Option<(f64, u64)>> = Vec::new();
     let mut any = false;
-    let fed: Result<(), String> = std::thread::scope(|scope| {
+    let fed: Result<(), Error> = std::thread::scope(|scope| {
         // The reader: cuts the file into blocks of whole records, in order.
         let reader_done = done_tx.clone();
         scope.spawn(move || {
@@ -541,12 +546,13 @@ fn stream(
                         if let Err(msg) = check_time(&mut times, row, t) {
                             time_error = Some((
                                 i,
-                                format!(
-                                    "{name}: row {}, column {} ({}): {msg}",
-                                    row.line,
-                                    c + 1,
-                                    &plan.header[c]
-                                ),
+                                Error::Csv {
+                                    file: file.to_path_buf(),
+                                    row: Some(row.line),
+                                    column: Some(c + 1),
+                                    column_name: Some(plan.header[c].to_string()),
+                                    message: msg,
+                                },
                             ));
                             break;
                         }
@@ -564,11 +570,16 @@ fn stream(
                 evaluator.push_batch(&cells).map_err(|(i, e)| {
                     let line = parsed.rows[i].line;
                     match e {
-                        EvalError::DuplicateCell { run, step } => format!(
-                            "{name}: row {line}: run {run}, step {step} already given in an \
-                             earlier row"
+                        EvalError::DuplicateCell { run, step } => Error::csv(
+                            file,
+                            Some(line),
+                            format!("run {run}, step {step} already given in an earlier row"),
                         ),
-                        other => format!("{name}: row {line}: cannot evaluate the log: {other}"),
+                        other => Error::Evaluate {
+                            file: file.to_path_buf(),
+                            row: Some(line),
+                            source: other,
+                        },
                     }
                 })?;
                 if let Some((_, message)) = time_error {
@@ -580,7 +591,7 @@ fn stream(
     });
     fed?;
     if !any {
-        return Err(format!("{name}: no data rows after the header"));
+        return Err(Error::csv(file, None, "no data rows after the header"));
     }
     let times = match plan.time_col {
         None => None,
@@ -592,16 +603,22 @@ fn stream(
                         .copied()
                         .flatten()
                         .map(|(t, _)| t)
-                        .ok_or_else(|| format!("{name}: column time: no time for step {k}"))
+                        .ok_or_else(|| {
+                            Error::csv(file, None, format!("column time: no time for step {k}"))
+                        })
                 })
                 .collect::<Result<Vec<_>, _>>()?,
         ),
     };
     evaluator.finish(times).map_err(|e| match e {
-        EvalError::MissingCell { run, step, steps } => format!(
-            "{name}: no row for run {run}, step {step} (every run needs a row for every step \
-             0..{}; is the file truncated?)",
-            steps - 1
+        EvalError::MissingCell { run, step, steps } => Error::csv(
+            file,
+            None,
+            format!(
+                "no row for run {run}, step {step} (every run needs a row for every step \
+                 0..{}; is the file truncated?)",
+                steps - 1
+            ),
         ),
         other => fail(other),
     })

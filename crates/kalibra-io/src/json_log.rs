@@ -15,12 +15,10 @@ use std::path::Path;
 use kalibra_eval::Scope;
 use serde_json::Value;
 
-use crate::input::{ModelArray, PER_CELL, RawLog, model_given};
+use crate::error::Error;
+use crate::raw::{ARRAY_NAMES, KNOWN, MODEL, ModelArray, PER_CELL, RawLog, model_given};
 
-const VECTORS: [&str; 3] = ["truth", "estimate", "innovation"];
 const MATRICES: [&str; 2] = ["covariance", "innovation_cov"];
-const MODEL: [&str; 4] = ["F", "H", "Q", "R"];
-use crate::arrays::KNOWN;
 
 /// An array's cells by run and step, each cell flat, with its shape.
 struct Cells {
@@ -33,12 +31,21 @@ struct Cells {
 }
 
 /// Reads the JSON log in `bytes` (from `file`, named in errors).
-pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, String> {
-    let name = file.display();
+pub(crate) fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, Error> {
+    let text_error = |line, column, message| Error::Json {
+        file: file.to_path_buf(),
+        line: Some(line),
+        column: Some(column),
+        message,
+    };
     let bytes = python_floats(bytes).map_err(|(line, column, literal)| {
-        format!(
-            "{name}: line {line}, column {column}: unexpected string {literal:?}; a log's only \
-             strings are the names of its arrays ({KNOWN})"
+        text_error(
+            line,
+            column,
+            format!(
+                "unexpected string {literal:?}; a log's only strings are the names of its \
+                 arrays ({KNOWN})"
+            ),
         )
     })?;
     let value: Value = serde_json::from_slice(&bytes).map_err(|e| {
@@ -46,25 +53,29 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, String> {
             serde_json::error::Category::Eof => "the file ends early (truncated?)".to_string(),
             _ => format!("not valid JSON ({e})"),
         };
-        format!("{name}: line {}, column {}: {what}", e.line(), e.column())
+        text_error(e.line(), e.column(), what)
     })?;
     // A copy made for stand-ins is not needed past parsing: free it before the cells are built.
     drop(bytes);
     let Value::Object(map) = value else {
-        return Err(format!(
-            "{name}: expected an object of named arrays ({KNOWN}), found {}",
-            kind(&value)
-        ));
+        return Err(Error::Json {
+            file: file.to_path_buf(),
+            line: None,
+            column: None,
+            message: format!(
+                "expected an object of named arrays ({KNOWN}), found {}",
+                kind(&value)
+            ),
+        });
     };
-    let known = |k: &str| {
-        VECTORS.contains(&k) || MATRICES.contains(&k) || MODEL.contains(&k) || k == "time"
-    };
-    if let Some(unknown) = map.keys().find(|k| !known(k)) {
-        return Err(format!(
-            "{name}: unknown array `{unknown}`; the arrays are {KNOWN}"
-        ));
+    if let Some(unknown) = map.keys().find(|k| !ARRAY_NAMES.contains(&k.as_str())) {
+        return Err(Error::array(
+            unknown.clone(),
+            format!("unknown array `{unknown}`; the arrays are {KNOWN}"),
+        )
+        .in_file(file));
     }
-    let fail = |msg: String| format!("{name}: {msg}");
+    let fail = |e: Error| e.in_file(file);
 
     let mut log = RawLog::default();
     for array in PER_CELL {
@@ -90,7 +101,7 @@ pub fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, String> {
         }
         let [f, h, q, r]: [ModelArray; 4] = model
             .try_into()
-            .map_err(|_| fail("arrays F, H, Q and R".to_string()))?;
+            .map_err(|_| fail(Error::log("arrays F, H, Q and R")))?;
         log.model = Some([f, h, q, r]);
     }
     Ok(log)
@@ -250,19 +261,29 @@ fn at(array: &str, index: &[usize]) -> String {
     s
 }
 
-fn list<'v>(array: &str, v: &'v Value, index: &[usize]) -> Result<&'v [Value], String> {
+/// The error `array {array[i][j]...}: {what}` at `index` of `array`.
+fn at_error(array: &str, index: &[usize], what: String) -> Error {
+    Error::Array {
+        file: None,
+        array: array.to_string(),
+        index: index.to_vec(),
+        message: format!("array {}: {what}", at(array, index)),
+    }
+}
+
+fn list<'v>(array: &str, v: &'v Value, index: &[usize]) -> Result<&'v [Value], Error> {
     match v {
         Value::Array(items) => Ok(items),
-        other => Err(format!(
-            "array {}: expected a list, found {}",
-            at(array, index),
-            kind(other)
+        other => Err(at_error(
+            array,
+            index,
+            format!("expected a list, found {}", kind(other)),
         )),
     }
 }
 
 /// A list of numbers.
-fn numbers(array: &str, v: &Value, index: &mut Vec<usize>) -> Result<Vec<f64>, String> {
+fn numbers(array: &str, v: &Value, index: &mut Vec<usize>) -> Result<Vec<f64>, Error> {
     let items = list(array, v, index)?;
     let mut out = Vec::with_capacity(items.len());
     for (i, item) in items.iter().enumerate() {
@@ -270,10 +291,10 @@ fn numbers(array: &str, v: &Value, index: &mut Vec<usize>) -> Result<Vec<f64>, S
         match number(item) {
             Some(x) => out.push(x),
             None => {
-                return Err(format!(
-                    "array {}: expected a number, found {}",
-                    at(array, index),
-                    kind(item)
+                return Err(at_error(
+                    array,
+                    index,
+                    format!("expected a number, found {}", kind(item)),
                 ));
             }
         }
@@ -289,16 +310,18 @@ fn cell(
     index: &mut Vec<usize>,
     size: Option<(usize, usize)>,
     matrix: bool,
-) -> Result<(Vec<f64>, (usize, usize)), String> {
+) -> Result<(Vec<f64>, (usize, usize)), Error> {
     let what = if matrix { "rows" } else { "values" };
     let check = |found: usize, expected: usize, index: &[usize], what: &str| {
         if found == expected {
             Ok(())
         } else {
-            Err(format!(
-                "array {}: expected {expected} {what}, found {found} (cells of one array have one \
-                 shape)",
-                at(array, index)
+            Err(at_error(
+                array,
+                index,
+                format!(
+                    "expected {expected} {what}, found {found} (cells of one array have one shape)"
+                ),
             ))
         }
     };
@@ -343,12 +366,15 @@ fn depth(v: &Value) -> Option<usize> {
 }
 
 /// A per-cell array: `(R, K, ...)`, or `(K, ...)` for a single run; `null` cells.
-fn per_cell(array: &'static str, v: &Value, matrix: bool) -> Result<Cells, String> {
+fn per_cell(array: &'static str, v: &Value, matrix: bool) -> Result<Cells, Error> {
     let cell_depth = if matrix { 2 } else { 1 };
     let d = depth(v).ok_or_else(|| {
-        format!(
-            "array {array} holds no numbers (expected shape {})",
-            if matrix { "(R, K, n, n)" } else { "(R, K, n)" }
+        Error::array(
+            array,
+            format!(
+                "array {array} holds no numbers (expected shape {})",
+                if matrix { "(R, K, n, n)" } else { "(R, K, n)" }
+            ),
         )
     })?;
     let runs_axis = if d == cell_depth + 2 {
@@ -356,11 +382,14 @@ fn per_cell(array: &'static str, v: &Value, matrix: bool) -> Result<Cells, Strin
     } else if d == cell_depth + 1 {
         false
     } else {
-        return Err(format!(
-            "array {array} has {d} axes, expected {} (runs, steps, {}) or {} for a single run",
-            cell_depth + 2,
-            if matrix { "rows, columns" } else { "values" },
-            cell_depth + 1
+        return Err(Error::array(
+            array,
+            format!(
+                "array {array} has {d} axes, expected {} (runs, steps, {}) or {} for a single run",
+                cell_depth + 2,
+                if matrix { "rows, columns" } else { "values" },
+                cell_depth + 1
+            ),
         ));
     };
     let run_values: Vec<&Value> = if runs_axis {
@@ -378,10 +407,10 @@ fn per_cell(array: &'static str, v: &Value, matrix: bool) -> Result<Cells, Strin
         match steps {
             None => steps = Some(items.len()),
             Some(k) if k != items.len() => {
-                return Err(format!(
-                    "array {}: expected {k} steps (as run 0), found {}",
-                    at(array, &index),
-                    items.len()
+                return Err(at_error(
+                    array,
+                    &index,
+                    format!("expected {k} steps (as run 0), found {}", items.len()),
                 ));
             }
             Some(_) => {}
@@ -404,7 +433,7 @@ fn per_cell(array: &'static str, v: &Value, matrix: bool) -> Result<Cells, Strin
     let (rows, cols) = size.unwrap_or((0, 0));
     let steps = steps.unwrap_or(0);
     if runs == 0 || steps == 0 {
-        return Err(format!("array {array} is empty"));
+        return Err(Error::array(array, format!("array {array} is empty")));
     }
     Ok(Cells {
         runs,
@@ -422,16 +451,20 @@ fn model_array(
     v: &Value,
     runs: usize,
     steps: usize,
-) -> Result<ModelArray, String> {
-    let d = depth(v).ok_or_else(|| format!("array {array} holds no numbers"))?;
+) -> Result<ModelArray, Error> {
+    let d =
+        depth(v).ok_or_else(|| Error::array(array, format!("array {array} holds no numbers")))?;
     let (scope, shape): (Scope, &[usize]) = match d {
         2 => (Scope::Constant, &[]),
         3 => (Scope::PerStep, &[steps]),
         4 => (Scope::PerRunStep, &[runs, steps]),
         _ => {
-            return Err(format!(
-                "array {array} has {d} axes, expected 2 (one matrix), 3 (one per step) or 4 \
-                 (one per run and step)"
+            return Err(Error::array(
+                array,
+                format!(
+                    "array {array} has {d} axes, expected 2 (one matrix), 3 (one per step) or 4 \
+                     (one per run and step)"
+                ),
             ));
         }
     };
@@ -454,7 +487,7 @@ fn walk_model(
     index: &mut Vec<usize>,
     size: &mut Option<(usize, usize)>,
     data: &mut Vec<f64>,
-) -> Result<(), String> {
+) -> Result<(), Error> {
     let Some((&len, rest)) = shape.split_first() else {
         let (values, s) = cell(array, v, index, *size, true)?;
         *size = Some(s);
@@ -468,10 +501,13 @@ fn walk_model(
         } else {
             "steps"
         };
-        return Err(format!(
-            "array {}: expected {len} entries ({axis} of the log), found {}",
-            at(array, index),
-            items.len()
+        return Err(at_error(
+            array,
+            index,
+            format!(
+                "expected {len} entries ({axis} of the log), found {}",
+                items.len()
+            ),
         ));
     }
     for (i, item) in items.iter().enumerate() {

@@ -1,24 +1,27 @@
-//! The readers of outside input under random and mutated bytes (issue 19, point 7): the CSV,
-//! JSON and NPZ log readers of `kalibra eval` (through `input::evaluate_bytes`, which runs the
-//! evaluation too) and the MODEL.toml and series CSV readers of `kalibra tune` (through
-//! `parse_model`, `parse_series`, the problem and a short sweep). Every input must give an
-//! error that names the file, or a report whose numbers are all finite; never a panic
-//! (proptest fails a case that panics) and never memory out of proportion to the input.
+//! The readers of outside input under random and mutated bytes: the CSV, JSON and NPZ log
+//! readers of `kalibra eval` (through `input::evaluate_bytes`, which runs the evaluation too)
+//! and the MODEL.toml and series CSV readers of `kalibra tune` (through `parse_model`,
+//! `parse_series`, the problem and a short sweep), both as `kalibra_io::fuzzing` defines them
+//! for the fuzz targets too. Every input must give an error that names the file, or a report
+//! whose numbers are all finite; never a panic (proptest fails a case that panics) and never
+//! memory out of proportion to the input.
 //!
 //! This is the stable-toolchain, in-CI companion of the coverage-guided fuzz targets in
 //! `fuzz/` (which need nightly; see `fuzz/README.md`). The inputs are the committed fixtures
-//! with a few edits each (bytes flipped, inserted, deleted, cut, repeated, and hostile tokens:
-//! NaN, infinities, 1e308, huge indices and counts, quotes, brackets), random bytes, and for
-//! NPZ archives built here around `.npy` headers that claim shapes and types of their own.
+//! (`crates/kalibra-cli/tests/fixtures`) with a few edits each (bytes flipped, inserted,
+//! deleted, cut, repeated, and hostile tokens: NaN, infinities, 1e308, huge indices and
+//! counts, quotes, brackets), random bytes, and for NPZ archives built here around `.npy`
+//! headers that claim shapes and types of their own.
 //!
 //! Size: `CASES` (64) cases per property, 6 properties; `PROPTEST_CASES` overrides.
 
 use std::path::Path;
 
-use kalibra_cli::finite::first_non_finite;
-use kalibra_cli::input::{LogFormat, evaluate_bytes};
-use kalibra_cli::tune_input::{parse_model, parse_series};
-use kalibra_eval::{Evaluation, Report, Tuning};
+use kalibra_eval::Report;
+use kalibra_io::Error;
+use kalibra_io::finite::first_non_finite;
+use kalibra_io::fuzzing::{TUNE_FILES, broken_promise, tune};
+use kalibra_io::input::LogFormat;
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
 
@@ -39,7 +42,7 @@ fn config() -> ProptestConfig {
 fn fixture(name: &str) -> Vec<u8> {
     std::fs::read(
         Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/fixtures")
+            .join("../kalibra-cli/tests/fixtures")
             .join(name),
     )
     .unwrap()
@@ -214,27 +217,16 @@ fn mutate(seed: &[u8], edits: &[Edit]) -> Vec<u8> {
 /// numbers.
 fn judged<T: serde::Serialize>(
     files: &[&str],
-    result: &Result<T, String>,
+    result: &Result<T, Error>,
 ) -> Result<(), TestCaseError> {
-    match result {
-        Ok(report) => {
-            let bad = first_non_finite(report);
-            prop_assert!(bad.is_none(), "{files:?}: Ok with a non-finite {bad:?}");
-        }
-        Err(message) => {
-            prop_assert!(
-                files.iter().any(|f| message.contains(f)),
-                "the error names none of {files:?}: {message}"
-            );
-        }
+    match broken_promise(files, result) {
+        None => Ok(()),
+        Some(broken) => Err(TestCaseError::fail(broken)),
     }
-    Ok(())
 }
 
-const TUNE_FILES: [&str; 2] = ["model.toml", "measurements.csv"];
-
-fn evaluate(file: &str, format: LogFormat, bytes: &[u8]) -> Result<Report, String> {
-    evaluate_bytes(Path::new(file), format, bytes, &Evaluation::new())
+fn evaluate(file: &str, format: LogFormat, bytes: &[u8]) -> Result<Report, Error> {
+    kalibra_io::fuzzing::eval(file, format, bytes)
 }
 
 /// A `.npy` file: the magic, version 1.0, a header dictionary padded as numpy pads it, the
@@ -281,7 +273,7 @@ fn npz(entries: &[(String, Vec<u8>)]) -> Vec<u8> {
 /// fill it, fall short or run over (hostile floats among them).
 fn npy_entry() -> impl Strategy<Value = (String, Vec<u8>)> {
     // Every array kalibra reads, and one it does not.
-    let names: Vec<&str> = kalibra_cli::ARRAY_NAMES
+    let names: Vec<&str> = kalibra_io::ARRAY_NAMES
         .into_iter()
         .chain(["other"])
         .collect();
@@ -323,33 +315,6 @@ fn npy_entry() -> impl Strategy<Value = (String, Vec<u8>)> {
                 npy(descr, fortran && shape.len() > 1, &shape, &bytes),
             )
         })
-}
-
-/// `kalibra tune` on the model and measurements in these bytes: read, made a problem and swept
-/// over three points on one thread.
-fn tune(model: &[u8], series: &[u8]) -> Result<kalibra_eval::TuneReport, String> {
-    let model_file = Path::new("model.toml");
-    let text = String::from_utf8_lossy(model);
-    let model = parse_model(model_file, &text)?;
-    let m = model.meas_dim();
-    let z = parse_series(
-        Path::new("measurements.csv"),
-        series,
-        "z",
-        m,
-        &format!("H has {m} row(s)"),
-    )?;
-    let problem = model.problem(model_file, z, None)?;
-    let mut tuning = Tuning::new()
-        .exponents(-1.0, 1.0, 1.0)
-        .map_err(|e| e.to_string())?
-        .threads(1);
-    if let Some(position) = &model.position {
-        tuning = tuning.position(position.clone());
-    }
-    tuning
-        .tune(&problem)
-        .map_err(|e| format!("{}: {e}", model_file.display()))
 }
 
 proptest! {
@@ -429,7 +394,7 @@ fn the_finiteness_check_finds_a_nan_in_a_report() {
 fn error_of(file: &str, format: LogFormat, bytes: &[u8]) -> String {
     match evaluate(file, format, bytes) {
         Ok(report) => panic!("{file}: accepted: {report:?}"),
-        Err(e) => e,
+        Err(e) => e.to_string(),
     }
 }
 
@@ -501,7 +466,7 @@ fn npy_shape_beyond_its_entry_is_refused_before_allocating() {
 /// whose cells hold nothing while its runs and steps are huge.
 #[test]
 fn arrays_with_absurd_shapes_are_refused() {
-    use kalibra_cli::input::log_from_arrays;
+    use kalibra_io::input::log_from_arrays;
     let huge = 1usize << 40;
     for (shape, data) in [
         (vec![huge, huge, 1 << 24], vec![]),

@@ -17,11 +17,12 @@ use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 use std::sync::mpsc;
 
-use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, ModelCell, Report, Scope};
+use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, ModelCell, Report};
 
-use crate::input::{ModelArray, PER_CELL, model_given};
-
-use crate::arrays::KNOWN;
+use crate::error::Error;
+use crate::raw::{
+    ARRAY_NAMES, KNOWN, MODEL, ModelArray, PER_CELL, cell_shape, model_given, no_per_cell_array,
+};
 
 /// Cells per batch handed from the reader thread to the evaluation.
 const BATCH_CELLS: usize = 4096;
@@ -32,11 +33,12 @@ type Archive<R> = zip::ZipArchive<R>;
 fn open<R: Read + Seek>(
     file: &Path,
     source: &impl Fn() -> std::io::Result<R>,
-) -> Result<Archive<R>, String> {
-    let name = file.display();
-    let handle = source().map_err(|e| format!("{name}: cannot read the file: {e}"))?;
-    zip::ZipArchive::new(handle)
-        .map_err(|e| format!("{name}: not an NPZ archive ({e}); write it with numpy's np.savez"))
+) -> Result<Archive<R>, Error> {
+    let handle = source().map_err(|e| Error::read(file, e))?;
+    zip::ZipArchive::new(handle).map_err(|e| Error::File {
+        file: file.to_path_buf(),
+        message: format!("not an NPZ archive ({e}); write it with numpy's np.savez"),
+    })
 }
 
 /// The bytes `shape` of `kind` takes, `None` beyond `u64`.
@@ -67,7 +69,7 @@ type AfterHeader<R> = std::io::Chain<std::io::Cursor<Vec<u8>>, R>;
 /// Reads the `.npy` header at the start of `reader` with npyz, once the shape it claims has
 /// been checked here: npyz multiplies the dimensions without checking for overflow, so a
 /// header of a few bytes claiming `(2^40, 2^40)` panicked inside it in a debug build and
-/// wrapped around in a release one (found by the readers' property test, issue 19).
+/// wrapped around in a release one (found by the readers' property test, `readers_fuzz.rs`).
 fn npy_file<R: Read>(mut reader: R) -> Result<npyz::NpyFile<AfterHeader<R>>, String> {
     let not_npy = |why: String| format!("not a .npy array ({why})");
     // The magic string, the format version and the header's length (2 bytes in version 1,
@@ -252,30 +254,6 @@ fn read_whole<R: Read + Seek>(archive: &mut Archive<R>, entry: &str) -> Result<A
     })
 }
 
-/// The runs, steps and cell shape of a per-cell array with `cell_dims` trailing dimensions;
-/// a single run may drop the leading R axis.
-pub(crate) fn cell_shape(
-    array: &str,
-    shape: &[usize],
-    cell_dims: usize,
-) -> Result<(usize, usize, Vec<usize>), String> {
-    let (runs, rest) = match shape.len() - cell_dims.min(shape.len()) {
-        2 => (shape[0], &shape[1..]),
-        1 => (1, shape),
-        _ => {
-            let expected = if cell_dims == 1 {
-                "(R, K, dim) or (K, dim)"
-            } else {
-                "(R, K, dim, dim) or (K, dim, dim)"
-            };
-            return Err(format!(
-                "array {array} has shape {shape:?}; expected {expected}"
-            ));
-        }
-    };
-    Ok((runs, rest[0], rest[1..].to_vec()))
-}
-
 /// A per-cell array, read cell by cell from its own handle on the archive.
 struct Stream<R: Read> {
     array: &'static str,
@@ -289,12 +267,15 @@ struct Stream<R: Read> {
 
 impl<R: Read> Stream<R> {
     /// Appends the next `cells` cells' values to `out`.
-    fn read(&mut self, cells: usize, out: &mut Vec<f64>) -> Result<(), String> {
+    fn read(&mut self, cells: usize, out: &mut Vec<f64>) -> Result<(), (&'static str, String)> {
         self.bytes.resize(cells * self.width * self.kind.size(), 0);
         self.reader.read_exact(&mut self.bytes).map_err(|e| {
-            format!(
-                "array {}: cannot read its values ({e}; truncated?)",
-                self.array
+            (
+                self.array,
+                format!(
+                    "array {}: cannot read its values ({e}; truncated?)",
+                    self.array
+                ),
             )
         })?;
         self.kind.decode(self.big_endian, &self.bytes, out);
@@ -302,10 +283,15 @@ impl<R: Read> Stream<R> {
     }
 
     /// Reads to the entry's end, which checks its checksum.
-    fn finish(&mut self) -> Result<(), String> {
+    fn finish(&mut self) -> Result<(), (&'static str, String)> {
         std::io::copy(&mut self.reader, &mut std::io::sink())
             .map(|_| ())
-            .map_err(|e| format!("array {}: cannot read it ({e}; truncated?)", self.array))
+            .map_err(|e| {
+                (
+                    self.array,
+                    format!("array {}: cannot read it ({e}; truncated?)", self.array),
+                )
+            })
     }
 }
 
@@ -318,17 +304,17 @@ struct Batch {
 }
 
 /// Evaluates the NPZ log `file` with `evaluation`.
-pub fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, String> {
+pub(crate) fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, Error> {
     let source = || File::open(file).map(|f| BufReader::with_capacity(1 << 20, f));
     evaluate_from(file, &source, evaluation)
 }
 
 /// Evaluates the NPZ log held in `bytes` (the file `file`, as messages name it).
-pub fn evaluate_bytes(
+pub(crate) fn evaluate_bytes(
     file: &Path,
     bytes: &[u8],
     evaluation: &Evaluation,
-) -> Result<Report, String> {
+) -> Result<Report, Error> {
     let source = || Ok(std::io::Cursor::new(bytes));
     evaluate_from(file, &source, evaluation)
 }
@@ -338,9 +324,16 @@ fn evaluate_from<R: Read + Seek + Send>(
     file: &Path,
     source: &impl Fn() -> std::io::Result<R>,
     evaluation: &Evaluation,
-) -> Result<Report, String> {
-    let name = file.display();
-    let fail = |msg: String| format!("{name}: {msg}");
+) -> Result<Report, Error> {
+    let fail = |e: Error| e.in_file(file);
+    let file_error = |message: String| Error::File {
+        file: file.to_path_buf(),
+        message,
+    };
+    // An error of the array `array` as a whole (`array {array}: {message}`).
+    let array_error = |array: &str, message: String| {
+        Error::array(array, format!("array {array}: {message}")).in_file(file)
+    };
     let mut archive = open(file, source)?;
     // Array name -> entry name.
     let mut entries = BTreeMap::new();
@@ -348,30 +341,35 @@ fn evaluate_from<R: Read + Seek + Send>(
         let entry = match archive.name_for_index(index) {
             Some(Ok(entry)) => entry.to_string(),
             Some(Err(e)) => {
-                return Err(fail(format!(
+                return Err(file_error(format!(
                     "entry {index} of the archive has no readable name ({e})"
                 )));
             }
-            None => return Err(fail(format!("entry {index} of the archive (truncated?)"))),
+            None => {
+                return Err(file_error(format!(
+                    "entry {index} of the archive (truncated?)"
+                )));
+            }
         };
         let Some(array) = entry.strip_suffix(".npy") else {
-            return Err(fail(format!(
+            return Err(file_error(format!(
                 "entry `{entry}` is not a .npy array; the arrays are {KNOWN}"
             )));
         };
-        if !crate::arrays::ARRAY_NAMES.contains(&array) {
-            return Err(fail(format!(
-                "unknown array `{array}`; the arrays are {KNOWN}"
+        if !ARRAY_NAMES.contains(&array) {
+            return Err(fail(Error::array(
+                array,
+                format!("unknown array `{array}`; the arrays are {KNOWN}"),
             )));
         }
         entries.insert(array.to_string(), entry.clone());
     }
-    let mut whole = |array: &str| -> Result<Option<Array>, String> {
+    let mut whole = |array: &str| -> Result<Option<Array>, Error> {
         match entries.get(array) {
             None => Ok(None),
             Some(entry) => read_whole(&mut archive, entry)
                 .map(Some)
-                .map_err(|e| fail(format!("array {array}: {e}"))),
+                .map_err(|e| array_error(array, e)),
         }
     };
     let time = whole("time")?;
@@ -383,10 +381,7 @@ fn evaluate_from<R: Read + Seek + Send>(
         .filter(|a| entries.contains_key(*a))
         .collect();
     if present.is_empty() {
-        return Err(fail(
-            "the log holds none of truth, estimate, covariance, innovation, innovation_cov"
-                .to_string(),
-        ));
+        return Err(fail(no_per_cell_array()));
     }
     let mut archives = present
         .iter()
@@ -398,36 +393,42 @@ fn evaluate_from<R: Read + Seek + Send>(
     for (archive, &array) in archives.iter_mut().zip(&present) {
         let entry = archive
             .by_name(&entries[array])
-            .map_err(|e| fail(format!("array {array}: cannot read it ({e}; truncated?)")))?;
+            .map_err(|e| array_error(array, format!("cannot read it ({e}; truncated?)")))?;
         let entry_size = entry.size();
-        let npy = npy_file(entry).map_err(|e| fail(format!("array {array}: {e}")))?;
-        let h = header(&npy).map_err(|e| fail(format!("array {array}: {e}")))?;
-        check_fits(&h, entry_size).map_err(|e| fail(format!("array {array}: {e}")))?;
+        let npy = npy_file(entry).map_err(|e| array_error(array, e))?;
+        let h = header(&npy).map_err(|e| array_error(array, e))?;
+        check_fits(&h, entry_size).map_err(|e| array_error(array, e))?;
         let matrix = array == "covariance" || array == "innovation_cov";
         let (runs, steps, cell) =
             cell_shape(array, &h.shape, if matrix { 2 } else { 1 }).map_err(fail)?;
         if runs == 0 || steps == 0 {
             // Nothing to evaluate; refused before the evaluation sizes itself by the cells'
             // dimensions, which no value then bounds.
-            return Err(fail(format!(
-                "array {array} is empty (shape {:?})",
-                h.shape
+            return Err(fail(Error::array(
+                array,
+                format!("array {array} is empty (shape {:?})", h.shape),
             )));
         }
         match shape_from {
             None => shape_from = Some((array, runs, steps)),
             Some((first, r, k)) if (r, k) != (runs, steps) => {
-                return Err(fail(format!(
-                    "array {array} has {runs} runs of {steps} steps, but array {first} has {r} \
-                     runs of {k} steps"
+                return Err(fail(Error::array(
+                    array,
+                    format!(
+                        "array {array} has {runs} runs of {steps} steps, but array {first} has \
+                         {r} runs of {k} steps"
+                    ),
                 )));
             }
             Some(_) => {}
         }
         if matrix && cell[0] != cell[1] {
-            return Err(fail(format!(
-                "array {array} holds {}x{} matrices; a covariance is square",
-                cell[0], cell[1]
+            return Err(fail(Error::array(
+                array,
+                format!(
+                    "array {array} holds {}x{} matrices; a covariance is square",
+                    cell[0], cell[1]
+                ),
             )));
         }
         *match array {
@@ -451,9 +452,9 @@ fn evaluate_from<R: Read + Seek + Send>(
         None => None,
         Some(t) if t.shape.len() == 1 => Some(t.data),
         Some(t) => {
-            return Err(fail(format!(
-                "array time has shape {:?}; expected (K,)",
-                t.shape
+            return Err(fail(Error::array(
+                "time",
+                format!("array time has shape {:?}; expected (K,)", t.shape),
             )));
         }
     };
@@ -461,15 +462,15 @@ fn evaluate_from<R: Read + Seek + Send>(
     if let Some([f, h, ..]) = &model {
         contents.model = Some((f.rows, h.rows));
     }
-    let evaluate_error = |e: EvalError| crate::input::evaluation_error(&name, &e);
+    let evaluate_error = |e: EvalError| Error::evaluate(file, e);
     let mut evaluator = evaluation.evaluator(contents).map_err(evaluate_error)?;
 
     // Every array's values fit in its entry (`check_fits`) and the evaluation refused cells of
     // no values, so this product is at most the archive's size.
     let total = runs.saturating_mul(steps);
-    let fed: Result<(), String> = std::thread::scope(|scope| {
+    let fed: Result<(), Error> = std::thread::scope(|scope| {
         // The reader: batches of cells, run-major, while this thread evaluates the last.
-        let (tx, rx) = mpsc::sync_channel::<Result<Batch, String>>(4);
+        let (tx, rx) = mpsc::sync_channel::<Result<Batch, (&'static str, String)>>(4);
         scope.spawn(move || {
             let mut first = 0;
             while first < total {
@@ -503,7 +504,8 @@ fn evaluate_from<R: Read + Seek + Send>(
             }
         });
         while let Ok(batch) = rx.recv() {
-            let batch = batch.map_err(fail)?;
+            let batch =
+                batch.map_err(|(array, message)| Error::array(array, message).in_file(file))?;
             let cells: Vec<_> = (0..batch.cells)
                 .map(|i| {
                     let (run, step) = ((batch.first + i) / steps, (batch.first + i) % steps);
@@ -534,28 +536,21 @@ fn evaluate_from<R: Read + Seek + Send>(
                 .collect();
             evaluator
                 .push_batch(&cells)
-                .map_err(|(_, e)| fail(e.to_string()))?;
+                .map_err(|(_, source)| Error::Refused {
+                    file: Some(file.to_path_buf()),
+                    source,
+                })?;
         }
         Ok(())
     });
     fed?;
     evaluator.finish(times).map_err(|e| match e {
-        EvalError::Empty { .. } => fail(e.to_string()),
+        EvalError::Empty { .. } => Error::Refused {
+            file: Some(file.to_path_buf()),
+            source: e,
+        },
         other => evaluate_error(other),
     })
-}
-
-impl ModelArray {
-    /// The matrix of `run` and `step` of a log of `steps` steps, row by row.
-    fn cell(&self, run: usize, step: usize, steps: usize) -> &[f64] {
-        let size = self.rows * self.cols;
-        let index = match self.scope {
-            Scope::Constant => 0,
-            Scope::PerStep => step,
-            Scope::PerRunStep => run * steps + step,
-        };
-        &self.data[index * size..(index + 1) * size]
-    }
 }
 
 /// The model arrays `F`, `H`, `Q`, `R`, all or none, with their shapes checked.
@@ -563,9 +558,8 @@ fn model(
     arrays: [Option<Array>; 4],
     runs: usize,
     steps: usize,
-) -> Result<Option<[ModelArray; 4]>, String> {
-    let names = ["F", "H", "Q", "R"];
-    let present: Vec<&str> = names
+) -> Result<Option<[ModelArray; 4]>, Error> {
+    let present: Vec<&str> = MODEL
         .iter()
         .zip(&arrays)
         .filter(|(_, a)| a.is_some())
@@ -574,34 +568,15 @@ fn model(
     if !model_given(&present)? {
         return Ok(None);
     }
-    let mut out = Vec::with_capacity(4);
-    for (name, a) in names.into_iter().zip(arrays) {
+    let [f, h, q, r] = arrays;
+    let take = |name: &str, a: Option<Array>| {
         let a = a.unwrap_or(Array {
             shape: vec![],
             data: vec![],
         });
-        let (scope, rows, cols) = match a.shape.as_slice() {
-            [r, c] => (Scope::Constant, *r, *c),
-            [k, r, c] if *k == steps => (Scope::PerStep, *r, *c),
-            [rr, k, r, c] if (*rr, *k) == (runs, steps) => (Scope::PerRunStep, *r, *c),
-            other => {
-                return Err(format!(
-                    "array {name} has shape {other:?}; expected one matrix (rows, cols), one \
-                     per step ({steps}, rows, cols) or one per run and step ({runs}, {steps}, \
-                     rows, cols)"
-                ));
-            }
-        };
-        out.push(ModelArray {
-            rows,
-            cols,
-            scope,
-            data: a.data,
-        });
-    }
-    let [f, h, q, r]: [ModelArray; 4] = out
-        .try_into()
-        .map_err(|_| "arrays F, H, Q and R".to_string())?;
+        ModelArray::of_shape(name, &a.shape, a.data, (runs, steps))
+    };
+    let [f, h, q, r] = [take("F", f)?, take("H", h)?, take("Q", q)?, take("R", r)?];
     let n = f.rows;
     let m = h.rows;
     for (array, a, want) in [
@@ -611,10 +586,13 @@ fn model(
         ("R", &r, (m, m)),
     ] {
         if (a.rows, a.cols) != want {
-            return Err(format!(
-                "array {array} holds {}x{} matrices; with F of {n}x{n} and H of {m} rows it \
-                 must be {}x{}",
-                a.rows, a.cols, want.0, want.1
+            return Err(Error::array(
+                array,
+                format!(
+                    "array {array} holds {}x{} matrices; with F of {n}x{n} and H of {m} rows it \
+                     must be {}x{}",
+                    a.rows, a.cols, want.0, want.1
+                ),
             ));
         }
     }

@@ -7,6 +7,7 @@ use kalibra_eval::{DMatrix, DVector, Start, TuneProblem, matrix_from_rows};
 use serde::Deserialize;
 
 use crate::csv_rows::Rows;
+use crate::error::Error;
 
 /// The formats, as `kalibra tune --help` shows them.
 pub const TUNE_HELP: &str = "\
@@ -86,13 +87,17 @@ impl Model {
         self.h.nrows()
     }
 
-    /// The tuning problem on these measurements (and truth); errors name `file`, the model.
+    /// The tuning problem on these measurements (and truth, read from its file).
+    ///
+    /// # Errors
+    /// [`Error::Tune`] naming `file`, the model's file, or the truth's file for an error of the
+    /// truth.
     pub fn problem(
         &self,
         file: &Path,
         measurements: Vec<Option<DVector<f64>>>,
         truth: Option<(&Path, Vec<Option<DVector<f64>>>)>,
-    ) -> Result<TuneProblem, String> {
+    ) -> Result<TuneProblem, Error> {
         let build = if self.as_given {
             TuneProblem::as_given
         } else {
@@ -107,12 +112,16 @@ impl Model {
             self.p0.clone(),
             measurements,
         )
-        .map_err(|e| format!("{}: {e}", file.display()))?
+        .map_err(|source| Error::Tune {
+            file: file.to_path_buf(),
+            source,
+        })?
         .with_start(self.start);
         match truth {
-            Some((path, t)) => problem
-                .with_truth(t)
-                .map_err(|e| format!("{}: {e}", path.display())),
+            Some((path, t)) => problem.with_truth(t).map_err(|source| Error::Tune {
+                file: path.to_path_buf(),
+                source,
+            }),
             None => Ok(problem),
         }
     }
@@ -144,10 +153,10 @@ fn key_before(text: &str, at: usize) -> Option<&str> {
 /// Reads MODEL.toml at `path`.
 ///
 /// # Errors
-/// A message naming the file and the key, or the line and column, at fault.
-pub fn read_model(path: &Path) -> Result<Model, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read the file: {e}", path.display()))?;
+/// [`Error::Io`] for a file that cannot be read; [`Error::Model`] naming the key, or the line
+/// and column, at fault.
+pub fn read_model(path: &Path) -> Result<Model, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::read(path, e))?;
     parse_model(path, &text)
 }
 
@@ -156,28 +165,38 @@ pub fn read_model(path: &Path) -> Result<Model, String> {
 ///
 /// # Errors
 /// As [`read_model`].
-pub fn parse_model(path: &Path, text: &str) -> Result<Model, String> {
-    let name = path.display();
+pub fn parse_model(path: &Path, text: &str) -> Result<Model, Error> {
+    let at_key = |key: &str, message: String| Error::Model {
+        file: path.to_path_buf(),
+        key: Some(key.to_string()),
+        line: None,
+        column: None,
+        message,
+    };
     let file: ModelFile = toml::from_str(text).map_err(|e| {
-        let at = e
-            .span()
-            .map(|s| {
+        let (key, line, column) = match e.span() {
+            Some(s) => {
                 let (line, column) = line_column(text, s.start);
-                let key = key_before(text, s.start)
-                    .map(|k| format!("key {k}, "))
-                    .unwrap_or_default();
-                format!("{key}line {line}, column {column}: ")
-            })
-            .unwrap_or_default();
+                let key = key_before(text, s.start).map(str::to_string);
+                (key, Some(line), Some(column))
+            }
+            None => (None, None, None),
+        };
         // serde's messages name the key (`unknown field `X``, `missing field `F``); a value of
         // the wrong type is located by its line and column.
-        format!("{name}: {at}{}", e.message().trim_end().replace('\n', "; "))
+        Error::Model {
+            file: path.to_path_buf(),
+            key,
+            line,
+            column,
+            message: e.message().trim_end().replace('\n', "; "),
+        }
     })?;
     let matrix = |key: &'static str, rows: &[Vec<f64>]| {
-        matrix_from_rows(key, rows).map_err(|e| format!("{name}: key {key}: {e}"))
+        matrix_from_rows(key, rows).map_err(|e| at_key(key, e.to_string()))
     };
     if file.x0.is_empty() {
-        return Err(format!("{name}: key x0: holds no values"));
+        return Err(at_key("x0", "holds no values".to_string()));
     }
     Ok(Model {
         f: matrix("F", &file.f)?,
@@ -200,15 +219,15 @@ pub fn parse_model(path: &Path, text: &str) -> Result<Model, String> {
 /// ("H has 2 rows").
 ///
 /// # Errors
-/// A message naming the file, and the row and column at fault.
+/// [`Error::Io`] for a file that cannot be read; [`Error::Csv`] naming the row and column at
+/// fault.
 pub fn read_series(
     path: &Path,
     prefix: &str,
     dim: usize,
     what: &str,
-) -> Result<Vec<Option<DVector<f64>>>, String> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| format!("{}: cannot read the file: {e}", path.display()))?;
+) -> Result<Vec<Option<DVector<f64>>>, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
     parse_series(path, &bytes, prefix, dim, what)
 }
 
@@ -222,14 +241,15 @@ pub fn parse_series(
     prefix: &str,
     dim: usize,
     what: &str,
-) -> Result<Vec<Option<DVector<f64>>>, String> {
-    let name = path.display();
+) -> Result<Vec<Option<DVector<f64>>>, Error> {
     if dim == 0 {
-        return Err(format!(
-            "{name}: {what}, so no {prefix} columns can be read"
+        return Err(Error::csv(
+            path,
+            None,
+            format!("{what}, so no {prefix} columns can be read"),
         ));
     }
-    let mut rows_in = Rows::new(&name, bytes)?;
+    let mut rows_in = Rows::new(path, bytes)?;
     let header = rows_in.header.clone();
     let expected: Vec<String> = std::iter::once("step".to_string())
         .chain((0..dim).map(|i| format!("{prefix}_{i}")))
@@ -240,9 +260,13 @@ pub fn parse_series(
     );
     if header.len() != expected.len() {
         let found = header.len().saturating_sub(1);
-        return Err(format!(
-            "{name}: row 1: {found} value column(s), but {what}, so {dim} are expected; \
-             the columns are {listing}"
+        return Err(Error::csv(
+            path,
+            Some(1),
+            format!(
+                "{found} value column(s), but {what}, so {dim} are expected; the columns are \
+                 {listing}"
+            ),
         ));
     }
     for (c, (h, want)) in header.iter().zip(&expected).enumerate() {
@@ -252,10 +276,9 @@ pub fn parse_series(
             } else {
                 String::new()
             };
-            return Err(format!(
-                "{name}: row 1, column {}: `{h}` where `{want}` is expected{hint}; \
-                 the columns are {listing}",
-                c + 1
+            return Err(rows_in.header_error(
+                c,
+                format!("`{h}` where `{want}` is expected{hint}; the columns are {listing}"),
             ));
         }
     }
@@ -314,7 +337,7 @@ pub fn parse_series(
         }
     }
     if out.is_empty() {
-        return Err(format!("{name}: no data rows after the header"));
+        return Err(Error::csv(path, None, "no data rows after the header"));
     }
     Ok(out)
 }

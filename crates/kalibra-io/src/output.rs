@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use kalibra_plot::ToSvg;
 
 use crate::document::Document;
+use crate::error::Error;
 
 /// Removes its directory when dropped, unless disarmed (also when a panic unwinds).
 struct Guard(Option<PathBuf>);
@@ -33,11 +34,14 @@ fn sibling(out: &Path, tag: &str) -> PathBuf {
 ///
 /// `out` is replaced if it holds an earlier report (a `report.json`); a directory holding
 /// anything else is left alone and refused.
+///
+/// # Errors
+/// As [`Target::prepare`] and [`Target::write`].
 pub fn write_report(
     out: &Path,
     report: &impl serde::Serialize,
     doc: &Document,
-) -> Result<(), String> {
+) -> Result<(), Error> {
     Target::prepare(out)?.write(report, doc)
 }
 
@@ -46,7 +50,7 @@ pub fn write_report(
 pub struct Target {
     out: PathBuf,
     /// As the user wrote it, for messages.
-    shown: String,
+    shown: PathBuf,
     tmp: PathBuf,
     guard: Guard,
 }
@@ -54,19 +58,24 @@ pub struct Target {
 impl Target {
     /// Checks `out` and makes the temporary directory beside it.
     ///
-    /// # Errors
-    /// A message naming `out`: an empty path, a directory holding something other than an
-    /// earlier report, or one that cannot be created or written beside.
-    ///
     /// `out` will be replaced if it holds an earlier report (a `report.json`); a directory
     /// holding anything else is left alone and refused.
-    pub fn prepare(out: &Path) -> Result<Self, String> {
-        let shown = out.display().to_string();
+    ///
+    /// # Errors
+    /// [`Error::EmptyOutput`] for an empty path; [`Error::Output`] for a directory holding
+    /// something other than an earlier report; [`Error::Io`] naming `out` for one that cannot
+    /// be created or written beside.
+    pub fn prepare(out: &Path) -> Result<Self, Error> {
         if out.as_os_str().is_empty() {
             // `Path::new("")` joins as the current directory: the report would land there.
-            return Err("the output directory is an empty path; name a directory".to_string());
+            return Err(Error::EmptyOutput);
         }
-        let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
+        let shown = out.to_path_buf();
+        let io = |what: &str, source: std::io::Error| Error::Io {
+            file: shown.clone(),
+            action: what.to_string(),
+            source,
+        };
         if out.exists() {
             let is_report = out.join("report.json").is_file();
             let is_empty = out.is_dir()
@@ -75,10 +84,12 @@ impl Target {
                     .next()
                     .is_none();
             if !(is_report || is_empty) {
-                return Err(format!(
-                    "{shown}: exists and holds no earlier report; choose another --out or \
-                     remove it"
-                ));
+                return Err(Error::Output {
+                    dir: shown,
+                    message: "exists and holds no earlier report; choose another --out or \
+                              remove it"
+                        .to_string(),
+                });
             }
         }
         // `a/b` with no parent components is relative to the current directory.
@@ -103,11 +114,21 @@ impl Target {
 
     /// Writes `report.json`, `report.md`, `report.html` and the figures, and moves them into
     /// place. `report` is the serialisable report (`kalibra eval`'s or `kalibra tune`'s).
-    pub fn write(mut self, report: &impl serde::Serialize, doc: &Document) -> Result<(), String> {
+    ///
+    /// # Errors
+    /// [`Error::Io`] naming the directory and what could not be written or moved;
+    /// [`Error::Output`] for a report that cannot be serialised.
+    pub fn write(mut self, report: &impl serde::Serialize, doc: &Document) -> Result<(), Error> {
         let (out, tmp, shown) = (&self.out, &self.tmp, &self.shown);
-        let io = |what: &str, e: std::io::Error| format!("{shown}: cannot {what}: {e}");
-        let json = serde_json::to_string_pretty(report)
-            .map_err(|e| format!("{shown}: cannot serialise the report: {e}"))?;
+        let io = |what: &str, source: std::io::Error| Error::Io {
+            file: shown.clone(),
+            action: what.to_string(),
+            source,
+        };
+        let json = serde_json::to_string_pretty(report).map_err(|e| Error::Output {
+            dir: shown.clone(),
+            message: format!("cannot serialise the report: {e}"),
+        })?;
         let write = |name: &str, text: &str| {
             fs::write(tmp.join(name), text).map_err(|e| io(&format!("write {name}"), e))
         };
