@@ -201,7 +201,7 @@ mod tests {
     #[test]
     fn bad_inputs_are_typed_errors() {
         assert!(Pcrlb::new(&Matrix2::new(1.0, 2.0, 2.0, 1.0)).is_err());
-        // Issue 19: an indefinite information matrix was accepted (only symmetry was checked).
+        // An indefinite information matrix was accepted (only symmetry was checked).
         assert!(Pcrlb::from_information(Matrix2::new(1.0, 2.0, 2.0, 1.0)).is_err());
         assert!(Pcrlb::from_information(-Matrix2::identity()).is_err());
         assert!(Pcrlb::from_information(Matrix2::zeros()).is_ok());

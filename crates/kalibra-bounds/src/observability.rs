@@ -142,7 +142,7 @@ mod tests {
         assert!(observability_singular_values(&f, &h, 0, 0).is_err());
     }
 
-    /// Issue 19, point 3: Jacobians whose `Dyn` sizes disagree were a panic inside nalgebra.
+    /// Jacobians whose `Dyn` sizes disagree were a panic inside nalgebra.
     #[test]
     fn dyn_sizes_are_checked() {
         let f = vec![DMatrix::<f64>::identity(2, 2); 3];

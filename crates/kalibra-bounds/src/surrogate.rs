@@ -469,7 +469,7 @@ mod tests {
         assert!((hw[0] - 1.959_963_984_540_054 * direct[(0, 0)].sqrt()).abs() < 1e-12);
     }
 
-    /// Issue 19: the docs promised an error for asymmetric noise that never came, and
+    /// The docs promised an error for asymmetric noise that never came, and
     /// indefinite or negative `Q` and `R` gave a surrogate as `Ok`.
     #[test]
     fn noise_that_is_not_a_covariance_is_refused() {
@@ -548,7 +548,7 @@ mod tests {
         );
         assert!(e.contains(&Vector2::new(1.0, 1.0)).unwrap());
         assert!(!e.contains(&Vector2::new(2.0, 2.0)).unwrap());
-        // Issue 19: a NaN point was Ok(false); a huge finite one is outside.
+        // A NaN point was Ok(false); a huge finite one is outside.
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
             assert!(matches!(
                 e.contains(&Vector2::new(bad, 0.0)),

@@ -1,4 +1,4 @@
-//! The property of issue 15, point 7, through the binary: random small logs written as CSV
+//! The report-equals-metrics property through the binary: random small logs written as CSV
 //! and as JSON give a `report.json` equal to the library's `Evaluation::evaluate` of the same
 //! arrays, compared as JSON values, so every number to the last bit: the logs are written
 //! with shortest round-trip float printing and read with correctly rounded parsing, and the

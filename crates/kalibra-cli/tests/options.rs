@@ -1,4 +1,4 @@
-//! The command line's options (issue 19, point 9): every option is named in its parse error,
+//! The command line's options: every option is named in its parse error,
 //! an empty `--out` (or an empty file argument) is a usage error before any work starts, a
 //! `--group` the log's state cannot hold names the option, and every command and subcommand
 //! answers `--help`.

@@ -693,7 +693,7 @@ mod tests {
         }
     }
 
-    /// Issue 19 (adversarial suite): a statistic near the smallest subnormal gave NaN inside
+    /// Found by the adversarial suite: a statistic near the smallest subnormal gave NaN inside
     /// `Ok`.
     #[test]
     fn asymptotic_p_of_a_tiny_statistic_is_one() {

@@ -110,7 +110,7 @@ fn typed_errors_for_bad_input() {
         Err(MetricsError::InvalidParameter { .. })
     ));
     assert_eq!(StepMean::new(2).mean(0), None);
-    // Issue 19: a sum beyond f64's range would have made the mean inf; it is refused and the
+    // A sum beyond f64's range would have made the mean inf; it is refused and the
     // accumulator stays as it was.
     let mut m = StepMean::new(1);
     m.push(0, f64::MAX).unwrap();
@@ -138,7 +138,7 @@ fn chi_square_band_matches_tabulated_quantiles() {
     assert!((n.lower - b.lower / 4.0).abs() < 1e-15 && n.contains(1.0) && !n.contains(1.5));
 }
 
-/// Issue 19: the NIS and NEES of a NaN or infinite vector came back as a NaN or an infinity
+/// The NIS and NEES of a NaN or infinite vector came back as a NaN or an infinity
 /// inside `Ok`; a form beyond f64's range of a finite vector did too.
 #[test]
 fn nis_and_nees_of_non_finite_vectors_are_errors() {
@@ -192,7 +192,7 @@ fn nis_and_nees_of_non_finite_vectors_are_errors() {
     );
 }
 
-/// Issue 19, found by the adversarial suite: subnormal degrees of freedom panicked inside
+/// Found by the adversarial suite: subnormal degrees of freedom panicked inside
 /// statrs, a confidence whose upper tail rounds to 1 gave an infinite bound, and degrees of
 /// freedom near f64::MAX an infinite or NaN bound, all inside `Ok`. Every `Ok` band is finite.
 #[test]
@@ -217,7 +217,7 @@ fn chi_square_bands_at_extreme_parameters_are_finite_or_errors() {
     assert!(ChiSquareBand::for_mean(1e-3, 1, 0.95).is_ok());
 }
 
-/// Issue 19, found by the adversarial suite: a squared error beyond f64's range made the RMSE
+/// Found by the adversarial suite: a squared error beyond f64's range made the RMSE
 /// inf inside `Ok`; it is refused, and MSEs near f64::MAX still give a finite group RMSE.
 #[test]
 fn squared_errors_stay_finite() {

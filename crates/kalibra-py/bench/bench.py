@@ -1,4 +1,4 @@
-"""The Python user's benchmark (issue 16, point 7): W1, the 4-state constant-velocity Kalman
+"""The Python user's benchmark: W1, the 4-state constant-velocity Kalman
 filter with position measurements, R runs x K steps with NEES and NIS, through
 
 * kalibra.monte_carlo (simulation, filter and the whole evaluation in Rust, in parallel),

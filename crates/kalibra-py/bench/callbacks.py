@@ -1,4 +1,4 @@
-"""The per-step cost of Python callables in kalibra's EKF and UKF (issue 16, point 3): W1's
+"""The per-step cost of Python callables in kalibra's EKF and UKF: W1's
 4-state constant-velocity model with position measurements, one run of K steps, through
 KalmanFilter (no callbacks), ExtendedKalmanFilter (f, F_jacobian, h, H_jacobian: 4 calls per
 step) and UnscentedKalmanFilter (2n + 1 = 9 calls of f and 9 of h per step), beside FilterPy's

@@ -46,10 +46,10 @@ fn values<T: Element + Copy + Sync>(
     // (`as_slice` alone would also take a Fortran-ordered array, in its memory order.)
     //
     // A large contiguous array is copied on every core (rayon collects an indexed iterator
-    // straight into the new vector): the copy of a 1000 x 1000 log's 240 MB into fresh memory
-    // took a quarter of `evaluate`'s time on one thread, most of it the kernel handing out and
-    // zeroing the new pages, which several threads do side by side. The GIL is held, so no
-    // Python code changes the array meanwhile.
+    // straight into the new vector): most of a large copy's cost is the kernel handing out and
+    // zeroing the new pages, which several threads do side by side
+    // (`crates/kalibra-py/bench/bench.py` shows it). The GIL is held, so no Python code changes
+    // the array meanwhile.
     let data = match view.as_slice() {
         Ok(slice) if array.is_c_contiguous() && slice.len() >= PARALLEL_COPY_FROM => slice
             .par_iter()
@@ -166,8 +166,8 @@ impl Drop for InPlace<'_> {
 }
 
 /// Reads argument `name` for a call that releases the GIL: a C-contiguous, aligned float64
-/// numpy array is read in place, not copied (a 1000 x 1000 log's 240 MB took a fifth of
-/// `evaluate`'s time to copy, most of it the kernel handing out fresh pages), and is set
+/// numpy array is read in place, not copied (a large log's copy is mostly the kernel handing
+/// out fresh pages; `crates/kalibra-py/bench/bench.py` shows the cost), and is set
 /// non-writeable until the returned guard drops, so that Python code writing to it through
 /// this array object meanwhile gets numpy's read-only error instead of racing with the read.
 /// (Other views of the same memory stay writeable: as for numpy's own functions that release
