@@ -10,7 +10,7 @@ use super::{BATCH, BatchModel, BatchStep, Isa, KfSchedule, Lanes};
 use crate::FilterError;
 
 /// [`BATCH`] Kalman filters on one [`BatchModel`], stepped together (see the
-/// [module docs](self)).
+/// [module docs](crate::batch)).
 #[derive(Clone, Debug)]
 pub struct KfBatch<const N: usize, const M: usize> {
     model: BatchModel<N, M>,

@@ -11,7 +11,7 @@ use crate::FilterError;
 
 /// The covariances of a Kalman filter on one [`BatchModel`] from one prior `P0`: an update at
 /// step 0, then a prediction and an update at each later step, computed once for every batch
-/// that follows it ([`KfBatch::scheduled`]).
+/// that follows it ([`KfBatch::scheduled`](crate::batch::KfBatch::scheduled)).
 ///
 /// A linear filter's `P-`, `S`, `K` and `P+` depend on the model and `P0` alone, never on the
 /// measurements, so a Monte Carlo study whose runs share both computes the same covariance
@@ -19,7 +19,7 @@ use crate::FilterError;
 /// one vector of the instruction set), and a batch that follows it computes only what differs
 /// between runs: the means, the innovations, the NIS and the NEES. Every number is the one the
 /// batch computes without a schedule, to the bit (on the same instruction set); a batch leaves
-/// the schedule where its lanes' covariances would part (see [`KfBatch::scheduled`]).
+/// the schedule where its lanes' covariances would part (see [`KfBatch::scheduled`](crate::batch::KfBatch::scheduled)).
 ///
 /// Memory: per update, `3 N^2 + N M + M^2 + N + M` numbers (66 for `N = 4`, `M = 2`: 528
 /// bytes).
@@ -68,7 +68,7 @@ impl<const N: usize, const M: usize> KfSchedule<N, M> {
     /// The covariances of `updates` updates (the first at step 0, each later one after a
     /// prediction) from `P0` on `model`, computed on instruction set `isa`. It holds fewer if a
     /// step's prior, gain, factor of `S` or posterior is not finite: a batch computes that step
-    /// and the later ones itself, and fails where [`KfBatch::new`]'s batch fails.
+    /// and the later ones itself, and fails where [`KfBatch::new`](crate::batch::KfBatch::new)'s batch fails.
     ///
     /// # Errors
     /// [`FilterError::Unsupported`] if the CPU does not run `isa`; [`FilterError::Initial`] if

@@ -11,9 +11,9 @@ use crate::FilterError;
 /// for instance one with angle components (FilterPy's `x_mean_fn`, `residual_x` and
 /// `z_mean_fn`; Stone Soup's angle types).
 ///
-/// A state space ([`Ukf::with_state_space`]) uses all three methods: the predicted mean of the
+/// A state space ([`Ukf::with_state_space`](crate::Ukf::with_state_space)) uses all three methods: the predicted mean of the
 /// sigma points, the deviations that form the predicted covariance, and the normalisation of
-/// the updated mean `x- + K nu`. A measurement mean ([`Ukf::with_measurement_mean`]) uses
+/// the updated mean `x- + K nu`. A measurement mean ([`Ukf::with_measurement_mean`](crate::Ukf::with_measurement_mean)) uses
 /// [`SigmaSpace::mean`] for `zhat`; the deviations there come from the measurement model's
 /// own residual. [`AngleComponents`] is the ready-made space with angles at given positions.
 pub trait SigmaSpace<D: Dim>: Send + Sync + std::fmt::Debug
