@@ -38,7 +38,8 @@ pub use kalibra_models::{
 };
 
 pub use kalibra_filters::{
-    ConstantGainKf, Ekf, Filter, FilterOptions, Kf, SigmaSet, Srf, Start, StepRecord, Ukf,
+    ConstantGainKf, Ekf, Filter, FilterOptions, Kf, SigmaSet, Smoothable, SqrtKf, SqrtUkf, Srf,
+    Start, StepRecord, Ukf,
 };
 
 pub use kalibra_metrics::{
