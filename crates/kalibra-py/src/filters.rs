@@ -559,10 +559,10 @@ impl CallbackModel {
 /// algebra in Rust (Joseph-form update, Cholesky solves) and calls back into Python for the
 /// model: four calls per step (f, F_jacobian, h, H_jacobian), plus residual if given.
 ///
-/// Cost: a callback costs about 1 microsecond (numpy array in, array out); on W1's 4-state
-/// model a step takes about 5 us, against 1.3 us for KalmanFilter and 17 us for FilterPy's
-/// ExtendedKalmanFilter (`bench/callbacks.py`, release build, one core of the development
-/// machine). The model's own Python work comes on top.
+/// Cost: each step crosses into Python four times (a numpy array in, one out), so a step
+/// costs several times KalmanFilter's and still less than FilterPy's ExtendedKalmanFilter;
+/// `crates/kalibra-py/bench/callbacks.py` prints the figures. The model's own Python work
+/// comes on top.
 ///
 /// Args:
 ///     f: f(x, k) -> (n,), the state at step k + 1 from x at step k.
@@ -696,9 +696,9 @@ impl ExtendedKalmanFilter {
 /// Jacobians. kalibra's `Ukf` runs the algebra in Rust and calls f and h once per sigma point
 /// (2n + 1 each per step; with an adaptive kappa, h once per point and grid value).
 ///
-/// Cost: about 2 microseconds per callback; on W1's 4-state model (18 callbacks per step) a
-/// step takes about 34 us, against 154 us for FilterPy's UnscentedKalmanFilter
-/// (`bench/callbacks.py`, release build, development machine).
+/// Cost: one callback per sigma point and function (18 per step on a 4-state model), so the
+/// crossings into Python dominate, and a step still costs less than FilterPy's
+/// UnscentedKalmanFilter; `crates/kalibra-py/bench/callbacks.py` prints the figures.
 ///
 /// The prediction pushes the posterior's sigma points through f; the update draws new sigma
 /// points from the prior (x-, P-) and pushes them through h. (FilterPy's UKF reuses the
