@@ -7,6 +7,8 @@
 //!   Monte Carlo and writes its partial result to `DIR/<study>/shard-I-of-S.cbor`;
 //!   `cargo xtask merge DIR... [--out DIR]` merges all shards into the reports and index the
 //!   unsharded run writes, bit for bit (docs/distributed.md).
+//! * `cargo xtask compare BEFORE AFTER`: compares two `reproduce --out` trees value by value,
+//!   skipping only the commit and the values measured with a clock (`compare.rs`).
 //! * `cargo xtask bench [w1|w2|w3|w4|eval|shards|all] [--out DIR] ...`: runs the benchmark
 //!   workloads through the public API and through hand-written nalgebra loops in the same
 //!   process, prints steps per second and their ratio, and writes the figures as JSON into
@@ -20,6 +22,7 @@
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
 mod bench;
+mod compare;
 mod reproduce;
 
 use clap::{Parser, Subcommand};
@@ -40,6 +43,8 @@ enum Command {
     Bench(bench::Args),
     /// Merge the shard files of `reproduce STUDY --shard I/S` into the unsharded reports.
     Merge(reproduce::MergeArgs),
+    /// Compare two `reproduce --out` trees value by value (a refactor must keep the numbers).
+    Compare(compare::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -47,6 +52,7 @@ fn main() -> std::process::ExitCode {
         Command::Reproduce(args) => reproduce::main(&args),
         Command::Bench(args) => bench::main(&args),
         Command::Merge(args) => reproduce::merge(&args),
+        Command::Compare(args) => compare::main(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
