@@ -3,6 +3,7 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use kalibra_plot::ToSvg;
 
@@ -20,20 +21,37 @@ impl Drop for Guard {
     }
 }
 
-/// A sibling of `out` named `.NAME.TAG-PID`.
+/// A sibling of `out` named `.NAME.TAG-PID-N`, with `N` counted per process so that two threads
+/// saving at once (Python's `Report.save` releases nothing, but a program may call it from
+/// threads) never share a temporary directory.
 fn sibling(out: &Path, tag: &str) -> PathBuf {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
     let name = out.file_name().map_or("kalibra-report".into(), |n| {
         n.to_string_lossy().into_owned()
     });
-    out.with_file_name(format!(".{name}.{tag}-{}", std::process::id()))
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    out.with_file_name(format!(".{name}.{tag}-{}-{n}", std::process::id()))
+}
+
+/// Whether a directory entry is one the writer produces: `report.json`, `report.md`,
+/// `report.html` or a figure (`*.svg`). Only a directory holding nothing else is replaced, so a
+/// user's folder that happens to contain a `report.json` is never deleted (the test
+/// `refuses_a_folder_with_other_files` shows it).
+fn is_report_file(entry: &fs::DirEntry) -> bool {
+    let name = entry.file_name();
+    let name = name.to_string_lossy();
+    entry.file_type().is_ok_and(|t| t.is_file())
+        && (matches!(name.as_ref(), "report.json" | "report.md" | "report.html")
+            || name.ends_with(".svg"))
 }
 
 /// Writes `report.json`, `report.md`, `report.html` and the figures into `out` at once
 /// ([`Target::prepare`] then [`Target::write`]), for a caller whose report is already computed
 /// (the Python package's `save`).
 ///
-/// `out` is replaced if it holds an earlier report (a `report.json`); a directory holding
-/// anything else is left alone and refused.
+/// `out` is replaced if it holds an earlier report and nothing else (`report.json`, and
+/// `report.md`, `report.html`, figures); a directory holding anything else is left alone and
+/// refused.
 ///
 /// # Errors
 /// As [`Target::prepare`] and [`Target::write`].
@@ -58,8 +76,9 @@ pub struct Target {
 impl Target {
     /// Checks `out` and makes the temporary directory beside it.
     ///
-    /// `out` will be replaced if it holds an earlier report (a `report.json`); a directory
-    /// holding anything else is left alone and refused.
+    /// `out` will be replaced if it holds an earlier report and nothing else (`report.json`,
+    /// and `report.md`, `report.html`, figures); a directory holding anything else is left
+    /// alone and refused.
     ///
     /// # Errors
     /// [`Error::EmptyOutput`] for an empty path; [`Error::Output`] for a directory holding
@@ -77,13 +96,30 @@ impl Target {
             source,
         };
         if out.exists() {
-            let is_report = out.join("report.json").is_file();
-            let is_empty = out.is_dir()
-                && fs::read_dir(out)
-                    .map_err(|e| io("read it", e))?
-                    .next()
-                    .is_none();
-            if !(is_report || is_empty) {
+            if !out.is_dir() {
+                return Err(Error::Output {
+                    dir: shown,
+                    message: "exists and is not a directory; choose another --out".to_string(),
+                });
+            }
+            let mut has_json = false;
+            let mut entries = 0usize;
+            for entry in fs::read_dir(out).map_err(|e| io("read it", e))? {
+                let entry = entry.map_err(|e| io("read it", e))?;
+                if !is_report_file(&entry) {
+                    return Err(Error::Output {
+                        dir: shown,
+                        message: format!(
+                            "holds no earlier report ({} is not part of one); choose another \
+                             --out or remove it",
+                            entry.file_name().to_string_lossy()
+                        ),
+                    });
+                }
+                has_json |= entry.file_name() == "report.json";
+                entries += 1;
+            }
+            if entries > 0 && !has_json {
                 return Err(Error::Output {
                     dir: shown,
                     message: "exists and holds no earlier report; choose another --out or \
@@ -157,5 +193,47 @@ impl Target {
             let _ = fs::remove_dir_all(&old);
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("kalibra-io-output-{name}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn accepts_an_earlier_report() {
+        let out = scratch("earlier");
+        for name in ["report.json", "report.md", "report.html", "nees.svg"] {
+            fs::write(out.join(name), "old").unwrap();
+        }
+        let target = Target::prepare(&out);
+        assert!(target.is_ok());
+        drop(target);
+        fs::remove_dir_all(&out).unwrap();
+    }
+
+    #[test]
+    fn refuses_a_folder_with_other_files() {
+        let out = scratch("foreign");
+        fs::write(out.join("report.json"), "{}").unwrap();
+        fs::write(out.join("thesis.tex"), "keep me").unwrap();
+        let err = Target::prepare(&out).err().unwrap();
+        assert!(
+            err.to_string().contains("thesis.tex is not part of one"),
+            "{err}"
+        );
+        assert_eq!(
+            fs::read_to_string(out.join("thesis.tex")).unwrap(),
+            "keep me"
+        );
+        fs::remove_dir_all(&out).unwrap();
     }
 }
