@@ -119,7 +119,8 @@ impl Whiteness {
 /// ```
 ///
 /// # Errors
-/// [`MetricsError::InvalidParameter`] for `lags == 0` or a confidence outside (0, 1);
+/// [`MetricsError::InvalidParameter`] for `lags == 0` or a confidence outside (0, 1) or so
+/// close to 1 that `(1 + confidence) / 2` rounds to 1;
 /// [`MetricsError::TooFewSamples`] if some lag has fewer than 2 pairs;
 /// [`MetricsError::Linalg`] if a vector is not finite or differs in size from the first;
 /// [`MetricsError::Degenerate`] if the innovations of some lag's pairs are all zero.
@@ -137,7 +138,9 @@ where
             value: 0.0,
         });
     }
-    if !(confidence > 0.0 && confidence < 1.0) {
+    // `(1 + c) / 2` must stay below 1: at 1 (a confidence within 2^-53 of 1) the normal
+    // quantile, and with it every bound, is infinite.
+    if !(confidence > 0.0 && 0.5 + confidence / 2.0 < 1.0) {
         return Err(MetricsError::InvalidParameter {
             name: "confidence",
             value: confidence,
@@ -151,7 +154,10 @@ where
     }
     let m = m.unwrap_or(0).max(1) as f64;
     let z = Normal::standard().inverse_cdf(0.5 + confidence / 2.0);
-    let mut out = Vec::with_capacity(lags);
+    // Reserved for at most as many lags as there are samples: a lag beyond them has no pair
+    // (the loop stops with `TooFewSamples` there), and `usize::MAX` lags must not reserve
+    // (`tests/extreme_sizes.rs`).
+    let mut out = Vec::with_capacity(lags.min(normalized.len()));
     let mut q = 0.0;
     for lag in 1..=lags {
         let (mut cross, mut head, mut tail, mut pairs) = (0.0, 0.0, 0.0, 0usize);

@@ -141,9 +141,11 @@ where
 /// ```
 ///
 /// # Errors
-/// [`TuningError::InvalidParameter`] for `t <= 0`, an index out of range or used twice;
+/// [`TuningError::InvalidParameter`] for `t` below the smallest normal number (its reciprocal
+/// would overflow) or not finite, an index out of range or used twice;
 /// [`TuningError::Linalg`] for non-finite measurements or a noise covariance that is not
-/// symmetric positive semi-definite.
+/// symmetric positive semi-definite, and [`LinalgError::NonFinite`] for a velocity
+/// `(z2 - z1) / t` or a covariance `(r1 + r2) / t^2` beyond f64's range.
 pub fn two_point_init<const N: usize, const D: usize>(
     z1: &SVector<f64, D>,
     z2: &SVector<f64, D>,
@@ -153,7 +155,8 @@ pub fn two_point_init<const N: usize, const D: usize>(
     position: [usize; D],
     velocity: [usize; D],
 ) -> Result<Gaussian<Const<N>>, TuningError> {
-    if !(t.is_finite() && t > 0.0) {
+    // From the smallest normal number on, `1 / t` is finite (subnormal `t` overflow it).
+    if !(t.is_finite() && t >= f64::MIN_POSITIVE) {
         return Err(TuningError::InvalidParameter {
             name: "differencing interval t",
             value: t,
@@ -178,7 +181,10 @@ pub fn two_point_init<const N: usize, const D: usize>(
     let mut j = OMatrix::<f64, kalibra_linalg::Dyn, kalibra_linalg::Dyn>::zeros(N, 2 * D);
     for a in 0..D {
         x[position[a]] = z2[a];
-        x[velocity[a]] = (z2[a] - z1[a]) / t;
+        let dz = z2[a] - z1[a];
+        // Opposite signs near the limit: divided first, `|z2| / t + |z1| / t` is the velocity
+        // whenever that is representable.
+        x[velocity[a]] = if dz.is_finite() { dz / t } else { z2[a] / t - z1[a] / t };
         j[(position[a], D + a)] = 1.0;
         j[(velocity[a], a)] = -1.0 / t;
         j[(velocity[a], D + a)] = 1.0 / t;
@@ -190,6 +196,8 @@ pub fn two_point_init<const N: usize, const D: usize>(
     let mut out = SMatrix::<f64, N, N>::zeros();
     out.copy_from(&p);
     kalibra_linalg::symmetrize(&mut out);
+    check_finite(&x, "two-point velocity (beyond f64's range)")?;
+    check_finite(&out, "two-point covariance (beyond f64's range)")?;
     Ok(Gaussian { mean: x, cov: out })
 }
 
