@@ -8,7 +8,8 @@
 //! that the source scan (`extreme/mod.rs`) finds taking `f64` data, so a new one fails it until
 //! it is driven here or listed with the reason it is not.
 //!
-//! Size: `CASES` (48) cases for each of the 6 properties; `PROPTEST_CASES` overrides the count.
+//! Size: `CASES` (256) cases for each of the 6 properties;
+//! `PROPTEST_CASES` overrides the count.
 
 mod extreme;
 
@@ -40,7 +41,7 @@ use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
 
 /// Cases per property.
-const CASES: u32 = 48;
+const CASES: u32 = 256;
 
 fn config() -> ProptestConfig {
     ProptestConfig {
@@ -82,7 +83,7 @@ fn huge() -> impl Strategy<Value = f64> {
 
 /// Two values of opposite signs near the limit, whose difference overflows.
 fn opposite() -> impl Strategy<Value = (f64, f64)> {
-    (1e307..f64::MAX, 1e307..f64::MAX).prop_map(|(a, b)| (a, -b))
+    (1e308..f64::MAX, 1e308..f64::MAX).prop_map(|(a, b)| (a, -b))
 }
 
 /// A positive interval: near the smallest normal number, subnormal, or anywhere.
@@ -134,8 +135,8 @@ fn spd(n: usize) -> impl Strategy<Value = DMatrix<f64>> {
             match kind {
                 0 | 1 => base.map(|x| ldexp(x, e)),
                 2 => {
-                    let w = DMatrix::from_vec(n, n, w);
-                    (&w + w.transpose()).map(|x| x * 0.5)
+                    let w = DMatrix::from_vec(n, n, w).map(|x| x * 0.5);
+                    &w + w.transpose()
                 }
                 _ => DMatrix::from_fn(n, n, |i, j| if i == j { w[i].abs() } else { 0.0 }),
             }
@@ -356,7 +357,10 @@ proptest! {
         let _ = cred.push(0, &e, &m2);
         let _ = cred.push_nees(0, e.as_slice(), 2.0);
         if let Ok(s) = cred.step_summary(0) {
-            prop_assert!(debug_finite(&s), "{s:?}");
+            // The NCI is NaN, as documented, when every run was skipped (a singular MSE).
+            let nci_defined = s.nci_skipped < s.runs;
+            prop_assert!(s.nci.is_finite() || !nci_defined, "{s:?}");
+            prop_assert!(s.anees.is_finite() && s.median_nees.is_finite() && s.mse.finite(), "{s:?}");
         }
     }
 }
@@ -483,7 +487,9 @@ proptest! {
             let scale = z1.abs() / t + z2.abs() / t;
             if let Ok(g) = init && scale.is_finite() {
                 let want = z2 / t - z1 / t;
-                prop_assert!((g.mean[1] - want).abs() <= 1e-15 * scale, "{} vs {want}", g.mean[1]);
+                // Relative to the terms, and a few subnormal steps where they underflow.
+                let tolerance = (1e-15 * scale).max(1e-322);
+                prop_assert!((g.mean[1] - want).abs() <= tolerance, "{} vs {want}", g.mean[1]);
             }
         }
     }
@@ -576,13 +582,35 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("Matrices::per_step", Cover::Reason(STORE)),
     ("Matrices::constant", Cover::Reason(STORE)),
     ("FilterLog::with_times", Cover::Driven),
-    ("Band::contains", Cover::Reason("a comparison with a report's band; returns a bool")),
-    ("Evaluator::finish", Cover::Reason("the streaming form of `Evaluation::evaluate`, which is driven here and gives the same report (crates/kalibra-eval/tests/stream.rs)")),
-    ("matrix_from_rows", Cover::Reason("copies rows into a matrix, checking shape and finiteness; computes nothing")),
-    ("TuneProblem::new", Cover::Reason("the offline Q tuning runs a KF over the problem: filter steps check finiteness (crates/kalibra-eval/tests/tune.rs; tests/adversarial.rs `filters`)")),
-    ("TuneProblem::as_given", Cover::Reason("as TuneProblem::new, with the initial covariance taken as given")),
+    (
+        "Band::contains",
+        Cover::Reason("a comparison with a report's band; returns a bool"),
+    ),
+    (
+        "Evaluator::finish",
+        Cover::Reason(
+            "the streaming form of `Evaluation::evaluate`, which is driven here and gives the same report (crates/kalibra-eval/tests/stream.rs)",
+        ),
+    ),
+    (
+        "matrix_from_rows",
+        Cover::Reason("copies rows into a matrix, checking shape and finiteness; computes nothing"),
+    ),
+    (
+        "TuneProblem::new",
+        Cover::Reason(
+            "the offline Q tuning runs a KF over the problem: filter steps check finiteness (crates/kalibra-eval/tests/tune.rs; tests/adversarial.rs `filters`)",
+        ),
+    ),
+    (
+        "TuneProblem::as_given",
+        Cover::Reason("as TuneProblem::new, with the initial covariance taken as given"),
+    ),
     ("TuneProblem::with_truth", Cover::Reason(STORE)),
-    ("Tuning::exponents", Cover::Reason("a grid of exponents through `grid`, which is driven here")),
+    (
+        "Tuning::exponents",
+        Cover::Reason("a grid of exponents through `grid`, which is driven here"),
+    ),
     ("Tuning::grid", Cover::Reason(STORE)),
     // kalibra-filters
     ("EkfBatch::new", Cover::Reason(LANES)),
@@ -606,13 +634,31 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("UkfBatch::update", Cover::Reason(LANES)),
     ("ConstantGainKf::new", Cover::Reason(FILTER_SUITE)),
     ("ConstantGainKf::with_options", Cover::Reason(FILTER_SUITE)),
-    ("ConstantGainKf::steady_state_gain", Cover::Reason("the Riccati limit through `steady_state`, which tests/adversarial.rs `filters` drives")),
+    (
+        "ConstantGainKf::steady_state_gain",
+        Cover::Reason(
+            "the Riccati limit through `steady_state`, which tests/adversarial.rs `filters` drives",
+        ),
+    ),
     ("$name::new", Cover::Reason(FILTER_SUITE)),
     ("$name::with_options", Cover::Reason(FILTER_SUITE)),
-    ("$name::as_given", Cover::Reason("the paper's unchecked algebra, an explicit opt-in; its records say so (crates/kalibra-filters/tests/kalman.rs)")),
+    (
+        "$name::as_given",
+        Cover::Reason(
+            "the paper's unchecked algebra, an explicit opt-in; its records say so (crates/kalibra-filters/tests/kalman.rs)",
+        ),
+    ),
     ("shifted_rayleigh_moments", Cover::Driven),
-    ("StepRecord::nees", Cover::Reason("`nees` with the record's covariance; `nees` is driven here")),
-    ("FixedLagSmoother::step", Cover::Reason("a filter step and an RTS pass over its records: crates/kalibra-filters/tests/smooth.rs and tests/adversarial.rs `filters`")),
+    (
+        "StepRecord::nees",
+        Cover::Reason("`nees` with the record's covariance; `nees` is driven here"),
+    ),
+    (
+        "FixedLagSmoother::step",
+        Cover::Reason(
+            "a filter step and an RTS pass over its records: crates/kalibra-filters/tests/smooth.rs and tests/adversarial.rs `filters`",
+        ),
+    ),
     ("SqrtKf::new", Cover::Reason(FILTER_SUITE)),
     ("SqrtKf::with_options", Cover::Reason(FILTER_SUITE)),
     ("SqrtUkf::new", Cover::Reason(FILTER_SUITE)),
@@ -626,11 +672,19 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("KappaGrid::equidistant", Cover::Driven),
     ("SigmaSet::with_kappa", Cover::Driven),
     // kalibra-io
-    ("Model::problem", Cover::Reason("reader plumbing: hands a file's matrices to TuneProblem::new")),
+    (
+        "Model::problem",
+        Cover::Reason("reader plumbing: hands a file's matrices to TuneProblem::new"),
+    ),
     // kalibra-linalg
     ("Covariance::new", Cover::Driven),
     ("Covariance::named", Cover::Driven),
-    ("Covariance::from_symmetric", Cover::Reason("Covariance::new without the symmetry check, for matrices built symmetric; same factorisation and checks")),
+    (
+        "Covariance::from_symmetric",
+        Cover::Reason(
+            "Covariance::new without the symmetry check, for matrices built symmetric; same factorisation and checks",
+        ),
+    ),
     ("Covariance::from_diagonal", Cover::Driven),
     ("Covariance::solve", Cover::Driven),
     ("Covariance::solve_right", Cover::Driven),
@@ -704,12 +758,24 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     // kalibra-models
     ("AngularTarget::new", Cover::Driven),
     ("AngularTarget::diagonal", Cover::Driven),
-    ("AngularTarget::angle_measurement", Cover::Reason("builds R = [r] through LinearObservation::new, which is driven here")),
+    (
+        "AngularTarget::angle_measurement",
+        Cover::Reason("builds R = [r] through LinearObservation::new, which is driven here"),
+    ),
     ("ManoeuvreProfile::acceleration", Cover::Reason(MODEL_PAPER)),
     ("ManoeuvreProfile::scaled", Cover::Reason(MODEL_PAPER)),
-    ("ManoeuvringTarget::truth_from_noise", Cover::Reason(MODEL_PAPER)),
-    ("ManoeuvringTarget::measurements_from_noise", Cover::Reason(MODEL_PAPER)),
-    ("ManoeuvringTarget::measurements", Cover::Reason(MODEL_PAPER)),
+    (
+        "ManoeuvringTarget::truth_from_noise",
+        Cover::Reason(MODEL_PAPER),
+    ),
+    (
+        "ManoeuvringTarget::measurements_from_noise",
+        Cover::Reason(MODEL_PAPER),
+    ),
+    (
+        "ManoeuvringTarget::measurements",
+        Cover::Reason(MODEL_PAPER),
+    ),
     ("AirDensity::at", Cover::Reason(MODEL_PAPER)),
     ("AirDensity::derivative", Cover::Reason(MODEL_PAPER)),
     ("ballistic_f1", Cover::Reason(MODEL_PAPER)),
@@ -728,14 +794,33 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("BearingReference::gradient", Cover::Driven),
     ("Bearing::new", Cover::Reason(FILTER_SUITE)),
     ("Bearing::from_coordinates", Cover::Reason(FILTER_SUITE)),
-    ("Bearing::with_translational_noise", Cover::Reason("checks and stores two variances; the bearing filters using them are in tests/adversarial.rs `bearings`")),
-    ("Bearing::relative_position", Cover::Reason("a difference of target and platform positions, driven by every bearing filter step (tests/adversarial.rs `bearings`)")),
-    ("check_dynamics_jacobian", Cover::Reason("a test helper for model authors (finite differences at the caller's point)")),
-    ("check_measurement_jacobian", Cover::Reason("a test helper for model authors (finite differences at the caller's point)")),
+    (
+        "Bearing::with_translational_noise",
+        Cover::Reason(
+            "checks and stores two variances; the bearing filters using them are in tests/adversarial.rs `bearings`",
+        ),
+    ),
+    (
+        "Bearing::relative_position",
+        Cover::Reason(
+            "a difference of target and platform positions, driven by every bearing filter step (tests/adversarial.rs `bearings`)",
+        ),
+    ),
+    (
+        "check_dynamics_jacobian",
+        Cover::Reason("a test helper for model authors (finite differences at the caller's point)"),
+    ),
+    (
+        "check_measurement_jacobian",
+        Cover::Reason("a test helper for model authors (finite differences at the caller's point)"),
+    ),
     ("Kinematic::new", Cover::Driven),
     ("Kinematic::constant_velocity", Cover::Driven),
     ("Kinematic::constant_acceleration", Cover::Driven),
-    ("Kinematic::position_measurement", Cover::Reason("builds H and takes R through LinearObservation::new, which is driven here")),
+    (
+        "Kinematic::position_measurement",
+        Cover::Reason("builds H and takes R through LinearObservation::new, which is driven here"),
+    ),
     ("wrap_angle_lanes", Cover::Reason(LANES)),
     ("lane", Cover::Reason(LANES)),
     ("set_lane_vector", Cover::Reason(LANES)),
@@ -744,26 +829,63 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("LinearGaussian::new", Cover::Driven),
     ("LinearGaussian::with_noise_scaled", Cover::Driven),
     ("LinearObservation::new", Cover::Driven),
-    ("sample_with_factor", Cover::Reason("a draw L w from a factor the caller made with semidefinite_factor (driven here); crates/kalibra-models/tests/value_stability.rs")),
-    ("Simulator::new", Cover::Reason("stores the initial state; the truth simulation steps the models, whose checks are driven here")),
-    ("simulate", Cover::Reason("truth simulation of a model: crates/kalibra-models tests")),
-    ("simulate_until", Cover::Reason("truth simulation of a model: crates/kalibra-models tests")),
-    ("AccelAxis::position_measurement", Cover::Reason(MODEL_PAPER)),
-    ("AccelAxis::position_velocity_measurement", Cover::Reason(MODEL_PAPER)),
+    (
+        "sample_with_factor",
+        Cover::Reason(
+            "a draw L w from a factor the caller made with semidefinite_factor (driven here); crates/kalibra-models/tests/value_stability.rs",
+        ),
+    ),
+    (
+        "Simulator::new",
+        Cover::Reason(
+            "stores the initial state; the truth simulation steps the models, whose checks are driven here",
+        ),
+    ),
+    (
+        "simulate",
+        Cover::Reason("truth simulation of a model: crates/kalibra-models tests"),
+    ),
+    (
+        "simulate_until",
+        Cover::Reason("truth simulation of a model: crates/kalibra-models tests"),
+    ),
+    (
+        "AccelAxis::position_measurement",
+        Cover::Reason(MODEL_PAPER),
+    ),
+    (
+        "AccelAxis::position_velocity_measurement",
+        Cover::Reason(MODEL_PAPER),
+    ),
     ("AccelAxis::jacobian_lanes", Cover::Reason(LANES)),
     ("Target3d::position_measurement", Cover::Reason(MODEL_PAPER)),
-    ("Target3d::position_velocity_measurement", Cover::Reason(MODEL_PAPER)),
+    (
+        "Target3d::position_velocity_measurement",
+        Cover::Reason(MODEL_PAPER),
+    ),
     // kalibra-plot
-    ("Series::line", Cover::Reason("a figure's points as data; the SVG writer is tested in kalibra-plot")),
-    ("Series::markers", Cover::Reason("a figure's points as data; the SVG writer is tested in kalibra-plot")),
-    ("Series::line_markers", Cover::Reason("a figure's points as data; the SVG writer is tested in kalibra-plot")),
+    (
+        "Series::line",
+        Cover::Reason("a figure's points as data; the SVG writer is tested in kalibra-plot"),
+    ),
+    (
+        "Series::markers",
+        Cover::Reason("a figure's points as data; the SVG writer is tested in kalibra-plot"),
+    ),
+    (
+        "Series::line_markers",
+        Cover::Reason("a figure's points as data; the SVG writer is tested in kalibra-plot"),
+    ),
     // kalibra-sim
     ("TruthBatch::new", Cover::Reason(LANES)),
     ("LinearTruthBatch::new", Cover::Reason(LANES)),
     ("LinearTruthBatch::step", Cover::Reason(LANES)),
     ("ChaCha8Lanes::standard_normals", Cover::Reason(LANES)),
     ("grid", Cover::Driven),
-    ("sweep", Cover::Reason("hands each grid point to the caller's closure; computes nothing from it")),
+    (
+        "sweep",
+        Cover::Reason("hands each grid point to the caller's closure; computes nothing from it"),
+    ),
     ("two_point_init", Cover::Driven),
     ("p_ad", Cover::Driven),
     ("q_ad", Cover::Driven),
@@ -782,7 +904,12 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
 /// forgotten, none listed is gone, every `Driven` one is called in this file.
 #[test]
 fn every_float_function_is_listed() {
-    let takes_floats = |f: &extreme::PublicFn| f.params.contains("f64") || f.params.contains("Lanes");
-    let problems = extreme::check_list(FLOAT_FUNCTIONS, takes_floats, include_str!("extreme_floats.rs"));
+    let takes_floats =
+        |f: &extreme::PublicFn| f.params.contains("f64") || f.params.contains("Lanes");
+    let problems = extreme::check_list(
+        FLOAT_FUNCTIONS,
+        takes_floats,
+        include_str!("extreme_floats.rs"),
+    );
     assert!(problems.is_empty(), "{}", problems.join("\n"));
 }

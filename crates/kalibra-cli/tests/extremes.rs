@@ -14,11 +14,20 @@ fn eval(test: &str, csv: &str, extra: &[&str]) -> (Option<i32>, String) {
     let log = dir.join("log.csv");
     std::fs::write(&log, csv).unwrap();
     let out = dir.join("report");
-    let mut args = vec!["eval", log.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let mut args = vec![
+        "eval",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
     args.extend_from_slice(extra);
     let start = Instant::now();
     let run = kalibra(&args);
-    assert!(start.elapsed() < Duration::from_secs(30), "took {:?}", start.elapsed());
+    assert!(
+        start.elapsed() < Duration::from_secs(30),
+        "took {:?}",
+        start.elapsed()
+    );
     (run.status.code(), text(&run.stderr))
 }
 
@@ -47,6 +56,9 @@ fn extreme_values_and_counts_give_clear_errors() {
         let (code, err) = eval("huge-counts", &csv, &[option, &max]);
         assert_eq!(code, Some(1), "{option}: {err}");
         assert!(err.contains(needle), "{option}: {err}");
-        assert!(!err.contains("panicked") && !err.contains("capacity"), "{option}: {err}");
+        assert!(
+            !err.contains("panicked") && !err.contains("capacity"),
+            "{option}: {err}"
+        );
     }
 }

@@ -1112,7 +1112,8 @@ fn point_rmse(
         // ordinary log keeps the plain sums above, bit for bit (`tests/extreme_floats.rs`).
         let halves = || {
             truth.iter().zip(estimates).filter_map(|(x, xhat)| {
-                x.as_ref().map(|x| (0..n).map(move |i| (i, xhat[i] / 2.0 - x[i] / 2.0)))
+                x.as_ref()
+                    .map(|x| (0..n).map(move |i| (i, xhat[i] / 2.0 - x[i] / 2.0)))
             })
         };
         let s = halves().flatten().fold(0.0f64, |m, (_, e)| m.max(e.abs()));

@@ -39,8 +39,8 @@ use crate::MetricsError;
 /// ```
 ///
 /// # Errors
-/// [`MetricsError::Linalg`] if the innovation is not finite or (`Dyn`) its size differs from
-/// `S`'s.
+/// [`MetricsError::Linalg`] if the innovation or the normalised innovation is not finite, or
+/// (`Dyn`) its size differs from `S`'s.
 pub fn normalized_innovation<M: Dim>(
     innovation: &OVector<f64, M>,
     s: &Covariance<M>,
@@ -54,6 +54,8 @@ where
     s.cholesky()
         .l_dirty()
         .solve_lower_triangular_unchecked_mut(&mut w);
+    // An innovation near f64::MAX against a variance below 1 (`tests/extreme_floats.rs`).
+    check_finite(&w, "normalised innovation (beyond f64's range)")?;
     Ok(w)
 }
 
@@ -153,6 +155,22 @@ where
         kalibra_linalg::check_dim(first, w.nrows(), "normalised innovation")?;
     }
     let m = m.unwrap_or(0).max(1) as f64;
+    // The autocorrelations are scale-free: innovations near the ends of f64's range are
+    // scaled by a power of two (exact) so that their products neither overflow nor underflow
+    // (`tests/extreme_floats.rs`); ordinary ones are used as they are.
+    let largest = normalized
+        .iter()
+        .flatten()
+        .flat_map(|w| w.iter())
+        .fold(0.0f64, |acc, v| acc.max(v.abs()));
+    let scaled: Option<Vec<Option<OVector<f64, M>>>> = crate::scale::extreme_exponent_of(largest)
+        .map(|k| {
+            normalized
+                .iter()
+                .map(|w| w.as_ref().map(|w| w.map(|v| crate::scale::ldexp(v, -k))))
+                .collect()
+        });
+    let normalized = scaled.as_deref().unwrap_or(normalized);
     let z = Normal::standard().inverse_cdf(0.5 + confidence / 2.0);
     // Reserved for at most as many lags as there are samples: a lag beyond them has no pair
     // (the loop stops with `TooFewSamples` there), and `usize::MAX` lags must not reserve
@@ -176,7 +194,15 @@ where
                 got: pairs,
             });
         }
-        let denominator = (head * tail).sqrt();
+        // `sqrt(head tail)`; as `sqrt(head) sqrt(tail)` where the product leaves the normal
+        // range (innovations beyond 1e77, or tiny ones beside the largest), which would make
+        // |rho| far above 1 or 0 (`tests/extreme_floats.rs`).
+        let product = head * tail;
+        let denominator = if product.is_normal() {
+            product.sqrt()
+        } else {
+            head.sqrt() * tail.sqrt()
+        };
         if denominator <= 0.0 {
             return Err(MetricsError::Degenerate {
                 what: "innovation autocorrelation",
@@ -197,8 +223,15 @@ where
         lags: out,
         confidence,
         box_pierce: q,
-        // The chi-square survival function, computed directly (see `hypothesis`).
-        p_value: gamma_ur(lags as f64 / 2.0, q / 2.0),
+        // The chi-square survival function, computed directly (see `hypothesis`). statrs
+        // panics at `x = 0`, which uncorrelated innovations reach (`Q = 0`, every
+        // autocorrelation exactly 0, or `Q / 2` below the smallest subnormal:
+        // `tests/extreme_floats.rs`), where the survival is 1.
+        p_value: match q / 2.0 {
+            x if x > 0.0 && x.is_finite() => gamma_ur(lags as f64 / 2.0, x),
+            x if x > 0.0 => 0.0,
+            _ => 1.0,
+        },
     })
 }
 

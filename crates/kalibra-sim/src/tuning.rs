@@ -80,7 +80,15 @@ pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningErr
             value: to,
         });
     }
-    let intervals = ((to - from) / step + 1e-3).floor();
+    // Ends of opposite signs near the limit: their difference overflows, its ratio to the
+    // step need not (`tests/extreme_floats.rs`).
+    let span = to - from;
+    let ratio = if span.is_finite() {
+        span / step
+    } else {
+        to / step - from / step
+    };
+    let intervals = (ratio + 1e-3).floor();
     // Each point is a filter run or more: a grid beyond this is a mistake in the step, not a
     // study, and would exhaust memory before any work.
     if intervals.is_nan() || intervals >= GRID_MAX_POINTS as f64 {
@@ -90,7 +98,17 @@ pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningErr
         });
     }
     let n = intervals as usize;
-    Ok((0..=n).map(|i| from + i as f64 * step).collect())
+    // Near f64::MAX `i step` can overflow where the point does not (from halves), and a last
+    // point within `step / 1000` past `to` can overflow itself (it is `to`).
+    let point = |i: f64| {
+        let p = from + i * step;
+        if p.is_finite() {
+            return p;
+        }
+        let p = (0.5 * from + i * (0.5 * step)) * 2.0;
+        if p.is_finite() { p.min(to) } else { to }
+    };
+    Ok((0..=n).map(|i| point(i as f64)).collect())
 }
 
 /// Evaluates `point(p)` at every `p` of `grid`, in parallel over grid points, and returns the
@@ -184,7 +202,11 @@ pub fn two_point_init<const N: usize, const D: usize>(
         let dz = z2[a] - z1[a];
         // Opposite signs near the limit: divided first, `|z2| / t + |z1| / t` is the velocity
         // whenever that is representable.
-        x[velocity[a]] = if dz.is_finite() { dz / t } else { z2[a] / t - z1[a] / t };
+        x[velocity[a]] = if dz.is_finite() {
+            dz / t
+        } else {
+            z2[a] / t - z1[a] / t
+        };
         j[(position[a], D + a)] = 1.0;
         j[(velocity[a], a)] = -1.0 / t;
         j[(velocity[a], D + a)] = 1.0 / t;
@@ -208,8 +230,9 @@ pub fn two_point_init<const N: usize, const D: usize>(
 /// # Errors
 /// [`TuningError::TooShort`] for fewer than two states; [`TuningError::Linalg`] if an `R_k` is
 /// not positive definite or the averaged information matrix is singular (the state is not
-/// observable in one step along the trajectory), or an input is not finite, or (`Dyn` sizes) a
-/// state or a Jacobian whose size disagrees with the models' (`DimensionMismatch`).
+/// observable in one step along the trajectory), or an input or the result is not finite
+/// (information near the smallest normal number), or (`Dyn` sizes) a state or a Jacobian whose
+/// size disagrees with the models' (`DimensionMismatch`).
 pub fn p_ad<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
     dynamics: &D,
     measurement: &H,
@@ -224,6 +247,13 @@ where
             what: "P_ad",
             needed: 2,
             got: states.len(),
+        });
+    }
+    // The last step index, `first_step + states.len() - 1`, must be a usize.
+    if first_step.checked_add(states.len()).is_none() {
+        return Err(TuningError::InvalidParameter {
+            name: "first step (step indices beyond usize)",
+            value: first_step as f64,
         });
     }
     let n = dynamics.state_dim();
@@ -252,7 +282,10 @@ where
     info /= (states.len() - 1) as f64;
     kalibra_linalg::symmetrize(&mut info);
     let info = Covariance::named(info, "averaged information matrix of P_ad")?;
-    Ok(info.inverse())
+    let p = info.inverse();
+    // Information near the smallest normal number has an inverse beyond f64's range.
+    check_finite(&p, "P_ad (beyond f64's range)")?;
+    Ok(p)
 }
 
 /// The adaptive process noise `Q_ad` (Saha, Ghosh and Goswami 2014, eq 23):

@@ -366,7 +366,9 @@ impl Credibility {
     /// # Errors
     /// [`MetricsError::StepOutOfRange`] beyond the horizon; [`MetricsError::Empty`] if no run
     /// was pushed at `step`; [`MetricsError::Linalg`] with [`LinalgError::NotConvergent`] if
-    /// the eigen-decomposition of `Sigma` does not converge (not seen in practice).
+    /// the eigen-decomposition of `Sigma` does not converge (not seen in practice), or with
+    /// [`LinalgError::NonFinite`] if the MSE matrix lies beyond f64's range (errors near
+    /// `1e308`).
     pub fn step_summary(&self, step: usize) -> Result<CredibilityStep, MetricsError> {
         self.check_step(step)?;
         let (errors, nees) = (&self.errors[step], &self.nees[step]);
@@ -378,6 +380,10 @@ impl Credibility {
         }
         let n = self.dim as f64;
         let nci = nci_of_step(errors, nees, self.dim)?;
+        let mse = mse_matrix(errors, self.dim);
+        // Errors near 1e308 have squares, and so an MSE, beyond f64's range
+        // (`tests/extreme_floats.rs`): an error rather than an infinity inside `Ok`.
+        kalibra_linalg::check_finite(&mse, "per-step MSE matrix (beyond f64's range)")?;
         Ok(CredibilityStep {
             runs,
             // Without overflow for NEES values near f64::MAX (a plain sum gave inf).
@@ -385,7 +391,7 @@ impl Credibility {
             nci: nci.value,
             nci_skipped: nci.skipped,
             median_nees: median(nees)? / n,
-            mse: mse_matrix(errors, self.dim),
+            mse,
             mse_rank: nci.rank,
         })
     }
