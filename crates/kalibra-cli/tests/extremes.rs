@@ -1,5 +1,5 @@
-//! Extreme but finite inputs through the command line: each reaches the library's typed error
-//! and comes back as one clear message with exit code 1, promptly (no panic, no hang).
+//! Extreme but finite inputs through the command line: each comes back promptly as an answer
+//! or as the library's typed error in one clear message with exit code 1 (no panic, no hang).
 
 mod common;
 
@@ -48,17 +48,24 @@ fn extreme_values_and_counts_give_clear_errors() {
     assert!(err.contains("run 0, step 0"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 
-    // The same log within range: the counts are at their largest, and the answer (a window
-    // longer than the series, lags beyond the pairs) is the library's typed refusal.
+    // The same log within range, with the largest counts the options take: a window and
+    // lags beyond the series are an answer (the report leaves them out), at once; a group
+    // naming component `usize::MAX` is the library's typed refusal.
     let csv = csv.replace("1e308,-1.5e308", "0,0.1");
     let max = u64::MAX.to_string();
-    for (option, needle) in [("--window", "window"), ("--lags", "lag")] {
+    for option in ["--window", "--lags"] {
         let (code, err) = eval("huge-counts", &csv, &[option, &max]);
-        assert_eq!(code, Some(1), "{option}: {err}");
-        assert!(err.contains(needle), "{option}: {err}");
-        assert!(
-            !err.contains("panicked") && !err.contains("capacity"),
-            "{option}: {err}"
-        );
+        assert_eq!(code, Some(0), "{option}: {err}");
     }
+    let group = format!("pos=0,{max}");
+    let (code, err) = eval("huge-group", &csv, &["--group", &group]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains(&format!("component {max} is not in the state")),
+        "{err}"
+    );
+    assert!(
+        !err.contains("panicked") && !err.contains("capacity"),
+        "{err}"
+    );
 }

@@ -92,7 +92,7 @@ where
             for k in 0..rank {
                 s -= l[(i, k)] * l[(j, k)];
             }
-            if !(s.abs() <= 100.0 * tol.max(f64::MIN_POSITIVE)) {
+            if s.is_nan() || s.abs() > 100.0 * tol.max(f64::MIN_POSITIVE) {
                 return Err(LinalgError::NotPositiveSemiDefinite {
                     what,
                     index: perm[j],
