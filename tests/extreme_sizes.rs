@@ -83,13 +83,6 @@ fn calls() -> Vec<(&'static str, Option<&'static str>, Call)> {
                 .map(|r| r.summary.verdict.kind),
         )
     };
-    let log_with = |f: &dyn Fn() -> Result<FilterLog<'static>, kalibra::eval::EvalError>| {
-        text(
-            f().and_then(|l| Evaluation::new().evaluate(&l))
-                .map(|r| r.summary.verdict.kind),
-        )
-    };
-    let _ = log_with;
     let cv = || {
         let k = Kinematic::constant_velocity(1, 1.0).unwrap();
         (
