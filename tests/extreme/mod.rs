@@ -232,16 +232,14 @@ fn scan_source(src: &str, krate: &str, file: &str, out: &mut Vec<PublicFn>) {
     while let Some(p) = b[i..].windows(marker.len()).position(|w| w == marker) {
         let at = i + p;
         let j = skip_ws(&b, at + marker.len());
-        if b[j..].starts_with(b"mod ") {
-            if let Some(brace) = b[j..].iter().position(|&c| c == b'{' || c == b';') {
-                let brace = j + brace;
-                if b[brace] == b'{' {
-                    let end = close(&b, brace);
-                    for c in &mut b[at..end] {
-                        if *c != b'\n' {
-                            *c = b' ';
-                        }
-                    }
+        if b[j..].starts_with(b"mod ")
+            && let Some(brace) = b[j..].iter().position(|&c| c == b'{' || c == b';')
+            && b[j + brace] == b'{'
+        {
+            let end = close(&b, j + brace);
+            for c in &mut b[at..end] {
+                if *c != b'\n' {
+                    *c = b' ';
                 }
             }
         }

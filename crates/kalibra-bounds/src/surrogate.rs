@@ -322,7 +322,7 @@ where
             }
             if previous.as_ref() == Some(&next) {
                 // A cycle cov -> next -> cov: an even number of steps left ends on `next`.
-                return Ok(if left % 2 == 0 { next } else { cov });
+                return Ok(if left.is_multiple_of(2) { next } else { cov });
             }
             if done >= COVARIANCE_AFTER_MAX_ITERATIONS {
                 return Err(BoundsError::InvalidParameter {
