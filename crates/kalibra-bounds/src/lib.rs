@@ -62,4 +62,6 @@ mod surrogate;
 pub use crlb::{MeasurementSample, Pcrlb};
 pub use error::BoundsError;
 pub use observability::{OBSERVABILITY_SVD_MAX_ITERATIONS, observability_singular_values};
-pub use surrogate::{Ellipsoid, ErgodicAverage, Surrogate, gaussian_half_widths};
+pub use surrogate::{
+    COVARIANCE_AFTER_MAX_ITERATIONS, Ellipsoid, ErgodicAverage, Surrogate, gaussian_half_widths,
+};

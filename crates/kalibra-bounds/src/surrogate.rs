@@ -26,6 +26,10 @@ use kalibra_linalg::{
 };
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 
+/// The most steps [`Surrogate::covariance_after`] iterates before its recursion settles on a
+/// fixed point or a two-cycle (after which any count is answered at once): 2^24.
+pub const COVARIANCE_AFTER_MAX_ITERATIONS: usize = 1 << 24;
+
 use crate::BoundsError;
 
 /// Running sums of the filter gains `K_k` and Jacobians `J_k` along one trajectory, for their
@@ -287,7 +291,9 @@ where
     ///
     /// # Errors
     /// [`BoundsError::Linalg`] for a wrongly sized `initial` or one that is not a covariance
-    /// ([`check_covariance`], semi-definite).
+    /// ([`check_covariance`], semi-definite); [`BoundsError::InvalidParameter`] for more than
+    /// [`COVARIANCE_AFTER_MAX_ITERATIONS`] steps of a recursion that has not settled by then
+    /// (`rho(C)` within about `1e-6` of 1).
     pub fn covariance_after(
         &self,
         steps: usize,
@@ -296,10 +302,35 @@ where
         check_dim(self.c.nrows(), initial.nrows(), "initial covariance")?;
         check_dim(self.c.nrows(), initial.ncols(), "initial covariance")?;
         check_covariance(initial, "initial covariance", Definiteness::SemiDefinite)?;
+        // Since rho(C) < 1 the recursion settles, in floating point, on a fixed point or a
+        // cycle of two values; from there every later step is known, so a count such as
+        // `usize::MAX` returns at once with the bits the full loop would give
+        // (`tests/extreme_sizes.rs`). A recursion that has not settled within
+        // `COVARIANCE_AFTER_MAX_ITERATIONS` is an error rather than a loop of 2^64 steps.
         let mut cov = initial.clone();
-        for _ in 0..steps {
-            cov = propagate(&self.c, &cov) + &self.eta_cov;
-            symmetrize(&mut cov);
+        let mut previous: Option<OMatrix<f64, N, N>> = None;
+        for done in 0..steps {
+            let next = {
+                let mut next = propagate(&self.c, &cov) + &self.eta_cov;
+                symmetrize(&mut next);
+                next
+            };
+            // `next` is step `done + 1`; steps left after it: `steps - done - 1`.
+            let left = steps - done - 1;
+            if next == cov {
+                return Ok(next);
+            }
+            if previous.as_ref() == Some(&next) {
+                // A cycle cov -> next -> cov: an even number of steps left ends on `next`.
+                return Ok(if left.is_multiple_of(2) { next } else { cov });
+            }
+            if done >= COVARIANCE_AFTER_MAX_ITERATIONS {
+                return Err(BoundsError::InvalidParameter {
+                    what: "surrogate covariance recursion",
+                    reason: "did not settle within COVARIANCE_AFTER_MAX_ITERATIONS steps",
+                });
+            }
+            previous = Some(std::mem::replace(&mut cov, next));
         }
         Ok(cov)
     }
@@ -338,8 +369,12 @@ fn check_confidence(confidence: f64) -> Result<(), BoundsError> {
 /// at confidence `c`: the surrogate's intervals, or a filter's own `N(0, P_k)` intervals.
 ///
 /// # Errors
-/// [`BoundsError::InvalidParameter`] unless `0 < confidence < 1`; [`BoundsError::Linalg`] for
-/// a negative or non-finite variance.
+/// [`BoundsError::InvalidParameter`] unless `0 < confidence < 1` with `(1 + confidence) / 2`
+/// below 1 in f64; [`BoundsError::Linalg`] for a negative or non-finite variance.
+///
+/// statrs' normal quantile is called at `(1 + confidence) / 2` only, strictly inside (0, 1);
+/// the ellipsoid's chi-square quantile ([`Ellipsoid::new`]) at `confidence` with the state
+/// dimension as degrees of freedom, far below the 1e7 from which statrs' series slow.
 pub fn gaussian_half_widths<N: Dim>(
     cov: &OMatrix<f64, N, N>,
     confidence: f64,
@@ -361,7 +396,15 @@ where
             },
         ));
     }
-    let z = standard_normal_quantile(0.5 + 0.5 * confidence);
+    let p = 0.5 + 0.5 * confidence;
+    // A confidence within 2^-53 of 1 rounds `p` to 1, whose quantile is infinite.
+    if p >= 1.0 {
+        return Err(BoundsError::InvalidParameter {
+            what: "confidence interval",
+            reason: "confidence so close to 1 that (1 + c) / 2 rounds to 1",
+        });
+    }
+    let z = standard_normal_quantile(p);
     Ok(diag.map(|v| z * v.sqrt()))
 }
 

@@ -58,6 +58,17 @@ pub enum EvalError {
         /// Step index (0 for arrays shared by all steps).
         step: usize,
     },
+    /// A value computed from finite data lies beyond f64's range: the estimation error
+    /// `estimate - truth` of an estimate and a truth of opposite signs near `±f64::MAX`.
+    #[error("{what} at run {run}, step {step} lies beyond f64's range")]
+    OutOfRange {
+        /// What was computed.
+        what: &'static str,
+        /// Run index.
+        run: usize,
+        /// Step index.
+        step: usize,
+    },
     /// Times that do not increase strictly.
     #[error("times do not increase strictly at step {step}")]
     TimesNotIncreasing {

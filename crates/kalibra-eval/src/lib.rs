@@ -108,7 +108,7 @@ pub use evaluate::{Evaluation, Group};
 pub use kalibra_filters::Start;
 /// The matrix and vector types of a [`TuneProblem`].
 pub use kalibra_linalg::{DMatrix, DVector};
-pub use log::{FilterLog, Matrices, Scope, Vectors};
+pub use log::{FilterLog, MAX_DIM, Matrices, Scope, Vectors};
 pub use report::{
     Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, Findings, JReport, LagReport,
     Reason, Report, RmseSeries, SCHEMA_VERSION, Summary, TestMethod, Verdict, VerdictKind,

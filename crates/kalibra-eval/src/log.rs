@@ -200,6 +200,11 @@ pub(crate) struct Array<'a> {
     steps: usize,
 }
 
+/// The largest row or column count of a logged array: a state of 65536 components is far
+/// beyond any filter whose covariances are logged, and the check keeps a dimension from data
+/// from sizing an allocation.
+pub const MAX_DIM: usize = 1 << 16;
+
 impl<'a> Array<'a> {
     fn check(
         array: &'static str,
@@ -215,25 +220,44 @@ impl<'a> Array<'a> {
                 what: "an array's dimension",
             });
         }
+        // Checked before any product is formed or anything allocated: a dimension from data
+        // may be `usize::MAX` (`tests/extreme_sizes.rs`).
+        for (what, dim) in [("array row", rows), ("array column", cols)] {
+            if dim > MAX_DIM {
+                return Err(EvalError::IndexLimit {
+                    what,
+                    index: dim - 1,
+                    limit: MAX_DIM,
+                });
+            }
+        }
         let cells = match scope {
             Scope::Constant => 1,
             Scope::PerStep => steps,
+            // Within MAX_RUNS x MAX_STEPS (`FilterLog::new`): no overflow.
             Scope::PerRunStep => runs * steps,
         };
         let width = match layout {
             Layout::Full => rows * cols,
             Layout::Diagonal => rows,
         };
+        let Some(total) = cells.checked_mul(width) else {
+            return Err(EvalError::IndexLimit {
+                what: "array value",
+                index: usize::MAX,
+                limit: usize::MAX,
+            });
+        };
         let (data, present, nan_unlogged) = match data {
             CellData::Dense {
                 values,
                 nan_unlogged,
             } => {
-                if values.len() != cells * width {
+                if values.len() != total {
                     return Err(EvalError::Shape {
                         array,
                         unit: "values",
-                        expected: cells * width,
+                        expected: total,
                         found: values.len(),
                     });
                 }
@@ -248,7 +272,23 @@ impl<'a> Array<'a> {
                         found: list.len(),
                     });
                 }
-                let mut data = vec![f64::NAN; cells * width];
+                // The cells' lengths first: `width` is checked against data in memory before
+                // `cells * width` values are allocated.
+                for (i, cell) in list.iter().enumerate() {
+                    if let Some(values) = cell
+                        && values.len() != width
+                    {
+                        let (run, step) = position(scope, steps, i);
+                        return Err(EvalError::CellLength {
+                            array,
+                            run,
+                            step,
+                            expected: width,
+                            found: values.len(),
+                        });
+                    }
+                }
+                let mut data = vec![f64::NAN; total];
                 let mut present = vec![false; cells];
                 for (i, cell) in list.into_iter().enumerate() {
                     if let Some(values) = cell {
@@ -431,13 +471,27 @@ impl<'a> FilterLog<'a> {
     /// An empty log of `runs` runs and `steps` steps.
     ///
     /// # Errors
-    /// [`EvalError::Empty`] for zero runs or steps.
+    /// [`EvalError::Empty`] for zero runs or steps; [`EvalError::IndexLimit`] for more than
+    /// [`MAX_RUNS`](crate::MAX_RUNS) runs or [`MAX_STEPS`](crate::MAX_STEPS) steps, which no
+    /// evaluation takes.
     pub fn new(runs: usize, steps: usize) -> Result<Self, EvalError> {
         if runs == 0 {
             return Err(EvalError::Empty { what: "runs" });
         }
         if steps == 0 {
             return Err(EvalError::Empty { what: "steps" });
+        }
+        for (what, count, limit) in [
+            ("run", runs, crate::MAX_RUNS),
+            ("step", steps, crate::MAX_STEPS),
+        ] {
+            if count > limit {
+                return Err(EvalError::IndexLimit {
+                    what,
+                    index: count - 1,
+                    limit,
+                });
+            }
         }
         Ok(Self {
             runs,

@@ -1105,10 +1105,35 @@ fn point_rmse(
         return None;
     }
     let k = steps as f64;
+    let state_sum = sums.iter().sum::<f64>();
+    if !state_sum.is_finite() {
+        // Errors, or their squares, beyond f64's range (truths and estimates near 1e308):
+        // the same sums of halved errors over their largest `s`, scaled back by `2 s`; an
+        // ordinary log keeps the plain sums above, bit for bit (`tests/extreme_floats.rs`).
+        let halves = || {
+            truth.iter().zip(estimates).filter_map(|(x, xhat)| {
+                x.as_ref()
+                    .map(|x| (0..n).map(move |i| (i, xhat[i] / 2.0 - x[i] / 2.0)))
+            })
+        };
+        let s = halves().flatten().fold(0.0f64, |m, (_, e)| m.max(e.abs()));
+        sums = vec![0.0; n];
+        for (i, e) in halves().flatten() {
+            sums[i] += (e / s) * (e / s);
+        }
+        let root = |sum: f64| 2.0 * s * (sum / k).sqrt();
+        return Some(PointRmse {
+            state: root(sums.iter().sum::<f64>()),
+            per_component: sums.iter().map(|&s| root(s)).collect(),
+            position: position.map(|idx| root(idx.iter().map(|&i| sums[i]).sum::<f64>())),
+            steps,
+        });
+    }
+    let root = |sum: f64| (sum / k).sqrt();
     Some(PointRmse {
-        state: (sums.iter().sum::<f64>() / k).sqrt(),
-        per_component: sums.iter().map(|s| (s / k).sqrt()).collect(),
-        position: position.map(|idx| (idx.iter().map(|&i| sums[i]).sum::<f64>() / k).sqrt()),
+        state: root(state_sum),
+        per_component: sums.iter().map(|&s| root(s)).collect(),
+        position: position.map(|idx| root(idx.iter().map(|&i| sums[i]).sum::<f64>())),
         steps,
     })
 }

@@ -105,6 +105,6 @@ pub use sqrt::{SqrtKf, SqrtUkf};
 pub use srf::{BearingSensor, Srf};
 pub use steady::{RICCATI_MAX_ITERATIONS, RICCATI_TOLERANCE, SteadyState, steady_state};
 pub use ukf::{
-    AngleComponents, KappaCriterion, KappaGrid, SigmaSet, SigmaSpace, SigmaWeights, Ukf,
-    UkfPrediction,
+    AngleComponents, KAPPA_GRID_MAX, KappaCriterion, KappaGrid, SigmaSet, SigmaSpace, SigmaWeights,
+    Ukf, UkfPrediction,
 };

@@ -92,7 +92,7 @@ where
             for k in 0..rank {
                 s -= l[(i, k)] * l[(j, k)];
             }
-            if s.abs() > 100.0 * tol.max(f64::MIN_POSITIVE) {
+            if s.is_nan() || s.abs() > 100.0 * tol.max(f64::MIN_POSITIVE) {
                 return Err(LinalgError::NotPositiveSemiDefinite {
                     what,
                     index: perm[j],
@@ -100,6 +100,16 @@ where
                 });
             }
         }
+    }
+    // A semi-definite matrix's factor is bounded by the root of its largest diagonal entry;
+    // an entry that overflowed (off-diagonal 1e257 beside a diagonal of 1e-103) means it is
+    // not semi-definite (`tests/extreme_floats.rs`).
+    if let Some(k) = l.iter().position(|v| !v.is_finite()) {
+        return Err(LinalgError::NotPositiveSemiDefinite {
+            what,
+            index: perm[k % n.max(1)],
+            pivot: f64::NAN,
+        });
     }
     // Back to the original row order.
     let mut out = OMatrix::<f64, D, D>::zeros_generic(nr, nc);

@@ -119,6 +119,33 @@ fn refused_squares(step: usize, mut error: impl Iterator<Item = f64>) -> Metrics
     }
 }
 
+/// The most cells (steps times components) a [`StepMean`], [`SquaredErrors`] or
+/// [`Credibility`](crate::Credibility) holds: 2^32, 32 GiB of sums, beyond the memory of any
+/// machine these studies run on (kalibra-eval's 2^24 steps of a 256-component state fit). A
+/// horizon is allocated whole when the accumulator is made, so a count from data is checked
+/// against this before anything is reserved (`tests/extreme_sizes.rs`), where `usize::MAX`
+/// steps would be a "capacity overflow" panic and `2^40` an allocation failure that aborts
+/// the process.
+pub const HORIZON_MAX: usize = 1 << 32;
+
+/// Checks a horizon of `steps` steps of `dim` components against [`HORIZON_MAX`].
+pub(crate) fn check_horizon(steps: usize, dim: usize) -> Result<(), MetricsError> {
+    match steps.checked_mul(dim.max(1)) {
+        Some(cells) if cells <= HORIZON_MAX => Ok(()),
+        _ => Err(MetricsError::InvalidParameter {
+            name: "horizon: steps times components above HORIZON_MAX",
+            value: steps as f64,
+        }),
+    }
+}
+
+/// [`check_horizon`] for the infallible constructors: a documented panic with the message.
+pub(crate) fn assert_horizon(steps: usize, dim: usize, what: &str) {
+    if let Err(e) = check_horizon(steps, dim) {
+        panic!("{what}: {e} ({HORIZON_MAX}); the try_new constructor checks a count from data");
+    }
+}
+
 fn check_step(step: usize, steps: usize) -> Result<(), MetricsError> {
     if step < steps {
         Ok(())
@@ -180,11 +207,25 @@ fn check_finite_sums(sums: &[f64]) -> Result<(), String> {
 
 impl StepMean {
     /// An empty accumulator over `steps` steps.
+    ///
+    /// # Panics
+    /// If `steps` is above [`HORIZON_MAX`] (checked before anything is allocated); use
+    /// [`StepMean::try_new`] for a count that comes from data.
     pub fn new(steps: usize) -> Self {
+        assert_horizon(steps, 1, "StepMean::new");
         Self {
             sum: vec![0.0; steps],
             count: vec![0; steps],
         }
+    }
+
+    /// [`StepMean::new`], with the horizon checked.
+    ///
+    /// # Errors
+    /// [`MetricsError::InvalidParameter`] for `steps` above [`HORIZON_MAX`].
+    pub fn try_new(steps: usize) -> Result<Self, MetricsError> {
+        check_horizon(steps, 1)?;
+        Ok(Self::new(steps))
     }
 
     /// The number of steps held.
@@ -194,8 +235,12 @@ impl StepMean {
 
     /// Extends the horizon to `steps` steps, the new ones empty; no change if it is already
     /// that long. For a stream whose length is learnt as it is read (a log read row by row).
+    ///
+    /// # Panics
+    /// If `steps` is above [`HORIZON_MAX`], as [`StepMean::new`].
     pub fn extend_steps(&mut self, steps: usize) {
         if steps > self.steps() {
+            assert_horizon(steps, 1, "StepMean::extend_steps");
             self.sum.resize(steps, 0.0);
             self.count.resize(steps, 0);
         }
@@ -387,12 +432,26 @@ impl TryFrom<SquaredErrorsData> for SquaredErrors {
 
 impl SquaredErrors {
     /// An empty accumulator over `steps` steps of a `dim`-component state.
+    ///
+    /// # Panics
+    /// If `steps * dim` is above [`HORIZON_MAX`] (checked before anything is allocated); use
+    /// [`SquaredErrors::try_new`] for counts that come from data.
     pub fn new(steps: usize, dim: usize) -> Self {
+        assert_horizon(steps, dim, "SquaredErrors::new");
         Self {
             dim,
             sum: vec![0.0; steps * dim],
             count: vec![0; steps],
         }
+    }
+
+    /// [`SquaredErrors::new`], with the horizon checked.
+    ///
+    /// # Errors
+    /// [`MetricsError::InvalidParameter`] for `steps * dim` above [`HORIZON_MAX`].
+    pub fn try_new(steps: usize, dim: usize) -> Result<Self, MetricsError> {
+        check_horizon(steps, dim)?;
+        Ok(Self::new(steps, dim))
     }
 
     /// Number of steps held.
@@ -402,8 +461,12 @@ impl SquaredErrors {
 
     /// Extends the horizon to `steps` steps, the new ones empty; no change if it is already
     /// that long (see [`StepMean::extend_steps`]).
+    ///
+    /// # Panics
+    /// If `steps * dim` is above [`HORIZON_MAX`], as [`SquaredErrors::new`].
     pub fn extend_steps(&mut self, steps: usize) {
         if steps > self.steps() {
+            assert_horizon(steps, self.dim, "SquaredErrors::extend_steps");
             self.sum.resize(steps * self.dim, 0.0);
             self.count.resize(steps, 0);
         }

@@ -63,8 +63,8 @@ fn check_finite(what: &'static str, x: &[f64]) -> Result<(), MetricsError> {
 /// burn-in included, must be finite: a NaN anywhere means the run itself failed.
 ///
 /// # Errors
-/// [`MetricsError::InvalidParameter`] named `"batch"` if `batch` is zero,
-/// [`MetricsError::TooFewSamples`] (`needed = burn_in + batch`) if fewer than `batch` samples
+/// [`MetricsError::InvalidParameter`] named `"batch"` if `batch` is zero or above
+/// [`BATCH_MAX`], [`MetricsError::TooFewSamples`] (`needed = burn_in + batch`) if fewer than `batch` samples
 /// remain after the burn-in, [`MetricsError::NonFiniteSample`] for a NaN or
 /// infinite sample.
 ///
@@ -83,6 +83,11 @@ pub fn batch_means(series: &[f64], batch: usize, burn_in: usize) -> Result<Vec<f
     }
     means.finish()
 }
+
+/// The largest batch [`BatchMeans`] and [`batch_means`] accept: the most `f64` samples one
+/// vector can hold (`isize::MAX` bytes). A larger batch could never be completed, so it is an
+/// [`MetricsError::InvalidParameter`] rather than a reservation that cannot succeed.
+pub const BATCH_MAX: usize = isize::MAX as usize / std::mem::size_of::<f64>();
 
 /// [`batch_means`] of a series that arrives one sample at a time: the means of the batches
 /// completed so far are kept, the samples are not (a trajectory of 10^5 steps needs a few
@@ -122,12 +127,13 @@ impl BatchMeans {
     /// An empty accumulator: batches of `batch` samples after the first `burn_in`.
     ///
     /// # Errors
-    /// [`MetricsError::InvalidParameter`] named `"batch"` if `batch` is zero.
+    /// [`MetricsError::InvalidParameter`] named `"batch"` if `batch` is zero or above
+    /// [`BATCH_MAX`] (a batch no vector of samples can hold).
     pub fn new(batch: usize, burn_in: usize) -> Result<Self, MetricsError> {
-        if batch == 0 {
+        if batch == 0 || batch > BATCH_MAX {
             return Err(MetricsError::InvalidParameter {
                 name: "batch",
-                value: 0.0,
+                value: batch as f64,
             });
         }
         Ok(Self {
@@ -137,7 +143,10 @@ impl BatchMeans {
             first_non_finite: None,
             sum: -0.0,
             largest: 0.0,
-            current: Vec::with_capacity(batch),
+            // Reserved up to a page of samples: a batch is validated, not trusted, and a
+            // batch of 2^40 samples must not reserve 8 TiB before the first sample arrives
+            // (`tests/extreme_sizes.rs`); past that the vector grows with the samples.
+            current: Vec::with_capacity(batch.min(512)),
             means: Vec::new(),
         })
     }

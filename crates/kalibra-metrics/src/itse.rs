@@ -79,6 +79,28 @@ pub fn itse(times: &[f64], squared_errors: &[f64]) -> Result<f64, MetricsError> 
         }
         total += 0.5 * dt * (times[k] * squared_errors[k] + times[k - 1] * squared_errors[k - 1]);
     }
+    if !total.is_finite() {
+        // Ordinary values whose products `t e^2 dt` overflow (each below 2^480, the three
+        // together beyond 2^1024; `tests/extreme_floats.rs`): the scaled form, which is an
+        // error where the integral itself leaves f64.
+        let exponent = |v: &[f64]| {
+            kalibra_linalg::binary_exponent(v.iter().fold(0.0f64, |m, x| m.max(x.abs())))
+                .unwrap_or(0)
+        };
+        let (a, b) = (exponent(times), exponent(squared_errors));
+        let scaled = itse(
+            &crate::scale::scaled(times, a),
+            &crate::scale::scaled(squared_errors, b),
+        )?;
+        let total = crate::scale::ldexp(scaled, 2 * a + b);
+        if !total.is_finite() {
+            return Err(MetricsError::InvalidParameter {
+                name: "ITSE (beyond the range of f64)",
+                value: total,
+            });
+        }
+        return Ok(total);
+    }
     Ok(total)
 }
 

@@ -50,6 +50,20 @@
 //! small p-values keep their digits (which is why the t and Kolmogorov-Smirnov tests are not
 //! statrs' own; see [`hypothesis`]).
 //!
+//! # Where statrs is called, and its limits
+//! Each call stays inside the domain where statrs answers (a huge parameter can make its
+//! series iterate without end, a probability of exactly 0 or 1 gives an infinite quantile);
+//! outside it, an asymptotic form or a typed error (`tests/extreme_floats.rs` and
+//! `tests/extreme_sizes.rs` drive every one):
+//!
+//! | function | statrs call | limit | beyond it |
+//! |---|---|---|---|
+//! | [`ChiSquareBand::for_mean`] | `ChiSquared(k).inverse_cdf(p)`, `k = samples dof` | `k` below [`WILSON_HILFERTY_FROM`] (1e7), `dof >= CHI_SQUARE_MIN_DOF`, `p = (1 -+ c)/2` strictly inside (0, 1) | Wilson-Hilferty, error `O(1/k)`: 3e-10 of the band's half-width at the switch; an `InvalidParameter` for a `p` that rounds to 0 or 1 |
+//! | [`consistent_median_nees`] | `ChiSquared(dim).inverse_cdf(0.5)` | `dim` below [`WILSON_HILFERTY_FROM`] | Wilson-Hilferty median `(1 - 2/(9 dim))^3`, relative error about 1.3e-15 at the switch (statrs there: 2e-12) |
+//! | [`paired_t_test`] | `StudentsT(n - 1).sf(t)` | `n` a slice length (held in memory); statrs' incomplete beta stops after 140 terms, so it returns for any `n` | none needed |
+//! | [`whiteness()`] | `Normal.inverse_cdf((1 + c)/2)`, `gamma_ur(L/2, q/2)` | `(1 + c)/2 < 1`; `q > 0` (statrs panics at 0); `L` at most the series length (a larger `L` is `TooFewSamples` before statrs is called) | an `InvalidParameter` for a confidence whose `(1 + c)/2` rounds to 1; `p = 1` at `q = 0` |
+//! | the two-sided normal p-values of [`runs_test`] and [`ks_asymptotic_p`] | `gamma_ur(1/2, x)` | none: a fixed shape | |
+//!
 //! # Where each job lives
 //! * `consistency`: [`nees`], [`nis`] and the chi-square bands ([`ChiSquareBand`]).
 //! * `accumulate`: the per-step accumulators [`StepMean`] and [`SquaredErrors`], [`Merge`],
@@ -93,15 +107,16 @@ mod scale;
 mod whiteness;
 mod window;
 
-pub use accumulate::{Merge, SquaredErrors, StepMean, time_average};
+pub use accumulate::{HORIZON_MAX, Merge, SquaredErrors, StepMean, time_average};
 pub use consistency::{CHI_SQUARE_MIN_DOF, ChiSquareBand, WILSON_HILFERTY_FROM, nees, nis};
 pub use credibility::{
-    Credibility, CredibilityAverage, CredibilityStep, consistent_median_nees, median,
+    Credibility, CredibilityAverage, CredibilityStep, RESERVE_RUNS_MAX, consistent_median_nees,
+    median,
 };
 pub use error::MetricsError;
 pub use hypothesis::{
-    BatchMeans, KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p, ks_two_sample,
-    ks_two_sample_exact_p, paired_t_test, runs_test,
+    BATCH_MAX, BatchMeans, KS_EXACT_MAX_CELLS, TestResult, batch_means, ks_asymptotic_p,
+    ks_two_sample, ks_two_sample_exact_p, paired_t_test, runs_test,
 };
 pub use innovation::{Crossover, JHorizon, JStep, JSummary, SweepPoint, crossover, j_step};
 pub use itse::itse;

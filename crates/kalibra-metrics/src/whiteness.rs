@@ -39,8 +39,8 @@ use crate::MetricsError;
 /// ```
 ///
 /// # Errors
-/// [`MetricsError::Linalg`] if the innovation is not finite or (`Dyn`) its size differs from
-/// `S`'s.
+/// [`MetricsError::Linalg`] if the innovation or the normalised innovation is not finite, or
+/// (`Dyn`) its size differs from `S`'s.
 pub fn normalized_innovation<M: Dim>(
     innovation: &OVector<f64, M>,
     s: &Covariance<M>,
@@ -54,6 +54,8 @@ where
     s.cholesky()
         .l_dirty()
         .solve_lower_triangular_unchecked_mut(&mut w);
+    // An innovation near f64::MAX against a variance below 1 (`tests/extreme_floats.rs`).
+    check_finite(&w, "normalised innovation (beyond f64's range)")?;
     Ok(w)
 }
 
@@ -119,7 +121,8 @@ impl Whiteness {
 /// ```
 ///
 /// # Errors
-/// [`MetricsError::InvalidParameter`] for `lags == 0` or a confidence outside (0, 1);
+/// [`MetricsError::InvalidParameter`] for `lags == 0` or a confidence outside (0, 1) or so
+/// close to 1 that `(1 + confidence) / 2` rounds to 1;
 /// [`MetricsError::TooFewSamples`] if some lag has fewer than 2 pairs;
 /// [`MetricsError::Linalg`] if a vector is not finite or differs in size from the first;
 /// [`MetricsError::Degenerate`] if the innovations of some lag's pairs are all zero.
@@ -137,7 +140,9 @@ where
             value: 0.0,
         });
     }
-    if !(confidence > 0.0 && confidence < 1.0) {
+    // `(1 + c) / 2` must stay below 1: at 1 (a confidence within 2^-53 of 1) the normal
+    // quantile, and with it every bound, is infinite.
+    if !(confidence > 0.0 && 0.5 + confidence / 2.0 < 1.0) {
         return Err(MetricsError::InvalidParameter {
             name: "confidence",
             value: confidence,
@@ -150,8 +155,27 @@ where
         kalibra_linalg::check_dim(first, w.nrows(), "normalised innovation")?;
     }
     let m = m.unwrap_or(0).max(1) as f64;
+    // The autocorrelations are scale-free: innovations near the ends of f64's range are
+    // scaled by a power of two (exact) so that their products neither overflow nor underflow
+    // (`tests/extreme_floats.rs`); ordinary ones are used as they are.
+    let largest = normalized
+        .iter()
+        .flatten()
+        .flat_map(|w| w.iter())
+        .fold(0.0f64, |acc, v| acc.max(v.abs()));
+    let scaled: Option<Vec<Option<OVector<f64, M>>>> = crate::scale::extreme_exponent_of(largest)
+        .map(|k| {
+            normalized
+                .iter()
+                .map(|w| w.as_ref().map(|w| w.map(|v| crate::scale::ldexp(v, -k))))
+                .collect()
+        });
+    let normalized = scaled.as_deref().unwrap_or(normalized);
     let z = Normal::standard().inverse_cdf(0.5 + confidence / 2.0);
-    let mut out = Vec::with_capacity(lags);
+    // Reserved for at most as many lags as there are samples: a lag beyond them has no pair
+    // (the loop stops with `TooFewSamples` there), and `usize::MAX` lags must not reserve
+    // (`tests/extreme_sizes.rs`).
+    let mut out = Vec::with_capacity(lags.min(normalized.len()));
     let mut q = 0.0;
     for lag in 1..=lags {
         let (mut cross, mut head, mut tail, mut pairs) = (0.0, 0.0, 0.0, 0usize);
@@ -170,7 +194,15 @@ where
                 got: pairs,
             });
         }
-        let denominator = (head * tail).sqrt();
+        // `sqrt(head tail)`; as `sqrt(head) sqrt(tail)` where the product leaves the normal
+        // range (innovations beyond 1e77, or tiny ones beside the largest), which would make
+        // |rho| far above 1 or 0 (`tests/extreme_floats.rs`).
+        let product = head * tail;
+        let denominator = if product.is_normal() {
+            product.sqrt()
+        } else {
+            head.sqrt() * tail.sqrt()
+        };
         if denominator <= 0.0 {
             return Err(MetricsError::Degenerate {
                 what: "innovation autocorrelation",
@@ -191,8 +223,15 @@ where
         lags: out,
         confidence,
         box_pierce: q,
-        // The chi-square survival function, computed directly (see `hypothesis`).
-        p_value: gamma_ur(lags as f64 / 2.0, q / 2.0),
+        // The chi-square survival function, computed directly (see `hypothesis`). statrs
+        // panics at `x = 0`, which uncorrelated innovations reach (`Q = 0`, every
+        // autocorrelation exactly 0, or `Q / 2` below the smallest subnormal:
+        // `tests/extreme_floats.rs`), where the survival is 1.
+        p_value: match q / 2.0 {
+            x if x > 0.0 && x.is_finite() => gamma_ur(lags as f64 / 2.0, x),
+            x if x > 0.0 => 0.0,
+            _ => 1.0,
+        },
     })
 }
 

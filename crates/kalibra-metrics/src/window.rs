@@ -61,7 +61,9 @@
 //!   can nearly coincide, have larger relative std errors: up to `8e-13` for `W = 3` and
 //!   `4e-10` for `W = 2` over 5000 standard normal samples.
 //!
-//! Values whose squares overflow `f64` (beyond about `1e154`) give infinite results.
+//! Values whose squares would overflow `f64` (beyond about `1e154`) or underflow are scaled by a
+//! power of two first ([`rmse`], [`rmse_per_state`], [`sliding_window`]); a statistic whose
+//! value itself lies beyond f64's range is an error.
 
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, LinalgError, OVector, check_finite};
 
@@ -93,7 +95,8 @@ fn check_finite_slice(series: &[f64], what: &'static str) -> Result<(), MetricsE
 /// # Errors
 /// [`MetricsError::DimensionMismatch`] if the series have different lengths or (for `Dyn`
 /// states) a vector's size differs from the first estimate's; [`MetricsError::Linalg`] with
-/// [`LinalgError::NonFinite`] if an input holds NaN or an infinity.
+/// [`LinalgError::NonFinite`] if an input holds NaN or an infinity, or if a difference lies
+/// beyond f64's range (an estimate and a truth of opposite signs near `±f64::MAX`).
 pub fn instantaneous_errors<N: Dim>(
     estimates: &[OVector<f64, N>],
     truth: &[OVector<f64, N>],
@@ -129,7 +132,11 @@ where
             }
             check_finite(xhat, "estimates")?;
             check_finite(x, "truth")?;
-            Ok(xhat - x)
+            let e = xhat - x;
+            // Two finite values of opposite signs near `f64::MAX` differ by more than f64
+            // holds: an error, not an infinity inside `Ok` (`tests/extreme_floats.rs`).
+            check_finite(&e, "estimation error (beyond f64's range)")?;
+            Ok(e)
         })
         .collect()
 }
@@ -203,7 +210,18 @@ where
         sum += e.component_mul(e);
     }
     let n = errors.len() as f64;
-    Ok(sum.map(|s| (s / n).sqrt()))
+    let mut out = sum.map(|s| (s / n).sqrt());
+    // A component whose values are extreme (near `f64::MAX`, or subnormal) takes `rmse`'s
+    // power-of-two scaling, so its squares neither overflow nor underflow; ordinary components
+    // keep the plain sum above, bit for bit (`tests/extreme_floats.rs`).
+    for i in 0..dim {
+        let largest = errors.iter().fold(0.0f64, |m, e| m.max(e[i].abs()));
+        if crate::scale::extreme_exponent_of(largest).is_some() {
+            let series: Vec<f64> = errors.iter().map(|e| e[i]).collect();
+            out[i] = rmse(&series)?;
+        }
+    }
+    Ok(out)
 }
 
 /// Statistics of every forward window of a scalar error series (paper 002, eqs. 16-18).

@@ -150,9 +150,21 @@ impl BearingReference {
     }
 
     /// The gradient of [`BearingReference::angle`] with respect to `(dx, dy)`: `(-dy, dx) / r^2`
-    /// from the x axis, `(dy, -dx) / r^2` nautically. Not finite at `r = 0`.
+    /// from the x axis, `(dy, -dx) / r^2` nautically. Not finite at `r = 0`, nor where its
+    /// size `1 / r` is (`r` below `2^-1024`).
     pub fn gradient(self, dx: f64, dy: f64) -> Vector2<f64> {
         let r2 = dx * dx + dy * dy;
+        if !(r2.is_normal() && r2.is_finite()) && (dx != 0.0 || dy != 0.0) {
+            // `r^2` underflowed or overflowed although `r` did not: scale by the larger
+            // offset first (`tests/extreme_floats.rs`); ordinary offsets keep the line above.
+            let s = dx.abs().max(dy.abs());
+            let (u, v) = (dx / s, dy / s);
+            let q = (u * u + v * v) * s;
+            return match self {
+                BearingReference::XAxis => Vector2::new(-v / q, u / q),
+                BearingReference::North => Vector2::new(v / q, -u / q),
+            };
+        }
         match self {
             BearingReference::XAxis => Vector2::new(-dy / r2, dx / r2),
             BearingReference::North => Vector2::new(dy / r2, -dx / r2),

@@ -86,7 +86,8 @@ impl Kinematic {
     /// until changed.
     ///
     /// # Errors
-    /// [`ModelError::InvalidParameter`] for `axes == 0` or a non-positive or non-finite `dt`.
+    /// [`ModelError::InvalidParameter`] for `axes == 0`, `axes` whose state length overflows
+    /// `usize`, or a non-positive or non-finite `dt`.
     pub fn new(order: Order, axes: usize, dt: f64) -> Result<Self, ModelError> {
         if axes == 0 {
             return Err(ModelError::InvalidParameter {
@@ -98,6 +99,13 @@ impl Kinematic {
             return Err(ModelError::InvalidParameter {
                 name: "dt",
                 value: dt,
+            });
+        }
+        // The state length `axes * per_axis` must be a usize (`tests/extreme_sizes.rs`).
+        if axes.checked_mul(order.per_axis()).is_none() {
+            return Err(ModelError::InvalidParameter {
+                name: "axes (state length beyond usize)",
+                value: axes as f64,
             });
         }
         Ok(Self {

@@ -66,7 +66,8 @@ where
     ///
     /// # Errors
     /// [`ModelError::NonFinite`] if the measurement or the next state is not finite (a
-    /// diverging truth), or a model's sampling error.
+    /// diverging truth), or a model's sampling error; [`ModelError::InvalidParameter`] at step
+    /// `usize::MAX`.
     pub fn step<M: Dim, R: Rng + ?Sized>(
         &mut self,
         rng: &mut R,
@@ -76,6 +77,13 @@ where
         DefaultAllocator: Alloc<N, M>,
     {
         let k = self.k;
+        // Checked before anything is drawn: a step index at usize::MAX has no successor.
+        let Some(next_k) = k.checked_add(1) else {
+            return Err(ModelError::InvalidParameter {
+                name: "step index (usize::MAX has no next step)",
+                value: k as f64,
+            });
+        };
         let mut z = self.measurement.measure(k, &self.x)
             + self.measurement.sample_noise(k, &self.x, rng)?;
         self.measurement.normalize(&mut z);
@@ -93,7 +101,7 @@ where
             });
         }
         let x = std::mem::replace(&mut self.x, next);
-        self.k = k + 1;
+        self.k = next_k;
         Ok((x, z))
     }
 }
@@ -145,7 +153,8 @@ where
 /// ```
 ///
 /// # Errors
-/// As [`Simulator::new`] and [`Simulator::step`].
+/// As [`Simulator::new`] and [`Simulator::step`], and [`ModelError::InvalidParameter`] for
+/// more `steps` than memory holds (checked before the first step).
 pub fn simulate<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>, R: Rng + ?Sized>(
     dynamics: D,
     measurement: H,
@@ -156,7 +165,24 @@ pub fn simulate<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>, R: Rng + ?
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    simulate_until(dynamics, measurement, x0, steps, rng, |_, _| false)
+    // The truth's `steps` states are reserved first: a count that no memory holds (such as
+    // `usize::MAX`) is an error at once, not a loop that ends when memory does
+    // (`tests/extreme_sizes.rs`).
+    let too_many = |_| ModelError::InvalidParameter {
+        name: "steps (more states than memory holds)",
+        value: steps as f64,
+    };
+    let mut truth = Truth {
+        first_step: 0,
+        states: Vec::new(),
+        measurements: Vec::new(),
+    };
+    truth.states.try_reserve_exact(steps).map_err(too_many)?;
+    truth
+        .measurements
+        .try_reserve_exact(steps)
+        .map_err(too_many)?;
+    record(truth, dynamics, measurement, x0, steps, rng, |_, _| false)
 }
 
 /// Simulates from `x0` at step 0 until `stop(k, x_k)` is true (that state is not recorded) or
@@ -170,17 +196,33 @@ pub fn simulate_until<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>, R: R
     x0: OVector<f64, N>,
     max_steps: usize,
     rng: &mut R,
+    stop: impl FnMut(usize, &OVector<f64, N>) -> bool,
+) -> Result<Truth<N, M>, ModelError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let truth = Truth {
+        first_step: 0,
+        states: Vec::new(),
+        measurements: Vec::new(),
+    };
+    record(truth, dynamics, measurement, x0, max_steps, rng, stop)
+}
+
+/// [`simulate_until`] into `truth` (empty, perhaps with room reserved).
+fn record<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>, R: Rng + ?Sized>(
+    mut truth: Truth<N, M>,
+    dynamics: D,
+    measurement: H,
+    x0: OVector<f64, N>,
+    max_steps: usize,
+    rng: &mut R,
     mut stop: impl FnMut(usize, &OVector<f64, N>) -> bool,
 ) -> Result<Truth<N, M>, ModelError>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     let mut sim = Simulator::new(dynamics, measurement, x0, 0)?;
-    let mut truth = Truth {
-        first_step: 0,
-        states: Vec::new(),
-        measurements: Vec::new(),
-    };
     while truth.len() < max_steps && !stop(sim.step_index(), sim.state()) {
         let (x, z) = sim.step(rng)?;
         truth.states.push(x);

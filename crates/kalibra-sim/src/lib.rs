@@ -99,7 +99,7 @@ pub enum SimError<E: std::error::Error + 'static> {
     ThreadPool {
         /// Threads asked for.
         threads: usize,
-        /// rayon's message.
+        /// rayon's message, or the limit ([`MAX_THREADS`]) exceeded.
         message: String,
     },
 }
@@ -123,7 +123,8 @@ impl MonteCarlo {
     }
 
     /// The same study on a dedicated pool of `threads` threads (`0` means rayon's global
-    /// pool). The results do not change; only the wall time does.
+    /// pool). The results do not change; only the wall time does. A count above
+    /// [`MAX_THREADS`] makes the study's run a [`SimError::ThreadPool`] error.
     pub fn threads(mut self, threads: usize) -> Self {
         self.threads = (threads > 0).then_some(threads);
         self
@@ -255,11 +256,22 @@ pub(crate) fn fold_blocks<A: Merge>(blocks: impl IntoIterator<Item = A>) -> Opti
     Some(total)
 }
 
+/// The most threads a dedicated pool ([`MonteCarlo::threads`], [`sweep`]) is built with: far
+/// beyond any machine's cores. rayon reserves its per-thread state before it spawns, so
+/// `usize::MAX` threads would be a "capacity overflow" panic (`tests/extreme_sizes.rs`).
+pub const MAX_THREADS: usize = 4096;
+
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool for `None`.
 pub(crate) fn in_pool<T: Send, E: std::error::Error + Send + 'static>(
     threads: Option<usize>,
     work: impl FnOnce() -> Result<T, SimError<E>> + Send,
 ) -> Result<T, SimError<E>> {
+    if let Some(threads) = threads.filter(|&t| t > MAX_THREADS) {
+        return Err(SimError::ThreadPool {
+            threads,
+            message: format!("more than MAX_THREADS ({MAX_THREADS})"),
+        });
+    }
     match threads {
         None => work(),
         Some(threads) => rayon::ThreadPoolBuilder::new()

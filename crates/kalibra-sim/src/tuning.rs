@@ -80,7 +80,15 @@ pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningErr
             value: to,
         });
     }
-    let intervals = ((to - from) / step + 1e-3).floor();
+    // Ends of opposite signs near the limit: their difference overflows, its ratio to the
+    // step need not (`tests/extreme_floats.rs`).
+    let span = to - from;
+    let ratio = if span.is_finite() {
+        span / step
+    } else {
+        to / step - from / step
+    };
+    let intervals = (ratio + 1e-3).floor();
     // Each point is a filter run or more: a grid beyond this is a mistake in the step, not a
     // study, and would exhaust memory before any work.
     if intervals.is_nan() || intervals >= GRID_MAX_POINTS as f64 {
@@ -90,7 +98,17 @@ pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningErr
         });
     }
     let n = intervals as usize;
-    Ok((0..=n).map(|i| from + i as f64 * step).collect())
+    // Near f64::MAX `i step` can overflow where the point does not (from halves), and a last
+    // point within `step / 1000` past `to` can overflow itself (it is `to`).
+    let point = |i: f64| {
+        let p = from + i * step;
+        if p.is_finite() {
+            return p;
+        }
+        let p = (0.5 * from + i * (0.5 * step)) * 2.0;
+        if p.is_finite() { p.min(to) } else { to }
+    };
+    Ok((0..=n).map(|i| point(i as f64)).collect())
 }
 
 /// Evaluates `point(p)` at every `p` of `grid`, in parallel over grid points, and returns the
@@ -141,9 +159,11 @@ where
 /// ```
 ///
 /// # Errors
-/// [`TuningError::InvalidParameter`] for `t <= 0`, an index out of range or used twice;
+/// [`TuningError::InvalidParameter`] for `t` below the smallest normal number (its reciprocal
+/// would overflow) or not finite, an index out of range or used twice;
 /// [`TuningError::Linalg`] for non-finite measurements or a noise covariance that is not
-/// symmetric positive semi-definite.
+/// symmetric positive semi-definite, and [`LinalgError::NonFinite`] for a velocity
+/// `(z2 - z1) / t` or a covariance `(r1 + r2) / t^2` beyond f64's range.
 pub fn two_point_init<const N: usize, const D: usize>(
     z1: &SVector<f64, D>,
     z2: &SVector<f64, D>,
@@ -153,7 +173,8 @@ pub fn two_point_init<const N: usize, const D: usize>(
     position: [usize; D],
     velocity: [usize; D],
 ) -> Result<Gaussian<Const<N>>, TuningError> {
-    if !(t.is_finite() && t > 0.0) {
+    // From the smallest normal number on, `1 / t` is finite (subnormal `t` overflow it).
+    if !(t.is_finite() && t >= f64::MIN_POSITIVE) {
         return Err(TuningError::InvalidParameter {
             name: "differencing interval t",
             value: t,
@@ -178,7 +199,14 @@ pub fn two_point_init<const N: usize, const D: usize>(
     let mut j = OMatrix::<f64, kalibra_linalg::Dyn, kalibra_linalg::Dyn>::zeros(N, 2 * D);
     for a in 0..D {
         x[position[a]] = z2[a];
-        x[velocity[a]] = (z2[a] - z1[a]) / t;
+        let dz = z2[a] - z1[a];
+        // Opposite signs near the limit: divided first, `|z2| / t + |z1| / t` is the velocity
+        // whenever that is representable.
+        x[velocity[a]] = if dz.is_finite() {
+            dz / t
+        } else {
+            z2[a] / t - z1[a] / t
+        };
         j[(position[a], D + a)] = 1.0;
         j[(velocity[a], a)] = -1.0 / t;
         j[(velocity[a], D + a)] = 1.0 / t;
@@ -190,6 +218,8 @@ pub fn two_point_init<const N: usize, const D: usize>(
     let mut out = SMatrix::<f64, N, N>::zeros();
     out.copy_from(&p);
     kalibra_linalg::symmetrize(&mut out);
+    check_finite(&x, "two-point velocity (beyond f64's range)")?;
+    check_finite(&out, "two-point covariance (beyond f64's range)")?;
     Ok(Gaussian { mean: x, cov: out })
 }
 
@@ -200,8 +230,9 @@ pub fn two_point_init<const N: usize, const D: usize>(
 /// # Errors
 /// [`TuningError::TooShort`] for fewer than two states; [`TuningError::Linalg`] if an `R_k` is
 /// not positive definite or the averaged information matrix is singular (the state is not
-/// observable in one step along the trajectory), or an input is not finite, or (`Dyn` sizes) a
-/// state or a Jacobian whose size disagrees with the models' (`DimensionMismatch`).
+/// observable in one step along the trajectory), or an input or the result is not finite
+/// (information near the smallest normal number), or (`Dyn` sizes) a state or a Jacobian whose
+/// size disagrees with the models' (`DimensionMismatch`).
 pub fn p_ad<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
     dynamics: &D,
     measurement: &H,
@@ -216,6 +247,13 @@ where
             what: "P_ad",
             needed: 2,
             got: states.len(),
+        });
+    }
+    // The last step index, `first_step + states.len() - 1`, must be a usize.
+    if first_step.checked_add(states.len()).is_none() {
+        return Err(TuningError::InvalidParameter {
+            name: "first step (step indices beyond usize)",
+            value: first_step as f64,
         });
     }
     let n = dynamics.state_dim();
@@ -244,7 +282,10 @@ where
     info /= (states.len() - 1) as f64;
     kalibra_linalg::symmetrize(&mut info);
     let info = Covariance::named(info, "averaged information matrix of P_ad")?;
-    Ok(info.inverse())
+    let p = info.inverse();
+    // Information near the smallest normal number has an inverse beyond f64's range.
+    check_finite(&p, "P_ad (beyond f64's range)")?;
+    Ok(p)
 }
 
 /// The adaptive process noise `Q_ad` (Saha, Ghosh and Goswami 2014, eq 23):

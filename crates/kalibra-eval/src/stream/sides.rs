@@ -71,6 +71,13 @@ impl StateSide {
         for ((e, a), b) in self.error.iter_mut().zip(xhat).zip(x) {
             *e = a - b;
         }
+        if !self.error.iter().all(|v| v.is_finite()) {
+            return Err(EvalError::OutOfRange {
+                what: "estimation error estimate - truth",
+                run,
+                step,
+            });
+        }
         self.squared.push_slice(step, &self.error)?;
         if run == options.run {
             self.window_series.push((step, self.error.clone()));

@@ -52,7 +52,9 @@ where
         };
         self.filtered.push_back(step);
         let target = usize::from(self.front_emitted);
-        if self.filtered.len() < target + self.lag + 1 {
+        // `len < target + lag + 1`, written so that a lag of `usize::MAX` cannot overflow
+        // (`len >= 1` after the push, `target <= 1`).
+        if self.filtered.len() - target <= self.lag {
             return Ok(None);
         }
         let smoothed = self.smooth()?.swap_remove(target);
@@ -122,6 +124,10 @@ where
     measurement: std::marker::PhantomData<M>,
 }
 
+/// The most steps [`FixedLagSmoother::new`] reserves its window for; a longer lag's window
+/// grows as the steps arrive.
+const LAG_RESERVE_MAX: usize = 1024;
+
 impl<N: Dim, M: Dim, F: Smoothable<N, M>> FixedLagSmoother<N, M, F>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -133,8 +139,10 @@ where
     pub fn new(filter: F, lag: usize, start: Start) -> Self {
         let window = Window {
             lag,
-            filtered: VecDeque::with_capacity(lag + 2),
-            predictions: VecDeque::with_capacity(lag + 2),
+            // The window holds `lag + 2` steps once full; reserved up to a bound, since a lag
+            // from data may be `usize::MAX` (`tests/extreme_sizes.rs`), and grown past it.
+            filtered: VecDeque::with_capacity(lag.saturating_add(2).min(LAG_RESERVE_MAX)),
+            predictions: VecDeque::with_capacity(lag.saturating_add(2).min(LAG_RESERVE_MAX)),
             front_emitted: false,
             space: filter.smoother_space(),
         };

@@ -27,6 +27,10 @@ pub enum KappaCriterion {
     PureMap,
 }
 
+/// The most values [`KappaGrid::equidistant`] makes: each kappa costs a sigma-point update
+/// per step, and a grid of millions is a mistaken count, not a search.
+pub const KAPPA_GRID_MAX: usize = 1 << 16;
+
 /// The candidate values of an adaptive UKF's kappa.
 #[derive(Clone, Debug, PartialEq)]
 pub struct KappaGrid {
@@ -62,14 +66,34 @@ impl KappaGrid {
     /// `count` equidistant values from `min` to `max` inclusive.
     ///
     /// # Errors
-    /// As [`KappaGrid::new`]; `count == 0`, or `count > 1` with `max <= min`.
+    /// As [`KappaGrid::new`]; `count == 0` or above [`KAPPA_GRID_MAX`], or `count > 1` with
+    /// `max <= min`.
     pub fn equidistant(min: f64, max: f64, count: usize) -> Result<Self, FilterError> {
+        // Checked before the values are collected: `usize::MAX` values cannot be held.
+        if count > KAPPA_GRID_MAX {
+            return Err(FilterError::InvalidParameter {
+                name: "kappa grid length (above KAPPA_GRID_MAX)",
+                value: count as f64,
+            });
+        }
         let values = match count {
             0 => Vec::new(),
             1 => vec![min],
             _ => {
                 let step = (max - min) / (count - 1) as f64;
-                (0..count).map(|i| min + step * i as f64).collect()
+                if step.is_finite() {
+                    (0..count).map(|i| min + step * i as f64).collect()
+                } else {
+                    // Ends of opposite signs near the limit: their difference overflows, the
+                    // values between them do not (`tests/extreme_floats.rs`).
+                    let last = (count - 1) as f64;
+                    (0..count)
+                        .map(|i| {
+                            let w = i as f64 / last;
+                            min * (1.0 - w) + max * w
+                        })
+                        .collect()
+                }
             }
         };
         Self::new(values)

@@ -18,6 +18,6 @@ mod space;
 mod update;
 
 pub use filter::{Ukf, UkfPrediction};
-pub use kappa::{KappaCriterion, KappaGrid};
+pub use kappa::{KAPPA_GRID_MAX, KappaCriterion, KappaGrid};
 pub use sigma::{SigmaSet, SigmaWeights};
 pub use space::{AngleComponents, SigmaSpace};

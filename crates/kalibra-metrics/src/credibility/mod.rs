@@ -216,14 +216,33 @@ impl CredibilityAverage {
     }
 }
 
+/// The most runs [`Credibility::reserve_runs`] reserves room for at a step: kalibra-eval's
+/// largest run count.
+pub const RESERVE_RUNS_MAX: usize = 1 << 24;
+
 impl Credibility {
     /// An empty accumulator over `steps` steps of a `dim`-component state.
+    ///
+    /// # Panics
+    /// If `steps * dim` is above [`HORIZON_MAX`](crate::HORIZON_MAX) (checked before anything
+    /// is allocated); use [`Credibility::try_new`] for counts that come from data.
     pub fn new(steps: usize, dim: usize) -> Self {
+        crate::accumulate::assert_horizon(steps, dim, "Credibility::new");
         Self {
             dim,
             errors: vec![Vec::new(); steps],
             nees: vec![Vec::new(); steps],
         }
+    }
+
+    /// [`Credibility::new`], with the horizon checked.
+    ///
+    /// # Errors
+    /// [`MetricsError::InvalidParameter`] for `steps * dim` above
+    /// [`HORIZON_MAX`](crate::HORIZON_MAX).
+    pub fn try_new(steps: usize, dim: usize) -> Result<Self, MetricsError> {
+        crate::accumulate::check_horizon(steps, dim)?;
+        Ok(Self::new(steps, dim))
     }
 
     /// Number of steps held.
@@ -233,8 +252,12 @@ impl Credibility {
 
     /// Extends the horizon to `steps` steps, the new ones empty; no change if it is already
     /// that long (see [`crate::StepMean::extend_steps`]).
+    ///
+    /// # Panics
+    /// If `steps * dim` is above [`HORIZON_MAX`](crate::HORIZON_MAX), as [`Credibility::new`].
     pub fn extend_steps(&mut self, steps: usize) {
         if steps > self.steps() {
+            crate::accumulate::assert_horizon(steps, self.dim, "Credibility::extend_steps");
             self.errors.resize(steps, Vec::new());
             self.nees.resize(steps, Vec::new());
         }
@@ -343,7 +366,9 @@ impl Credibility {
     /// # Errors
     /// [`MetricsError::StepOutOfRange`] beyond the horizon; [`MetricsError::Empty`] if no run
     /// was pushed at `step`; [`MetricsError::Linalg`] with [`LinalgError::NotConvergent`] if
-    /// the eigen-decomposition of `Sigma` does not converge (not seen in practice).
+    /// the eigen-decomposition of `Sigma` does not converge (not seen in practice), or with
+    /// [`LinalgError::NonFinite`] if the MSE matrix lies beyond f64's range (errors near
+    /// `1e308`).
     pub fn step_summary(&self, step: usize) -> Result<CredibilityStep, MetricsError> {
         self.check_step(step)?;
         let (errors, nees) = (&self.errors[step], &self.nees[step]);
@@ -355,6 +380,10 @@ impl Credibility {
         }
         let n = self.dim as f64;
         let nci = nci_of_step(errors, nees, self.dim)?;
+        let mse = mse_matrix(errors, self.dim);
+        // Errors near 1e308 have squares, and so an MSE, beyond f64's range
+        // (`tests/extreme_floats.rs`): an error rather than an infinity inside `Ok`.
+        kalibra_linalg::check_finite(&mse, "per-step MSE matrix (beyond f64's range)")?;
         Ok(CredibilityStep {
             runs,
             // Without overflow for NEES values near f64::MAX (a plain sum gave inf).
@@ -362,7 +391,7 @@ impl Credibility {
             nci: nci.value,
             nci_skipped: nci.skipped,
             median_nees: median(nees)? / n,
-            mse: mse_matrix(errors, self.dim),
+            mse,
             mse_rank: nci.rank,
         })
     }
@@ -386,14 +415,18 @@ impl Credibility {
     }
 
     /// Reserves room for `runs` more runs at each of `steps` (those within the horizon), so
-    /// pushing them does not grow the per-step storage one reallocation at a time.
+    /// pushing them does not grow the per-step storage one reallocation at a time. A hint:
+    /// at most [`RESERVE_RUNS_MAX`] runs are reserved, so that a count from data cannot ask
+    /// for more memory than exists (`tests/extreme_sizes.rs`); more runs still fit, growing
+    /// as they are pushed.
     pub fn reserve_runs(&mut self, runs: usize, steps: Range<usize>) {
+        let runs = runs.min(RESERVE_RUNS_MAX);
         let steps = steps.start.min(self.steps())..steps.end.min(self.steps());
         for (e, n) in self.errors[steps.clone()]
             .iter_mut()
             .zip(&mut self.nees[steps])
         {
-            e.reserve(runs * self.dim);
+            e.reserve(runs.saturating_mul(self.dim));
             n.reserve(runs);
         }
     }
@@ -480,6 +513,16 @@ fn append_runs(mine: &mut [Vec<f64>], theirs: Vec<Vec<f64>>) {
 /// # Ok::<(), kalibra_metrics::MetricsError>(())
 /// ```
 ///
+/// # Numerical choices
+/// statrs' inverse chi-square CDF below [`WILSON_HILFERTY_FROM`](crate::WILSON_HILFERTY_FROM)
+/// degrees of freedom, and from there the Wilson-Hilferty median `(1 - 2/(9 dim))^3`, as
+/// [`ChiSquareBand::for_mean`](crate::ChiSquareBand::for_mean) does: statrs' series for the
+/// incomplete gamma function takes about `sqrt(dim)` terms and, from `2^53` on, where adding 1
+/// to the term index no longer changes it, never ends. The approximation's relative error
+/// falls as `1/dim^2`: about `1.3e-15` at the switch, where statrs' own inversion is off by
+/// about `2e-12` (the test `consistent_median_nees_switch` holds both against the median's
+/// asymptotic series).
+///
 /// # Errors
 /// [`MetricsError::InvalidParameter`] for `dim == 0`.
 pub fn consistent_median_nees(dim: usize) -> Result<f64, MetricsError> {
@@ -490,8 +533,13 @@ pub fn consistent_median_nees(dim: usize) -> Result<f64, MetricsError> {
     if dim == 0 {
         return Err(invalid);
     }
-    let chi2 = ChiSquared::new(dim as f64).map_err(|_| invalid)?;
-    Ok(chi2.inverse_cdf(0.5) / dim as f64)
+    let k = dim as f64;
+    if k >= crate::WILSON_HILFERTY_FROM {
+        // The median of chi-square(k) / k: z = 0 in `(1 - a + z sqrt(a))^3`, `a = 2 / (9 k)`.
+        return Ok((1.0 - 2.0 / (9.0 * k)).powi(3));
+    }
+    let chi2 = ChiSquared::new(k).map_err(|_| invalid)?;
+    Ok(chi2.inverse_cdf(0.5) / k)
 }
 
 /// The median of a sample, with the even-length convention of numpy and most texts (the mean
@@ -541,6 +589,25 @@ mod tests {
 
     fn normal(rng: &mut ChaCha8Rng) -> f64 {
         StandardNormal.sample(rng)
+    }
+
+    /// At the switch both forms agree with the median's asymptotic series
+    /// `k - 2/3 + 8/(405 k)` (Wilson-Hilferty to 1e-14 relative, statrs' bisection to 1e-11),
+    /// and the largest counts come back at once, at or just below 1.
+    #[test]
+    fn consistent_median_nees_switch() {
+        let series = |k: f64| (k - 2.0 / 3.0 + 8.0 / (405.0 * k)) / k;
+        let below = crate::WILSON_HILFERTY_FROM as usize - 1;
+        let exact = consistent_median_nees(below).unwrap();
+        let want = series(below as f64);
+        assert!((exact / want - 1.0).abs() < 1e-11, "{exact} vs {want}");
+        let at = consistent_median_nees(below + 1).unwrap();
+        let want = series((below + 1) as f64);
+        assert!((at / want - 1.0).abs() < 1e-14, "{at} vs {want}");
+        for dim in [usize::MAX / 2, usize::MAX] {
+            let m = consistent_median_nees(dim).unwrap();
+            assert!(m <= 1.0 && m > 1.0 - 1e-15, "{dim}: {m}");
+        }
     }
 
     /// `m` correlated 3-D errors of different scales per component, spanning the space.
