@@ -547,32 +547,14 @@ fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Resu
     Ok(false)
 }
 
-/// Reads the rows of `source` (the file `file`) into an evaluator and finishes it.
-///
-/// The file is cut into blocks at record boundaries; parsing threads turn blocks into numbers
-/// while this thread feeds the rows to the evaluator in file order, so the report is the one a
-/// single thread would give, bit for bit, whatever the number of threads.
-fn stream(
-    file: &Path,
-    mut source: impl Read + Send,
+/// The plan of a CSV log whose header is `header` (the file's first record) and whose size is
+/// `size` if known, and what the log holds.
+fn plan<'f>(
+    file: &'f Path,
+    header_bytes: &[u8],
     size: Option<u64>,
-    evaluation: &Evaluation,
-) -> Result<Report, Error> {
-    let read_error = |e: std::io::Error| Error::read(file, e);
-    // The header: everything up to the first record end.
-    let mut buf = Vec::new();
-    let mut at_end = false;
-    let header_end = loop {
-        if let Some(end) = first_record_end(&buf) {
-            break end;
-        }
-        if at_end {
-            break buf.len();
-        }
-        let want = buf.len() + 64 * 1024;
-        at_end = fill(&mut source, &mut buf, want).map_err(read_error)?;
-    };
-    let rows = Rows::new(file, &buf[..header_end])?;
+) -> Result<(Plan<'f>, Contents), Error> {
+    let rows = Rows::new(file, header_bytes)?;
     let (columns, layouts) = header(file, &rows)?;
     let find = |want: Column| columns.iter().position(|c| *c == want);
     let (Some(run_col), Some(step_col)) = (find(Column::Run), find(Column::Step)) else {
@@ -603,6 +585,106 @@ fn stream(
         width,
         max_rows: size.map(|s| s / (rows.header.len().max(1) as u64)),
     };
+    Ok((plan, contents))
+}
+
+/// The stages of reading the CSV log `file`, each run alone on this thread, one after another
+/// (`crate::stages`): reading the file and cutting it into blocks at record ends, finding the
+/// rows and fields of every block, reading them with their numbers, and evaluating the cells.
+/// Holds the file and its numbers in memory: for the bench's stage split, not for use.
+pub(crate) fn stages(
+    file: &Path,
+    evaluation: &Evaluation,
+) -> Result<(crate::stages::Stages, Report), Error> {
+    let clock = std::time::Instant::now();
+    let bytes = std::fs::read(file).map_err(|e| Error::read(file, e))?;
+    let header_end = first_record_end(&bytes).unwrap_or(bytes.len());
+    let mut blocks = Vec::new();
+    let mut rest = &bytes[header_end..];
+    let mut row = 2;
+    while !rest.is_empty() {
+        let cut = if rest.len() <= BLOCK_BYTES {
+            rest.len()
+        } else {
+            last_record_end(&rest[..BLOCK_BYTES]).unwrap_or(rest.len())
+        };
+        blocks.push((row, &rest[..cut]));
+        row += memchr::memchr_iter(b'\n', &rest[..cut]).count() as u64;
+        rest = &rest[cut..];
+    }
+    let read = clock.elapsed().as_secs_f64();
+    let (plan, contents) = plan(file, &bytes[..header_end], Some(bytes.len() as u64))?;
+    let clock = std::time::Instant::now();
+    let fields: usize = blocks.iter().map(|(_, b)| plain_fields(b)).sum();
+    let tokenise = clock.elapsed().as_secs_f64();
+    let clock = std::time::Instant::now();
+    let parsed = blocks
+        .iter()
+        .map(|&(row, b)| match plan.parse_plain(b, row) {
+            Some(parsed) => Ok(parsed),
+            None => plan.parse(b, row),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let parse = clock.elapsed().as_secs_f64() - tokenise;
+    let clock = std::time::Instant::now();
+    let fail = |e: EvalError| Error::evaluate(file, e);
+    let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
+    for p in &parsed {
+        let cells: Vec<_> = p
+            .rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let values = &p.values[i * plan.width..(i + 1) * plan.width];
+                (r.run, r.step, plan.cell(r, values))
+            })
+            .collect();
+        evaluator.push_batch(&cells).map_err(|(_, e)| fail(e))?;
+    }
+    let report = evaluator.finish(None).map_err(fail)?;
+    let evaluate = clock.elapsed().as_secs_f64();
+    let stages = crate::stages::Stages {
+        read,
+        tokenise,
+        parse,
+        evaluate,
+        values: fields,
+    };
+    Ok((stages, report))
+}
+
+/// The fields of a block's rows, found as [`Plan::parse_plain`] finds rows and fields but
+/// without reading the numbers: the tokenising part of its work, timed apart.
+fn plain_fields(block: &[u8]) -> usize {
+    memchr::memchr_iter(b'\n', block).count() + memchr::memchr_iter(b',', block).count()
+}
+
+/// Reads the rows of `source` (the file `file`) into an evaluator and finishes it.
+///
+/// The file is cut into blocks at record boundaries; parsing threads turn blocks into numbers
+/// while this thread feeds the rows to the evaluator in file order, so the report is the one a
+/// single thread would give, bit for bit, whatever the number of threads.
+fn stream(
+    file: &Path,
+    mut source: impl Read + Send,
+    size: Option<u64>,
+    evaluation: &Evaluation,
+) -> Result<Report, Error> {
+    let read_error = |e: std::io::Error| Error::read(file, e);
+    // The header: everything up to the first record end.
+    let mut buf = Vec::new();
+    let mut at_end = false;
+    let header_end = loop {
+        if let Some(end) = first_record_end(&buf) {
+            break end;
+        }
+        if at_end {
+            break buf.len();
+        }
+        let want = buf.len() + 64 * 1024;
+        at_end = fill(&mut source, &mut buf, want).map_err(read_error)?;
+    };
+    let (plan, contents) = plan(file, &buf[..header_end], size)?;
     let fail = |e: EvalError| Error::evaluate(file, e);
     let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
     let first_data_row = 1 + buf[..header_end].iter().filter(|&&b| b == b'\n').count() as u64;
@@ -900,27 +982,9 @@ mod tests {
     use super::*;
 
     fn plan_of(header: &str) -> Plan<'static> {
-        let file = Path::new("log.csv");
-        let rows = Rows::new(file, header.as_bytes()).unwrap();
-        let (columns, layouts) = super::header(file, &rows).unwrap();
-        let find = |want: Column| columns.iter().position(|c| *c == want);
-        let mut offsets = [None; ARRAYS.len()];
-        let mut width = 0;
-        for l in &layouts {
-            offsets[l.array] = Some(width);
-            width += l.columns.len();
-        }
-        Plan {
-            file,
-            header: rows.header.clone(),
-            layouts,
-            run_col: find(Column::Run).unwrap(),
-            step_col: find(Column::Step).unwrap(),
-            time_col: find(Column::Time),
-            offsets,
-            width,
-            max_rows: None,
-        }
+        plan(Path::new("log.csv"), header.as_bytes(), None)
+            .unwrap()
+            .0
     }
 
     /// The rows and values of a parse, with every number as its bits.
@@ -934,14 +998,22 @@ mod tests {
                     .iter()
                     .map(|v| v.to_bits())
                     .collect();
-                (r.line, r.run, r.step, r.time.map(f64::to_bits), r.logged, values)
+                (
+                    r.line,
+                    r.run,
+                    r.step,
+                    r.time.map(f64::to_bits),
+                    r.logged,
+                    values,
+                )
             })
             .collect()
     }
 
     #[test]
     fn plain_rows_are_read_as_the_csv_crate_reads_them() {
-        let header = "run,step,time,truth_0,truth_1,estimate_0,estimate_1,covariance_0_0,covariance_1_1\n";
+        let header =
+            "run,step,time,truth_0,truth_1,estimate_0,estimate_1,covariance_0_0,covariance_1_1\n";
         let plan = plan_of(header);
         let plain = [
             "0,0,0.5,1,2,3,4,5,6\n",
@@ -950,7 +1022,9 @@ mod tests {
             "1,0,,1.7976931348623157e308,-2.5e-3,0.1000000000000000055511151231257827021181583404541015625,7,8,9",
         ];
         let block = plain.concat();
-        let fast = plan.parse_plain(block.as_bytes(), 2).expect("a plain block");
+        let fast = plan
+            .parse_plain(block.as_bytes(), 2)
+            .expect("a plain block");
         let slow = plan.parse(block.as_bytes(), 2).unwrap();
         assert_eq!(bits(&fast), bits(&slow));
         assert_eq!(fast.rows.len(), 4);

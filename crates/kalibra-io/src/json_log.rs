@@ -125,8 +125,7 @@ pub(crate) fn small_arrays(
     let mut values = Vec::with_capacity(texts.len());
     for (name, text) in texts {
         let text = python_floats(text).map_err(|(_, _, s)| Error::log(s))?;
-        let value: Value =
-            serde_json::from_slice(&text).map_err(|e| Error::log(e.to_string()))?;
+        let value: Value = serde_json::from_slice(&text).map_err(|e| Error::log(e.to_string()))?;
         values.push((*name, value));
     }
     time_and_model(

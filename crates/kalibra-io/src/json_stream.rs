@@ -508,8 +508,7 @@ impl<R: Read> Cells<R> {
         out: &mut Vec<f64>,
         logged: &mut Vec<bool>,
     ) -> Step<()> {
-        self.bytes
-            .expect(if run == 0 { b'[' } else { b',' })?;
+        self.bytes.expect(if run == 0 { b'[' } else { b',' })?;
         self.bytes.expect(b'[')?;
         for step in 0..steps {
             if step > 0 {
@@ -554,7 +553,10 @@ pub(crate) fn evaluate<R: Read + Seek + Send>(
         Some(s) => (s.runs, s.steps),
         None => return Err(Fallback),
     };
-    if cell_spans.iter().any(|s| (s.runs, s.steps) != (runs, steps)) {
+    if cell_spans
+        .iter()
+        .any(|s| (s.runs, s.steps) != (runs, steps))
+    {
         return Err(Fallback);
     }
     // The small arrays, read whole with the whole-file reader's rules.
@@ -567,7 +569,8 @@ pub(crate) fn evaluate<R: Read + Seek + Send>(
         handle.read_exact(&mut text)?;
         small.push((span.array, text));
     }
-    let (times, model) = crate::json_log::small_arrays(&small, runs, steps).map_err(|_| Fallback)?;
+    let (times, model) =
+        crate::json_log::small_arrays(&small, runs, steps).map_err(|_| Fallback)?;
     // The checks `FilterLog` makes of the times and the model, before any cell is read.
     let mut check = FilterLog::new(runs, steps).map_err(|_| Fallback)?;
     if let Some(t) = &times {
@@ -832,19 +835,48 @@ mod tests {
     #[test]
     fn numbers_read_as_serde_json_reads_them() {
         let literals = [
-            "0", "-0", "1", "-1", "0.1", "-0.0", "1e5", "1E5", "1e+5", "1e-5", "2.5e-3",
-            "1.7976931348623157e308", "2.2250738585072014e-308", "4.9e-324", "5e-325",
-            "1e-400", "1e400", "-1e400", "18446744073709551615", "18446744073709551616",
-            "-9223372036854775808", "-9223372036854775809", "123456789012345678901234567890",
-            "0.30000000000000004", "9007199254740993", "2.4703282292062328e-324",
-            "0.1000000000000000055511151231257827021181583404541015625", "01", "1.", ".5",
-            "+1", "1e", "1e+", "-", "1x", "0x10", "inf", "nan",
+            "0",
+            "-0",
+            "1",
+            "-1",
+            "0.1",
+            "-0.0",
+            "1e5",
+            "1E5",
+            "1e+5",
+            "1e-5",
+            "2.5e-3",
+            "1.7976931348623157e308",
+            "2.2250738585072014e-308",
+            "4.9e-324",
+            "5e-325",
+            "1e-400",
+            "1e400",
+            "-1e400",
+            "18446744073709551615",
+            "18446744073709551616",
+            "-9223372036854775808",
+            "-9223372036854775809",
+            "123456789012345678901234567890",
+            "0.30000000000000004",
+            "9007199254740993",
+            "2.4703282292062328e-324",
+            "0.1000000000000000055511151231257827021181583404541015625",
+            "01",
+            "1.",
+            ".5",
+            "+1",
+            "1e",
+            "1e+",
+            "-",
+            "1x",
+            "0x10",
+            "inf",
+            "nan",
         ];
         for text in literals {
             let ours = match json_number(text.as_bytes()) {
-                Some(Token::Number(end)) if end == text.len() => {
-                    parse_number(text.as_bytes()).ok()
-                }
+                Some(Token::Number(end)) if end == text.len() => parse_number(text.as_bytes()).ok(),
                 _ => None,
             };
             let theirs = serde_json::from_str::<serde_json::Value>(text)
@@ -859,7 +891,10 @@ mod tests {
         }
         // The plain forms of a log are read here, not handed over.
         for text in ["0", "-0", "1e5", "0.1", "-2.5e-3", "4.9e-324"] {
-            assert!(matches!(json_number(text.as_bytes()), Some(Token::Number(_))));
+            assert!(matches!(
+                json_number(text.as_bytes()),
+                Some(Token::Number(_))
+            ));
         }
         assert!(matches!(
             json_number(b"-Infinity,"),
@@ -867,4 +902,38 @@ mod tests {
         ));
         assert!(matches!(json_number(b"NaN]"), Some(Token::Python(v, 3)) if v.is_nan()));
     }
+}
+
+/// The stages of the streamed JSON log `file` (`crate::stages`): reading the file, the first
+/// pass (finding the arrays), and the second pass with the evaluation (reading the cells and
+/// their numbers on the reader thread while this one evaluates), timed apart, with the file
+/// held in memory; `None` for a log the streaming reader hands over.
+pub(crate) fn stages(
+    file: &std::path::Path,
+    evaluation: &Evaluation,
+) -> Result<Option<(crate::stages::Stages, Report)>, crate::Error> {
+    let clock = std::time::Instant::now();
+    let bytes = std::fs::read(file).map_err(|e| crate::Error::read(file, e))?;
+    let read = clock.elapsed().as_secs_f64();
+    let clock = std::time::Instant::now();
+    let Ok(spans) = scan(&mut Bytes::new(std::io::Cursor::new(&bytes[..]), 0)) else {
+        return Ok(None);
+    };
+    let tokenise = clock.elapsed().as_secs_f64();
+    let values = spans.iter().map(|s| s.runs * s.steps).sum();
+    let clock = std::time::Instant::now();
+    let source = || Ok(std::io::Cursor::new(&bytes[..]));
+    let Ok(report) = evaluate(&source, evaluation) else {
+        return Ok(None);
+    };
+    // The streaming evaluation makes the first pass again; it is the time above.
+    let rest = clock.elapsed().as_secs_f64() - tokenise;
+    let stages = crate::stages::Stages {
+        read,
+        tokenise,
+        parse: rest,
+        evaluate: f64::NAN,
+        values,
+    };
+    Ok(Some((stages, report)))
 }

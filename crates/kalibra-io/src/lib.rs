@@ -54,6 +54,8 @@ mod json_stream;
 mod npz_log;
 pub mod output;
 mod raw;
+#[doc(hidden)]
+pub mod stages;
 mod tune_document;
 pub mod tune_input;
 

@@ -758,8 +758,7 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
                     OsStr::new(&window_arg),
                 ],
             )?);
-            for (((_, _, script), results), runs) in scripts.iter().zip(&results).zip(&mut s_runs)
-            {
+            for (((_, _, script), results), runs) in scripts.iter().zip(&results).zip(&mut s_runs) {
                 runs.push(measure(
                     &python,
                     &driver,
@@ -828,11 +827,20 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
 
     print_table(&rows, size.rows());
     print_goals(&rows);
+    let split = stage_split(&dir, size, window, &out_dir)?;
     if !disagreements.is_empty() {
         bail!(
             "kalibra and a script disagree on {}: the timings compare different work",
             disagreements.join(", ")
         );
+    }
+    for (format, stages) in &split {
+        let f = format.ext();
+        for (stage, seconds) in stages {
+            if seconds.is_finite() {
+                figures.push(format!("{f}: stage {stage}"), *seconds, "s");
+            }
+        }
     }
     for r in &rows {
         let f = r.format.ext();
@@ -867,6 +875,60 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
         );
     }
     Ok(figures)
+}
+
+/// The stage split of kalibra's CSV and JSON readers (`kalibra_io::stages`: each stage alone
+/// on one thread, the file in memory), with the report's writing (`kalibra eval`'s
+/// `Document` and report files) timed after them; printed, and returned per format as
+/// (stage, seconds).
+fn stage_split(
+    dir: &Path,
+    size: LogSize,
+    window: usize,
+    out_dir: &Path,
+) -> Result<Vec<(Format, Vec<(&'static str, f64)>)>> {
+    let evaluation = kalibra_eval::Evaluation::new().window(window)?;
+    let mut split = Vec::new();
+    println!(
+        "  stages of kalibra's path, each alone on one thread with the file in memory (the \
+         command overlaps them on every core):"
+    );
+    for format in [Format::Csv, Format::Json] {
+        let log = dir.join(size.file_name(format));
+        let Some((stages, report)) = kalibra_io::stages::stages(&log, &evaluation)? else {
+            continue;
+        };
+        let target_dir = out_dir.join(format!("stages-{}", format.ext()));
+        let clock = std::time::Instant::now();
+        let doc = kalibra_io::document::Document::new(&log, &report);
+        kalibra_io::output::Target::prepare(&target_dir)?.write(&report, &doc)?;
+        let report_s = clock.elapsed().as_secs_f64();
+        let named = vec![
+            ("read", stages.read),
+            ("tokenise", stages.tokenise),
+            ("parse numbers", stages.parse),
+            ("evaluate", stages.evaluate),
+            ("report", report_s),
+        ];
+        let shown: Vec<String> = named
+            .iter()
+            .filter(|(_, s)| s.is_finite())
+            .map(|(stage, s)| format!("{stage} {s:.3} s"))
+            .collect();
+        let note = match format {
+            Format::Csv => format!(
+                "{} fields; tokenise = line ends and commas counted, parse numbers = the \
+                 reader's pass less that",
+                stages.values
+            ),
+            _ => "tokenise = the first pass (where each array lies), parse numbers = the \
+                  second pass with the evaluation overlapped"
+                .to_string(),
+        };
+        println!("    {}: {} ({note})", format.ext(), shown.join(", "));
+        split.push((format, named));
+    }
+    Ok(split)
 }
 
 fn print_table(rows: &[Row], n_rows: usize) {
