@@ -988,7 +988,9 @@ mod tests {
     }
 
     /// The rows and values of a parse, with every number as its bits.
-    fn bits(p: &Parsed) -> Vec<(u64, usize, usize, Option<u64>, [bool; 5], Vec<u64>)> {
+    type Bits = (u64, usize, usize, Option<u64>, [bool; 5], Vec<u64>);
+
+    fn bits(p: &Parsed) -> Vec<Bits> {
         let width = p.values.len() / p.rows.len().max(1);
         p.rows
             .iter()

@@ -89,13 +89,16 @@ pub(crate) fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, Error> 
     Ok(log)
 }
 
+/// The times and the model `F`, `H`, `Q`, `R` of a log, each if given.
+pub(crate) type TimeAndModel = (Option<Vec<f64>>, Option<[ModelArray; 4]>);
+
 /// The arrays read whole whatever the log's size, `time` and the model `F`, `H`, `Q`, `R`,
 /// from the top-level object's values (`get` by name), for a log of `runs x steps` cells.
 fn time_and_model<'v>(
     get: impl Fn(&str) -> Option<&'v Value>,
     runs: usize,
     steps: usize,
-) -> Result<(Option<Vec<f64>>, Option<[ModelArray; 4]>), Error> {
+) -> Result<TimeAndModel, Error> {
     let time = match get("time") {
         Some(v) => Some(numbers("time", v, &mut vec![])?),
         None => None,
@@ -121,7 +124,7 @@ pub(crate) fn small_arrays(
     texts: &[(&'static str, Vec<u8>)],
     runs: usize,
     steps: usize,
-) -> Result<(Option<Vec<f64>>, Option<[ModelArray; 4]>), Error> {
+) -> Result<TimeAndModel, Error> {
     let mut values = Vec::with_capacity(texts.len());
     for (name, text) in texts {
         let text = python_floats(text).map_err(|(_, _, s)| Error::log(s))?;

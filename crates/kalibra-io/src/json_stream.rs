@@ -700,6 +700,40 @@ fn read_runs<R: Read>(
     })
 }
 
+/// The stages of the streamed JSON log `file` (`crate::stages`): reading the file, the first
+/// pass (finding the arrays), and the second pass with the evaluation (reading the cells and
+/// their numbers on the reader thread while this one evaluates), timed apart, with the file
+/// held in memory; `None` for a log the streaming reader hands over.
+pub(crate) fn stages(
+    file: &std::path::Path,
+    evaluation: &Evaluation,
+) -> Result<Option<(crate::stages::Stages, Report)>, crate::Error> {
+    let clock = std::time::Instant::now();
+    let bytes = std::fs::read(file).map_err(|e| crate::Error::read(file, e))?;
+    let read = clock.elapsed().as_secs_f64();
+    let clock = std::time::Instant::now();
+    let Ok(spans) = scan(&mut Bytes::new(std::io::Cursor::new(&bytes[..]), 0)) else {
+        return Ok(None);
+    };
+    let tokenise = clock.elapsed().as_secs_f64();
+    let values = spans.iter().map(|s| s.runs * s.steps).sum();
+    let clock = std::time::Instant::now();
+    let source = || Ok(std::io::Cursor::new(&bytes[..]));
+    let Ok(report) = evaluate(&source, evaluation) else {
+        return Ok(None);
+    };
+    // The streaming evaluation makes the first pass again; it is the time above.
+    let rest = clock.elapsed().as_secs_f64() - tokenise;
+    let stages = crate::stages::Stages {
+        read,
+        tokenise,
+        parse: rest,
+        evaluate: f64::NAN,
+        values,
+    };
+    Ok(Some((stages, report)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -902,38 +936,4 @@ mod tests {
         ));
         assert!(matches!(json_number(b"NaN]"), Some(Token::Python(v, 3)) if v.is_nan()));
     }
-}
-
-/// The stages of the streamed JSON log `file` (`crate::stages`): reading the file, the first
-/// pass (finding the arrays), and the second pass with the evaluation (reading the cells and
-/// their numbers on the reader thread while this one evaluates), timed apart, with the file
-/// held in memory; `None` for a log the streaming reader hands over.
-pub(crate) fn stages(
-    file: &std::path::Path,
-    evaluation: &Evaluation,
-) -> Result<Option<(crate::stages::Stages, Report)>, crate::Error> {
-    let clock = std::time::Instant::now();
-    let bytes = std::fs::read(file).map_err(|e| crate::Error::read(file, e))?;
-    let read = clock.elapsed().as_secs_f64();
-    let clock = std::time::Instant::now();
-    let Ok(spans) = scan(&mut Bytes::new(std::io::Cursor::new(&bytes[..]), 0)) else {
-        return Ok(None);
-    };
-    let tokenise = clock.elapsed().as_secs_f64();
-    let values = spans.iter().map(|s| s.runs * s.steps).sum();
-    let clock = std::time::Instant::now();
-    let source = || Ok(std::io::Cursor::new(&bytes[..]));
-    let Ok(report) = evaluate(&source, evaluation) else {
-        return Ok(None);
-    };
-    // The streaming evaluation makes the first pass again; it is the time above.
-    let rest = clock.elapsed().as_secs_f64() - tokenise;
-    let stages = crate::stages::Stages {
-        read,
-        tokenise,
-        parse: rest,
-        evaluate: f64::NAN,
-        values,
-    };
-    Ok(Some((stages, report)))
 }

@@ -877,16 +877,14 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
     Ok(figures)
 }
 
+/// Per format, each stage's name and seconds.
+type StageSplit = Vec<(Format, Vec<(&'static str, f64)>)>;
+
 /// The stage split of kalibra's CSV and JSON readers (`kalibra_io::stages`: each stage alone
 /// on one thread, the file in memory), with the report's writing (`kalibra eval`'s
 /// `Document` and report files) timed after them; printed, and returned per format as
 /// (stage, seconds).
-fn stage_split(
-    dir: &Path,
-    size: LogSize,
-    window: usize,
-    out_dir: &Path,
-) -> Result<Vec<(Format, Vec<(&'static str, f64)>)>> {
+fn stage_split(dir: &Path, size: LogSize, window: usize, out_dir: &Path) -> Result<StageSplit> {
     let evaluation = kalibra_eval::Evaluation::new().window(window)?;
     let mut split = Vec::new();
     println!(
