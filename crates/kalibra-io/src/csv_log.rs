@@ -589,13 +589,13 @@ fn plan<'f>(
 }
 
 /// The stages of reading the CSV log `file`, each run alone on this thread, one after another
-/// (`crate::stages`): reading the file and cutting it into blocks at record ends, finding the
+/// (`stages`): reading the file and cutting it into blocks at record ends, finding the
 /// rows and fields of every block, reading them with their numbers, and evaluating the cells.
 /// Holds the file and its numbers in memory: for the bench's stage split, not for use.
 pub(crate) fn stages(
     file: &Path,
     evaluation: &Evaluation,
-) -> Result<(crate::stages::Stages, Report), Error> {
+) -> Result<(crate::stage_times::Stages, Report), Error> {
     let clock = std::time::Instant::now();
     let bytes = std::fs::read(file).map_err(|e| Error::read(file, e))?;
     let header_end = first_record_end(&bytes).unwrap_or(bytes.len());
@@ -643,7 +643,7 @@ pub(crate) fn stages(
     }
     let report = evaluator.finish(None).map_err(fail)?;
     let evaluate = clock.elapsed().as_secs_f64();
-    let stages = crate::stages::Stages {
+    let stages = crate::stage_times::Stages {
         read,
         tokenise,
         parse,

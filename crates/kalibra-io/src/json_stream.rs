@@ -21,8 +21,6 @@
 //! serde_json's `float_roundtrip` does (the test `numbers_read_as_serde_json_reads_them`).
 
 use std::io::{Read, Seek, SeekFrom};
-#[cfg(test)]
-use std::path::Path;
 use std::sync::mpsc;
 
 use kalibra_eval::{Cell, Contents, Evaluation, FilterLog, MatrixCell, ModelCell, Report};
@@ -700,14 +698,14 @@ fn read_runs<R: Read>(
     })
 }
 
-/// The stages of the streamed JSON log `file` (`crate::stages`): reading the file, the first
+/// The stages of the streamed JSON log `file` (`stages`): reading the file, the first
 /// pass (finding the arrays), and the second pass with the evaluation (reading the cells and
 /// their numbers on the reader thread while this one evaluates), timed apart, with the file
 /// held in memory; `None` for a log the streaming reader hands over.
 pub(crate) fn stages(
     file: &std::path::Path,
     evaluation: &Evaluation,
-) -> Result<Option<(crate::stages::Stages, Report)>, crate::Error> {
+) -> Result<Option<(crate::stage_times::Stages, Report)>, crate::Error> {
     let clock = std::time::Instant::now();
     let bytes = std::fs::read(file).map_err(|e| crate::Error::read(file, e))?;
     let read = clock.elapsed().as_secs_f64();
@@ -724,7 +722,7 @@ pub(crate) fn stages(
     };
     // The streaming evaluation makes the first pass again; it is the time above.
     let rest = clock.elapsed().as_secs_f64() - tokenise;
-    let stages = crate::stages::Stages {
+    let stages = crate::stage_times::Stages {
         read,
         tokenise,
         parse: rest,
@@ -736,6 +734,8 @@ pub(crate) fn stages(
 
 #[cfg(test)]
 mod tests {
+    use std::path::Path;
+
     use super::*;
 
     fn fixture(name: &str) -> Vec<u8> {

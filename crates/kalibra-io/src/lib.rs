@@ -54,6 +54,7 @@ mod json_stream;
 mod npz_log;
 pub mod output;
 mod raw;
+mod stage_times;
 #[doc(hidden)]
 pub mod stages;
 mod tune_document;

@@ -10,23 +10,7 @@ use kalibra_eval::{Evaluation, Report};
 use crate::error::Error;
 use crate::input::LogFormat;
 
-/// Seconds per stage.
-#[derive(Clone, Copy, Debug)]
-pub struct Stages {
-    /// Reading the file into memory (and, for a CSV, cutting it into blocks at record ends).
-    pub read: f64,
-    /// CSV: finding the rows and fields (the line ends and commas, counted with memchr);
-    /// JSON: the first pass, finding where each array lies.
-    pub tokenise: f64,
-    /// CSV: reading the rows with their numbers, less the tokenising (the reader finds the
-    /// fields as it parses the numbers); JSON: the second pass, the cells and their numbers on
-    /// a reader thread with the evaluation on this one (so `evaluate` is NaN).
-    pub parse: f64,
-    /// CSV: feeding the parsed cells to the evaluator and finishing the report.
-    pub evaluate: f64,
-    /// CSV: the fields; JSON: the cells of the per-cell arrays.
-    pub values: usize,
-}
+pub use crate::stage_times::Stages;
 
 /// The stages of evaluating the log `path` (CSV or JSON; `None` for an NPZ log, whose values
 /// need no tokenising or parsing, or a JSON log the streaming reader does not take), and the
