@@ -337,6 +337,97 @@ impl Plan<'_> {
         Ok(parsed)
     }
 
+    /// [`Plan::parse`] of a block of plain rows, without the csv crate and without an
+    /// allocation per row: no quotes, no empty line, `\n` endings (no `\r`), the header's
+    /// number of fields, numbers in decimal notation (the form every writer of a large log
+    /// uses). Each row is read once from start to end, the numbers parsed where they stand
+    /// (fast-float2 tells where each ends). `None` where the block is not plain or holds an
+    /// error, which [`Plan::parse`] then reads and reports as it always did.
+    fn parse_plain(&self, block: &[u8], first_row: u64) -> Option<Parsed> {
+        // A quote needs the csv crate's reading; so does a `\r`, after which the csv crate
+        // numbers the rows its own way, and its numbers are the ones messages give.
+        if memchr::memchr2(b'"', b'\r', block).is_some() {
+            return None;
+        }
+        let columns = self.header.len();
+        let mut slots = vec![Slot::Time; columns];
+        slots[self.run_col] = Slot::Run;
+        slots[self.step_col] = Slot::Step;
+        for layout in &self.layouts {
+            let offset = self.offsets[layout.array]?;
+            for (k, &c) in layout.columns.iter().enumerate() {
+                slots[c] = Slot::Value(offset + k, layout.array);
+            }
+        }
+        // About 8 bytes a field in a log of floats; a guess, only for the first allocation.
+        let rows_guess = block.len() / (8 * columns).max(1) + 1;
+        let mut parsed = Parsed {
+            rows: Vec::with_capacity(rows_guess),
+            values: Vec::with_capacity(rows_guess * self.width),
+        };
+        let mut line_no = first_row;
+        let mut start = 0;
+        while start < block.len() {
+            let end = memchr::memchr(b'\n', &block[start..]).map_or(block.len(), |e| start + e);
+            let line = &block[start..end];
+            start = end + 1;
+            if line.is_empty() {
+                return None;
+            }
+            let at = parsed.values.len();
+            parsed.values.resize(at + self.width, f64::NAN);
+            let (mut run, mut step, mut time) = (0, 0, None);
+            let (mut present, mut empty) = ([false; ARRAYS.len()], [false; ARRAYS.len()]);
+            let mut i = 0;
+            for (c, slot) in slots.iter().enumerate() {
+                if c > 0 {
+                    if line.get(i) != Some(&b',') {
+                        return None;
+                    }
+                    i += 1;
+                }
+                i = blanks(line, i);
+                match *slot {
+                    Slot::Run => (run, i) = plain_index(line, i)?,
+                    Slot::Step => (step, i) = plain_index(line, i)?,
+                    Slot::Time => (time, i) = plain_number(line, i)?,
+                    Slot::Value(k, array) => {
+                        let value;
+                        (value, i) = plain_number(line, i)?;
+                        match value {
+                            Some(v) => {
+                                parsed.values[at + k] = v;
+                                present[array] = true;
+                            }
+                            None => empty[array] = true,
+                        }
+                    }
+                }
+                i = blanks(line, i);
+            }
+            if i != line.len() {
+                return None;
+            }
+            if present.iter().zip(&empty).any(|(p, e)| *p && *e) {
+                return None;
+            }
+            if let Some(max) = self.max_rows
+                && (run as u128 + 1) * (step as u128 + 1) > u128::from(max)
+            {
+                return None;
+            }
+            parsed.rows.push(RowMeta {
+                line: line_no,
+                run,
+                step,
+                time,
+                logged: present,
+            });
+            line_no += 1;
+        }
+        Some(parsed)
+    }
+
     /// The cell of a parsed row whose values are `values`.
     fn cell<'a>(&self, row: &RowMeta, values: &'a [f64]) -> Cell<'a> {
         let slice = |a: usize| -> Option<&'a [f64]> {
@@ -363,6 +454,56 @@ impl Plan<'_> {
             model: None,
         }
     }
+}
+
+/// What a column of a plain row goes to ([`Plan::parse_plain`]).
+#[derive(Clone, Copy)]
+enum Slot {
+    Run,
+    Step,
+    Time,
+    /// The value's place in the parsed row, and its array.
+    Value(usize, usize),
+}
+
+/// Skips spaces and tabs from `i` in `line`.
+fn blanks(line: &[u8], mut i: usize) -> usize {
+    while matches!(line.get(i), Some(b' ' | b'\t')) {
+        i += 1;
+    }
+    i
+}
+
+/// The number at `i` in `line` (after blanks), and where it ends; `Some(None)` for an empty
+/// field (the next byte ends it). `None` for anything but decimal notation (`inf`, `nan` and
+/// what is not a number are left to the csv crate's reading): fast-float2 reads decimal
+/// notation by Rust's grammar and rounds correctly, as `str::parse::<f64>` does, so a value
+/// read here is the one [`number`] reads, bit for bit (the test
+/// `plain_rows_are_read_as_the_csv_crate_reads_them`).
+fn plain_number(line: &[u8], i: usize) -> Option<(Option<f64>, usize)> {
+    match line.get(i) {
+        None | Some(b',') => Some((None, i)),
+        Some(b'0'..=b'9' | b'-' | b'+' | b'.') => {
+            let (value, used) = fast_float2::parse_partial::<f64, _>(&line[i..]).ok()?;
+            value.is_finite().then_some((Some(value), i + used))
+        }
+        Some(_) => None,
+    }
+}
+
+/// The whole number (digits only) at `i` in `line`, and where it ends.
+fn plain_index(line: &[u8], i: usize) -> Option<(usize, usize)> {
+    let digits = line[i.min(line.len())..]
+        .iter()
+        .take_while(|b| b.is_ascii_digit())
+        .count();
+    if digits == 0 || digits > 18 {
+        return None;
+    }
+    let value = line[i..i + digits]
+        .iter()
+        .fold(0usize, |acc, &b| acc * 10 + usize::from(b - b'0'));
+    Some((value, i + digits))
 }
 
 /// Where `buf` (starting at a record) can be cut after a whole record: just after its last
@@ -406,32 +547,14 @@ fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Resu
     Ok(false)
 }
 
-/// Reads the rows of `source` (the file `file`) into an evaluator and finishes it.
-///
-/// The file is cut into blocks at record boundaries; parsing threads turn blocks into numbers
-/// while this thread feeds the rows to the evaluator in file order, so the report is the one a
-/// single thread would give, bit for bit, whatever the number of threads.
-fn stream(
-    file: &Path,
-    mut source: impl Read + Send,
+/// The plan of a CSV log whose header is `header` (the file's first record) and whose size is
+/// `size` if known, and what the log holds.
+fn plan<'f>(
+    file: &'f Path,
+    header_bytes: &[u8],
     size: Option<u64>,
-    evaluation: &Evaluation,
-) -> Result<Report, Error> {
-    let read_error = |e: std::io::Error| Error::read(file, e);
-    // The header: everything up to the first record end.
-    let mut buf = Vec::new();
-    let mut at_end = false;
-    let header_end = loop {
-        if let Some(end) = first_record_end(&buf) {
-            break end;
-        }
-        if at_end {
-            break buf.len();
-        }
-        let want = buf.len() + 64 * 1024;
-        at_end = fill(&mut source, &mut buf, want).map_err(read_error)?;
-    };
-    let rows = Rows::new(file, &buf[..header_end])?;
+) -> Result<(Plan<'f>, Contents), Error> {
+    let rows = Rows::new(file, header_bytes)?;
     let (columns, layouts) = header(file, &rows)?;
     let find = |want: Column| columns.iter().position(|c| *c == want);
     let (Some(run_col), Some(step_col)) = (find(Column::Run), find(Column::Step)) else {
@@ -462,6 +585,106 @@ fn stream(
         width,
         max_rows: size.map(|s| s / (rows.header.len().max(1) as u64)),
     };
+    Ok((plan, contents))
+}
+
+/// The stages of reading the CSV log `file`, each run alone on this thread, one after another
+/// (`stages`): reading the file and cutting it into blocks at record ends, finding the
+/// rows and fields of every block, reading them with their numbers, and evaluating the cells.
+/// Holds the file and its numbers in memory: for the bench's stage split, not for use.
+pub(crate) fn stages(
+    file: &Path,
+    evaluation: &Evaluation,
+) -> Result<(crate::stage_times::Stages, Report), Error> {
+    let clock = std::time::Instant::now();
+    let bytes = std::fs::read(file).map_err(|e| Error::read(file, e))?;
+    let header_end = first_record_end(&bytes).unwrap_or(bytes.len());
+    let mut blocks = Vec::new();
+    let mut rest = &bytes[header_end..];
+    let mut row = 2;
+    while !rest.is_empty() {
+        let cut = if rest.len() <= BLOCK_BYTES {
+            rest.len()
+        } else {
+            last_record_end(&rest[..BLOCK_BYTES]).unwrap_or(rest.len())
+        };
+        blocks.push((row, &rest[..cut]));
+        row += memchr::memchr_iter(b'\n', &rest[..cut]).count() as u64;
+        rest = &rest[cut..];
+    }
+    let read = clock.elapsed().as_secs_f64();
+    let (plan, contents) = plan(file, &bytes[..header_end], Some(bytes.len() as u64))?;
+    let clock = std::time::Instant::now();
+    let fields: usize = blocks.iter().map(|(_, b)| plain_fields(b)).sum();
+    let tokenise = clock.elapsed().as_secs_f64();
+    let clock = std::time::Instant::now();
+    let parsed = blocks
+        .iter()
+        .map(|&(row, b)| match plan.parse_plain(b, row) {
+            Some(parsed) => Ok(parsed),
+            None => plan.parse(b, row),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let parse = clock.elapsed().as_secs_f64() - tokenise;
+    let clock = std::time::Instant::now();
+    let fail = |e: EvalError| Error::evaluate(file, e);
+    let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
+    for p in &parsed {
+        let cells: Vec<_> = p
+            .rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let values = &p.values[i * plan.width..(i + 1) * plan.width];
+                (r.run, r.step, plan.cell(r, values))
+            })
+            .collect();
+        evaluator.push_batch(&cells).map_err(|(_, e)| fail(e))?;
+    }
+    let report = evaluator.finish(None).map_err(fail)?;
+    let evaluate = clock.elapsed().as_secs_f64();
+    let stages = crate::stage_times::Stages {
+        read,
+        tokenise,
+        parse,
+        evaluate,
+        values: fields,
+    };
+    Ok((stages, report))
+}
+
+/// The fields of a block's rows, found as [`Plan::parse_plain`] finds rows and fields but
+/// without reading the numbers: the tokenising part of its work, timed apart.
+fn plain_fields(block: &[u8]) -> usize {
+    memchr::memchr_iter(b'\n', block).count() + memchr::memchr_iter(b',', block).count()
+}
+
+/// Reads the rows of `source` (the file `file`) into an evaluator and finishes it.
+///
+/// The file is cut into blocks at record boundaries; parsing threads turn blocks into numbers
+/// while this thread feeds the rows to the evaluator in file order, so the report is the one a
+/// single thread would give, bit for bit, whatever the number of threads.
+fn stream(
+    file: &Path,
+    mut source: impl Read + Send,
+    size: Option<u64>,
+    evaluation: &Evaluation,
+) -> Result<Report, Error> {
+    let read_error = |e: std::io::Error| Error::read(file, e);
+    // The header: everything up to the first record end.
+    let mut buf = Vec::new();
+    let mut at_end = false;
+    let header_end = loop {
+        if let Some(end) = first_record_end(&buf) {
+            break end;
+        }
+        if at_end {
+            break buf.len();
+        }
+        let want = buf.len() + 64 * 1024;
+        at_end = fill(&mut source, &mut buf, want).map_err(read_error)?;
+    };
+    let (plan, contents) = plan(file, &buf[..header_end], size)?;
     let fail = |e: EvalError| Error::evaluate(file, e);
     let mut evaluator = evaluation.evaluator(contents).map_err(fail)?;
     let first_data_row = 1 + buf[..header_end].iter().filter(|&&b| b == b'\n').count() as u64;
@@ -498,7 +721,7 @@ fn stream(
                 want = BLOCK_BYTES;
                 let rest = buf.split_off(cut);
                 let block = std::mem::replace(&mut buf, rest);
-                let lines = block.iter().filter(|&&b| b == b'\n').count() as u64;
+                let lines = memchr::memchr_iter(b'\n', &block).count() as u64;
                 if block.is_empty() || work_tx.send((index, row, block)).is_err() {
                     return;
                 }
@@ -521,7 +744,11 @@ fn stream(
                     let Ok((index, row, block)) = next else {
                         return;
                     };
-                    if done.send((index, plan.parse(&block, row))).is_err() {
+                    let parsed = match plan.parse_plain(&block, row) {
+                        Some(parsed) => Ok(parsed),
+                        None => plan.parse(&block, row),
+                    };
+                    if done.send((index, parsed)).is_err() {
                         return;
                     }
                 }
@@ -748,4 +975,81 @@ fn layouts(columns: &[Column]) -> Result<Vec<Layout>, String> {
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan_of(header: &str) -> Plan<'static> {
+        plan(Path::new("log.csv"), header.as_bytes(), None)
+            .unwrap()
+            .0
+    }
+
+    /// The rows and values of a parse, with every number as its bits.
+    type Bits = (u64, usize, usize, Option<u64>, [bool; 5], Vec<u64>);
+
+    fn bits(p: &Parsed) -> Vec<Bits> {
+        let width = p.values.len() / p.rows.len().max(1);
+        p.rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let values = p.values[i * width..(i + 1) * width]
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect();
+                (
+                    r.line,
+                    r.run,
+                    r.step,
+                    r.time.map(f64::to_bits),
+                    r.logged,
+                    values,
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn plain_rows_are_read_as_the_csv_crate_reads_them() {
+        let header =
+            "run,step,time,truth_0,truth_1,estimate_0,estimate_1,covariance_0_0,covariance_1_1\n";
+        let plan = plan_of(header);
+        let plain = [
+            "0,0,0.5,1,2,3,4,5,6\n",
+            "0, 1 ,1.5,\t-0, +1.5 ,.5,5.,1e5,1E-300\n",
+            "0,2,2.5,0.30000000000000004,123456789012345678901234,,,4.9e-324,2.2250738585072014e-308\n",
+            "1,0,,1.7976931348623157e308,-2.5e-3,0.1000000000000000055511151231257827021181583404541015625,7,8,9",
+        ];
+        let block = plain.concat();
+        let fast = plan
+            .parse_plain(block.as_bytes(), 2)
+            .expect("a plain block");
+        let slow = plan.parse(block.as_bytes(), 2).unwrap();
+        assert_eq!(bits(&fast), bits(&slow));
+        assert_eq!(fast.rows.len(), 4);
+        assert!(!fast.rows[2].logged[1] && fast.rows[2].logged[0]);
+        // Blocks left to the csv crate: it reads them, or reports their error.
+        for odd in [
+            "0,0,\"0.5\",1,2,3,4,5,6\n",
+            "0,0,0.5,1,2,3,4,5,6\r\n",
+            "0,0,0.5,1,2,3,4,5,6\n\n0,1,0.5,1,2,3,4,5,6\n",
+            "0,0,0.5,inf,2,3,4,5,6\n",
+            "0,0,0.5,NaN,2,3,4,5,6\n",
+            "0,0,0.5,1e400,2,3,4,5,6\n",
+            "0,0,0.5,1.5x,2,3,4,5,6\n",
+            "0,0,0.5,1 2,2,3,4,5,6\n",
+            "0,0,0.5,1,2,3,4,5\n",
+            "0,0,0.5,1,2,3,4,5,6,7\n",
+            "0,0,0.5,1,2,3,,5,6\n",
+            "+0,0,0.5,1,2,3,4,5,6\n",
+            "0,,0.5,1,2,3,4,5,6\n",
+            "0,0,0.5,1,2,3,4,5,6\r0,1,0.5,1,2,3,4,5,6\n",
+            "0,0,0.5,1,2,3,4,5,\u{a0}6\n",
+        ] {
+            assert!(plan.parse_plain(odd.as_bytes(), 2).is_none(), "{odd:?}");
+        }
+    }
 }

@@ -118,9 +118,10 @@ impl LogFormat {
     }
 }
 
-/// Evaluates the log `path` in the format its extension names: a CSV file streams through
-/// the evaluation row by row; JSON and NPZ logs are read whole into a `FilterLog` (their
-/// arrays are stored whole in the file).
+/// Evaluates the log `path` in the format its extension names: every format streams through
+/// the evaluation, a CSV file row by row, NPZ and JSON logs run by run with their arrays read
+/// side by side; a JSON log outside the layout the streaming reader takes (or one with an
+/// error, whose message names the line and column or the array and index) is read whole.
 ///
 /// # Errors
 /// An [`Error`] naming the file and where in it the input is at fault, or what the
@@ -130,6 +131,10 @@ pub fn evaluate_log(path: &Path, evaluation: &Evaluation) -> Result<Report, Erro
     match LogFormat::of(path)? {
         LogFormat::Csv => crate::csv_log::evaluate(path, evaluation),
         LogFormat::Json => {
+            let source = || std::fs::File::open(path);
+            if let Ok(report) = crate::json_stream::evaluate(&source, evaluation) {
+                return Ok(report);
+            }
             let bytes = std::fs::read(path).map_err(|e| Error::read(path, e))?;
             evaluate_json(path, &bytes, evaluation)
         }
@@ -153,12 +158,22 @@ pub fn evaluate_bytes(
 ) -> Result<Report, Error> {
     match format {
         LogFormat::Csv => crate::csv_log::evaluate_bytes(name, bytes, evaluation),
-        LogFormat::Json => evaluate_json(name, bytes, evaluation),
+        LogFormat::Json => {
+            let source = || Ok(std::io::Cursor::new(bytes));
+            match crate::json_stream::evaluate(&source, evaluation) {
+                Ok(report) => Ok(report),
+                Err(_) => evaluate_json(name, bytes, evaluation),
+            }
+        }
         LogFormat::Npz => crate::npz_log::evaluate_bytes(name, bytes, evaluation),
     }
 }
 
-fn evaluate_json(path: &Path, bytes: &[u8], evaluation: &Evaluation) -> Result<Report, Error> {
+pub(crate) fn evaluate_json(
+    path: &Path,
+    bytes: &[u8],
+    evaluation: &Evaluation,
+) -> Result<Report, Error> {
     let log = crate::json_log::read(path, bytes)?
         .checked()
         .map_err(|e| e.in_file(path))?;

@@ -85,26 +85,57 @@ pub(crate) fn read(file: &Path, bytes: &[u8]) -> Result<RawLog<'static>, Error> 
             .map_err(fail)?;
     }
     let (runs, steps) = log.require_cells().map_err(fail)?;
-    if let Some(v) = map.get("time") {
-        let times = numbers("time", v, &mut vec![]).map_err(fail)?;
-        log.time = Some(times);
-    }
-    let present: Vec<&str> = MODEL
-        .iter()
-        .copied()
-        .filter(|m| map.contains_key(*m))
-        .collect();
-    if model_given(&present).map_err(fail)? {
-        let mut model = Vec::with_capacity(4);
-        for array in MODEL {
-            model.push(model_array(array, &map[array], runs, steps).map_err(fail)?);
-        }
-        let [f, h, q, r]: [ModelArray; 4] = model
-            .try_into()
-            .map_err(|_| fail(Error::log("arrays F, H, Q and R")))?;
-        log.model = Some([f, h, q, r]);
-    }
+    (log.time, log.model) = time_and_model(|name| map.get(name), runs, steps).map_err(fail)?;
     Ok(log)
+}
+
+/// The times and the model `F`, `H`, `Q`, `R` of a log, each if given.
+pub(crate) type TimeAndModel = (Option<Vec<f64>>, Option<[ModelArray; 4]>);
+
+/// The arrays read whole whatever the log's size, `time` and the model `F`, `H`, `Q`, `R`,
+/// from the top-level object's values (`get` by name), for a log of `runs x steps` cells.
+fn time_and_model<'v>(
+    get: impl Fn(&str) -> Option<&'v Value>,
+    runs: usize,
+    steps: usize,
+) -> Result<TimeAndModel, Error> {
+    let time = match get("time") {
+        Some(v) => Some(numbers("time", v, &mut vec![])?),
+        None => None,
+    };
+    let present: Vec<&str> = MODEL.iter().copied().filter(|m| get(m).is_some()).collect();
+    if !model_given(&present)? {
+        return Ok((time, None));
+    }
+    let mut model = Vec::with_capacity(4);
+    for array in MODEL {
+        let v = get(array).ok_or_else(|| Error::log("arrays F, H, Q and R"))?;
+        model.push(model_array(array, v, runs, steps)?);
+    }
+    let [f, h, q, r]: [ModelArray; 4] = model
+        .try_into()
+        .map_err(|_| Error::log("arrays F, H, Q and R"))?;
+    Ok((time, Some([f, h, q, r])))
+}
+
+/// The small arrays of a streamed log (`json_stream`): each array's name and the text of its
+/// value, read with the rules of [`read`].
+pub(crate) fn small_arrays(
+    texts: &[(&'static str, Vec<u8>)],
+    runs: usize,
+    steps: usize,
+) -> Result<TimeAndModel, Error> {
+    let mut values = Vec::with_capacity(texts.len());
+    for (name, text) in texts {
+        let text = python_floats(text).map_err(|(_, _, s)| Error::log(s))?;
+        let value: Value = serde_json::from_slice(&text).map_err(|e| Error::log(e.to_string()))?;
+        values.push((*name, value));
+    }
+    time_and_model(
+        |name| values.iter().find(|(n, _)| *n == name).map(|(_, v)| v),
+        runs,
+        steps,
+    )
 }
 
 /// One of Python's tokens for a float JSON has no word for, and the stand-in it is read as.

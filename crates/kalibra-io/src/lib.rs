@@ -26,7 +26,8 @@
 //! * [`finite`]: finding a non-finite number inside a report.
 //! * `raw`: the arrays' names, cells and shapes as the readers produce them, and the rules
 //!   all array formats share; `csv_rows`: the CSV header and rows both commands read.
-//! * One module per format: `arrays` (numpy-shaped arrays in memory), `json_log`, `npz_log`
+//! * One module per format: `arrays` (numpy-shaped arrays in memory), `json_log` (read
+//!   whole) and `json_stream` (streamed, handing `json_log` what it does not take), `npz_log`
 //!   (streamed), `csv_log` (streamed), and [`tune_input`] (MODEL.toml and the measurement
 //!   and truth CSVs of `kalibra tune`).
 //! * [`input`]: the format by extension, dispatching to the readers.
@@ -49,9 +50,13 @@ pub mod finite;
 pub mod fuzzing;
 pub mod input;
 mod json_log;
+mod json_stream;
 mod npz_log;
 pub mod output;
 mod raw;
+mod stage_times;
+#[doc(hidden)]
+pub mod stages;
 mod tune_document;
 pub mod tune_input;
 

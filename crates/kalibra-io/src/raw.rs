@@ -119,7 +119,7 @@ impl ModelArray {
         })
     }
 
-    fn matrices(self) -> Matrices<'static> {
+    pub(crate) fn matrices(self) -> Matrices<'static> {
         match self.scope {
             Scope::Constant => Matrices::constant(self.rows, self.cols, self.data),
             Scope::PerStep => Matrices::per_step(self.rows, self.cols, self.data),
