@@ -2,7 +2,7 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite,
-    check_finite, propagate, symmetrize,
+    check_finite, symmetrize,
 };
 use std::sync::Arc;
 
@@ -186,15 +186,7 @@ where
             cov += d * d.transpose() * w.other;
         }
         symmetrize(&mut cov);
-        let (propagated, noise) = if self.core.is_prior() {
-            let (_, old_noise) = self.core.prior_split();
-            let carried_noise = propagate(&f, old_noise);
-            (&cov - &carried_noise, carried_noise + q)
-        } else {
-            (cov, q)
-        };
-        self.core
-            .predict_split::<false>(mean, f, propagated, noise)?;
+        self.core.predict_unscented(mean, f, cov, q)?;
         self.factor = predicted;
         Ok(())
     }

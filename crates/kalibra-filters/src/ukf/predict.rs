@@ -1,8 +1,6 @@
 //! The scalar UKF's unscented prediction: the posterior's sigma points through `f_k`.
 
-use kalibra_linalg::{
-    Alloc, DefaultAllocator, Dim, add_scatter, propagate, sigma_sqrt, symmetrize,
-};
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, add_scatter, sigma_sqrt, symmetrize};
 use kalibra_models::{Dynamics, Measurement};
 
 use super::Ukf;
@@ -54,16 +52,6 @@ where
         check_model_output("transition Jacobian F", &f, (n, n), k)?;
         let q = self.dynamics.noise_cov(k);
         check_model_output("process noise covariance Q", &q, (n, n), k)?;
-        let (propagated, noise) = if self.core.is_prior() {
-            // A second prediction without an update: carry the split through the Jacobian and
-            // count what the unscented transform adds beyond it as propagated, so the parts
-            // still sum to the unscented prior (and equal the KF's split for linear f).
-            let (_, old_noise) = self.core.prior_split();
-            let carried_noise = propagate(&f, old_noise);
-            (&cov - &carried_noise, carried_noise + q)
-        } else {
-            (cov, q)
-        };
-        self.core.predict_split::<false>(mean, f, propagated, noise)
+        self.core.predict_unscented(mean, f, cov, q)
     }
 }
