@@ -349,7 +349,7 @@ impl KalmanFilter {
 impl KalmanFilter {
     #[new]
     #[pyo3(signature = (F, H, Q, R, x0, P0, start="predict_first", form="standard"))]
-    #[allow(non_snake_case)]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         F: &Bound<'_, PyAny>,
         H: &Bound<'_, PyAny>,

@@ -148,13 +148,16 @@ where
 pub(crate) const SQRT_AS_GIVEN: &str =
     "a square-root filter with an as-given initial covariance (it needs a factor)";
 
+/// A square-root filter's factor and QR work array.
+pub(crate) type FactorAndScratch<N> = (OMatrix<f64, N, N>, Vec<f64>);
+
 /// A square-root filter's initial factor, from its checked core (Cholesky's, or for a
 /// singular covariance the pivoted semi-definite factor made triangular), and a QR work array
 /// of `scratch_len` entries.
 pub(crate) fn initial_factor<N: Dim, M: Dim>(
     core: &KalmanCore<N, M>,
     scratch_len: usize,
-) -> Result<(OMatrix<f64, N, N>, Vec<f64>), FilterError>
+) -> Result<FactorAndScratch<N>, FilterError>
 where
     DefaultAllocator: Alloc<N, M>,
 {

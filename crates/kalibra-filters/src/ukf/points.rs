@@ -12,6 +12,9 @@ use super::{SigmaSpace, SigmaWeights};
 use crate::FilterError;
 use crate::core::check_model_output;
 
+/// A mean of sigma points and the central point's deviation from it.
+pub(crate) type Centred<D> = (OVector<f64, D>, OVector<f64, D>);
+
 /// The central point `f(x)`, returned, and the `2n` outer points `f(x +- spread L_j)` written
 /// to `out` (`out[j]` the plus point, `out[n + j]` the minus point). Every answer of the model
 /// is checked as it comes (a `Dyn` model may return any length), before a sum mixes it with
@@ -69,7 +72,7 @@ pub(crate) fn space_deviations<N: Dim>(
     x0: OVector<f64, N>,
     points: &mut [OVector<f64, N>],
     w: &SigmaWeights,
-) -> Result<(OVector<f64, N>, OVector<f64, N>), FilterError>
+) -> Result<Centred<N>, FilterError>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -121,7 +124,7 @@ pub(crate) fn measure<N: Dim, M: Dim, H: Measurement<N, M>>(
     z0: &OVector<f64, M>,
     mean: Option<&dyn SigmaSpace<M>>,
     out: &mut [OVector<f64, M>],
-) -> Result<(OVector<f64, M>, OVector<f64, M>), FilterError>
+) -> Result<Centred<M>, FilterError>
 where
     DefaultAllocator: Alloc<N, M>,
 {
