@@ -4,8 +4,7 @@ use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
 use kalibra_models::{Dynamics, Measurement};
 
 use crate::core::KalmanCore;
-use crate::core::reject_as_given;
-use crate::kalman::{jacobian_predict, measurement_update};
+use crate::kalman::{checked_core, jacobian_predict, measurement_update};
 use crate::{Filter, FilterError, FilterOptions, StepRecord, steady_state};
 
 /// The constant-gain Kalman filter: the [`Ekf`](crate::Ekf)'s prediction and innovation with a
@@ -85,17 +84,13 @@ where
         gain: OMatrix<f64, N, M>,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
-        reject_as_given(
-            &options,
-            "the constant-gain KF with an as-given initial covariance",
-        )?;
-        crate::kalman::check_model_sizes(&dynamics, &measurement)?;
-        let mut core = KalmanCore::new(
-            dynamics.state_dim(),
-            measurement.meas_dim(),
+        let mut core = checked_core(
+            &dynamics,
+            &measurement,
             x0,
             p0,
             options,
+            Some("the constant-gain KF with an as-given initial covariance"),
         )?;
         core.accept_fixed_gain(&gain)?;
         Ok(Self {

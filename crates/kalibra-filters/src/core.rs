@@ -331,6 +331,29 @@ where
         Ok(())
     }
 
+    /// Predicts from step `k` to `k + 1` with an unscented prior covariance `cov` (symmetric),
+    /// recording the Jacobian `f` and the process noise `q`. After an update the whole of `cov`
+    /// less `q` counts as propagated; at a second prediction without an update the old noise
+    /// part is carried through the Jacobian and what the unscented transform adds beyond it
+    /// counts as propagated, so the parts still sum to the unscented prior (and equal the
+    /// KF's split for linear `f`).
+    pub(crate) fn predict_unscented(
+        &mut self,
+        mean: OVector<f64, N>,
+        f: OMatrix<f64, N, N>,
+        cov: OMatrix<f64, N, N>,
+        q: OMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        let (propagated, noise) = if self.is_prior() {
+            let (_, old_noise) = self.prior_split();
+            let carried_noise = propagate(&f, old_noise);
+            (&cov - &carried_noise, carried_noise + q)
+        } else {
+            (cov, q)
+        };
+        self.predict_split::<false>(mean, f, propagated, noise)
+    }
+
     /// The prior of an update at the current step: the prediction, or, after an update with
     /// no prediction since (a filter that starts by updating), the current posterior. Nothing
     /// changes until the update succeeds ([`KalmanCore::begin_record`]), so a failed update

@@ -141,14 +141,7 @@ macro_rules! constructors {
                 p0: OMatrix<f64, N, N>,
                 options: FilterOptions,
             ) -> Result<Self, FilterError> {
-                check_model_sizes(&dynamics, &measurement)?;
-                let core = KalmanCore::new(
-                    dynamics.state_dim(),
-                    measurement.meas_dim(),
-                    x0,
-                    p0,
-                    options,
-                )?;
+                let core = checked_core(&dynamics, &measurement, x0, p0, options, None)?;
                 Ok(Self {
                     dynamics,
                     measurement,
@@ -194,6 +187,35 @@ where
         }
         _ => Ok(()),
     }
+}
+
+/// The construction every Kalman-type filter shares, so that all check the same things in
+/// the same order: [`InitialCheck::AsGiven`] refused with `refuse_as_given`'s wording (`None`
+/// for the filters with an as-given form, whose public constructors decide), the models'
+/// sizes ([`check_model_sizes`]), then the initial estimate's sizes, finiteness and the
+/// options' initial check (the core's).
+pub(crate) fn checked_core<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
+    dynamics: &D,
+    measurement: &H,
+    x0: OVector<f64, N>,
+    p0: OMatrix<f64, N, N>,
+    options: FilterOptions,
+    refuse_as_given: Option<&'static str>,
+) -> Result<KalmanCore<N, M>, FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    if let Some(what) = refuse_as_given {
+        reject_as_given(&options, what)?;
+    }
+    check_model_sizes(dynamics, measurement)?;
+    KalmanCore::new(
+        dynamics.state_dim(),
+        measurement.meas_dim(),
+        x0,
+        p0,
+        options,
+    )
 }
 
 /// The update shared by the KF and the EKF; they differ only in where `H_k` comes from.

@@ -142,9 +142,14 @@ where
         p0: OMatrix<f64, N, N>,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
-        crate::core::reject_as_given(&options, "the SRF with an as-given initial covariance")?;
-        crate::kalman::check_model_sizes(&dynamics, &bearing)?;
-        let core = KalmanCore::new(dynamics.state_dim(), U1, x0, p0, options)?;
+        let core = crate::kalman::checked_core(
+            &dynamics,
+            &bearing,
+            x0,
+            p0,
+            options,
+            Some("the SRF with an as-given initial covariance"),
+        )?;
         Ok(Self {
             dynamics,
             bearing,

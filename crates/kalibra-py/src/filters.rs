@@ -3,7 +3,10 @@
 //! whose functions are Python callables, see `callbacks`).
 
 use kalibra_filters::smooth::Smoothable;
-use kalibra_filters::{Ekf, Filter, KappaCriterion, KappaGrid, Kf, SigmaSet, Start, Ukf};
+use kalibra_filters::{
+    Ekf, Filter, FilterError, KappaCriterion, KappaGrid, Kf, SigmaSet, SigmaSpace, SqrtKf, SqrtUkf,
+    Start, StepRecord, Ukf,
+};
 use kalibra_linalg::{DMatrix, DVector, Dyn};
 use kalibra_models::{LinearGaussian, LinearObservation};
 use pyo3::prelude::*;
@@ -120,7 +123,7 @@ pub(crate) fn run_filter<F: Filter<Dyn, Dyn>>(
     zs: &[Option<DVector<f64>>],
     start: Start,
     mut after: impl FnMut(&F, bool, &mut Outputs),
-) -> Result<Outputs, kalibra_filters::FilterError> {
+) -> Result<Outputs, FilterError> {
     let mut out = Outputs::default();
     for (i, z) in zs.iter().enumerate() {
         if i > 0 || start == Start::PredictFirst {
@@ -198,6 +201,84 @@ fn run_error(batch: bool, r: usize, e: impl std::fmt::Display) -> PyErr {
     error(format!("argument measurements:{run} {e}"))
 }
 
+/// Which algebra a filter runs: the covariance (`"standard"`) or a Cholesky factor of it
+/// (`"square_root"`, kalibra's `SqrtKf` and `SqrtUkf`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Form {
+    Standard,
+    SquareRoot,
+}
+
+fn form_of(form: &str) -> PyResult<Form> {
+    match form {
+        "standard" => Ok(Form::Standard),
+        "square_root" => Ok(Form::SquareRoot),
+        other => Err(error(format!(
+            "argument form is {other:?}; expected \"standard\" or \"square_root\""
+        ))),
+    }
+}
+
+/// A filter of either form, so that `run` and `smooth` drive one value whatever the form.
+enum EitherForm<A, B> {
+    Standard(A),
+    SquareRoot(B),
+}
+
+impl<A: Smoothable<Dyn, Dyn>, B: Smoothable<Dyn, Dyn>> Filter<Dyn, Dyn> for EitherForm<A, B> {
+    fn step_index(&self) -> usize {
+        match self {
+            Self::Standard(f) => f.step_index(),
+            Self::SquareRoot(f) => f.step_index(),
+        }
+    }
+    fn mean(&self) -> &DVector<f64> {
+        match self {
+            Self::Standard(f) => f.mean(),
+            Self::SquareRoot(f) => f.mean(),
+        }
+    }
+    fn covariance(&self) -> &DMatrix<f64> {
+        match self {
+            Self::Standard(f) => f.covariance(),
+            Self::SquareRoot(f) => f.covariance(),
+        }
+    }
+    fn predict(&mut self) -> Result<(), FilterError> {
+        match self {
+            Self::Standard(f) => f.predict(),
+            Self::SquareRoot(f) => f.predict(),
+        }
+    }
+    fn update(&mut self, z: &DVector<f64>) -> Result<&StepRecord<Dyn, Dyn>, FilterError> {
+        match self {
+            Self::Standard(f) => f.update(z),
+            Self::SquareRoot(f) => f.update(z),
+        }
+    }
+    fn last_record(&self) -> Option<&StepRecord<Dyn, Dyn>> {
+        match self {
+            Self::Standard(f) => f.last_record(),
+            Self::SquareRoot(f) => f.last_record(),
+        }
+    }
+}
+
+impl<A: Smoothable<Dyn, Dyn>, B: Smoothable<Dyn, Dyn>> Smoothable<Dyn, Dyn> for EitherForm<A, B> {
+    fn predict_with_cross(&mut self) -> Result<DMatrix<f64>, FilterError> {
+        match self {
+            Self::Standard(f) => f.predict_with_cross(),
+            Self::SquareRoot(f) => f.predict_with_cross(),
+        }
+    }
+    fn smoother_space(&self) -> Option<std::sync::Arc<dyn SigmaSpace<Dyn>>> {
+        match self {
+            Self::Standard(f) => f.smoother_space(),
+            Self::SquareRoot(f) => f.smoother_space(),
+        }
+    }
+}
+
 /// The linear Kalman filter `x_k = F x_{k-1} + w`, `z_k = H x_k + v`, `w ~ N(0, Q)`,
 /// `v ~ N(0, R)`, run in Rust (kalibra's `Kf`: Joseph-form update, the gain by a Cholesky solve
 /// with S, every covariance symmetrised).
@@ -212,10 +293,15 @@ fn run_error(batch: bool, r: usize, e: impl std::fmt::Display) -> PyErr {
 ///     start: "predict_first" (default, FilterPy's order: x0 is one step before the first
 ///         measurement, so each row is predict then update) or "update_first" (x0 is the prior
 ///         at the first measurement).
+///     form: "standard" (default) or "square_root": kalibra's `SqrtKf`, which carries a
+///         Cholesky factor of the covariance (QR prediction, array-form update) and stays
+///         positive definite where the standard form's covariance stops being so (a
+///         near-perfect measurement against a large prior). The same outputs; `smooth` runs
+///         the RTS smoother over the covariances the factors stand for.
 ///
 /// Raises:
 ///     KalibraError: a wrong shape (naming the argument), a non-finite matrix, a Q, R or P0 that
-///         is not symmetric positive semi-definite.
+///         is not symmetric positive semi-definite, an unknown form.
 ///
 /// Example:
 ///     >>> import numpy as np, kalibra
@@ -234,15 +320,36 @@ pub struct KalmanFilter {
     x0: DVector<f64>,
     p0: DMatrix<f64>,
     start: Start,
+    form: Form,
     n: usize,
     m: usize,
+}
+
+/// The filter of a `KalmanFilter`, of either form.
+type AnyKf<'a> = EitherForm<
+    Kf<Dyn, Dyn, &'a LinearGaussian<Dyn>, &'a LinearObservation<Dyn, Dyn>>,
+    SqrtKf<Dyn, Dyn, &'a LinearGaussian<Dyn>, &'a LinearObservation<Dyn, Dyn>>,
+>;
+
+impl KalmanFilter {
+    /// The filter at (x0, P0): the one construction `new` (to check x0 and P0), `run` and
+    /// `smooth` go through.
+    fn build(&self) -> Result<AnyKf<'_>, FilterError> {
+        let (x0, p0) = (self.x0.clone(), self.p0.clone());
+        Ok(match self.form {
+            Form::Standard => EitherForm::Standard(Kf::new(&self.dynamics, &self.sensor, x0, p0)?),
+            Form::SquareRoot => {
+                EitherForm::SquareRoot(SqrtKf::new(&self.dynamics, &self.sensor, x0, p0)?)
+            }
+        })
+    }
 }
 
 #[pymethods]
 impl KalmanFilter {
     #[new]
-    #[pyo3(signature = (F, H, Q, R, x0, P0, start="predict_first"))]
-    #[allow(non_snake_case)]
+    #[pyo3(signature = (F, H, Q, R, x0, P0, start="predict_first", form="standard"))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         F: &Bound<'_, PyAny>,
         H: &Bound<'_, PyAny>,
@@ -251,6 +358,7 @@ impl KalmanFilter {
         x0: &Bound<'_, PyAny>,
         P0: &Bound<'_, PyAny>,
         start: &str,
+        form: &str,
     ) -> PyResult<Self> {
         let x0 = initial_mean(x0)?;
         let n = x0.len();
@@ -269,21 +377,25 @@ impl KalmanFilter {
         let r = matrix(R, "R", m, m)?;
         let p0 = matrix(P0, "P0", n, n)?;
         let start = start_of(start)?;
+        let form = form_of(form)?;
         let model = |e: kalibra_models::ModelError| error(e.to_string());
         let dynamics = LinearGaussian::new(f, q).map_err(model)?;
         let sensor = LinearObservation::new(h, r).map_err(model)?;
-        // Checks x0 and P0 once, here, so that a bad one is an error of the constructor.
-        Kf::new(&dynamics, &sensor, x0.clone(), p0.clone())
-            .map_err(|e| error(format!("arguments x0, P0: {e}")))?;
-        Ok(Self {
+        let filter = Self {
             dynamics,
             sensor,
             x0,
             p0,
             start,
+            form,
             n,
             m,
-        })
+        };
+        // Checks x0 and P0 once, here, so that a bad one is an error of the constructor.
+        filter
+            .build()
+            .map_err(|e| error(format!("arguments x0, P0: {e}")))?;
+        Ok(filter)
     }
 
     /// The state dimension n.
@@ -332,13 +444,7 @@ impl KalmanFilter {
         let one = |r: usize| -> PyResult<Outputs> {
             let zs = rows(&z.data[r * size..(r + 1) * size], self.m)
                 .map_err(|e| run_error(batch, r, e))?;
-            let mut kf = Kf::new(
-                &self.dynamics,
-                &self.sensor,
-                self.x0.clone(),
-                self.p0.clone(),
-            )
-            .map_err(|e| error(e.to_string()))?;
+            let mut kf = self.build().map_err(|e| error(e.to_string()))?;
             run_filter(&mut kf, &zs, self.start, |_, _, _| {})
                 .map_err(|e| run_error(batch, r, format!("{e} (x0 is step 0)")))
         };
@@ -361,8 +467,8 @@ impl KalmanFilter {
 
     fn __repr__(&self) -> String {
         format!(
-            "<kalibra.KalmanFilter n={} m={} start={:?}>",
-            self.n, self.m, self.start
+            "<kalibra.KalmanFilter n={} m={} start={:?} form={:?}>",
+            self.n, self.m, self.start, self.form
         )
     }
 
@@ -401,13 +507,7 @@ impl KalmanFilter {
             .map(|r| {
                 let zs = rows(&z.data[r * size..(r + 1) * size], self.m)
                     .map_err(|e| run_error(batch, r, e))?;
-                let mut kf = Kf::new(
-                    &self.dynamics,
-                    &self.sensor,
-                    self.x0.clone(),
-                    self.p0.clone(),
-                )
-                .map_err(|e| error(e.to_string()))?;
+                let mut kf = self.build().map_err(|e| error(e.to_string()))?;
                 smooth_rows(&mut kf, &zs, self.start)
                     .map_err(|e| run_error(batch, r, format!("{e} (x0 is step 0)")))
             })
@@ -509,10 +609,7 @@ impl CallbackModel {
         &self,
         py: Python<'_>,
         measurements: &Bound<'_, PyAny>,
-        run_one: impl Fn(
-            &Failure,
-            &[Option<DVector<f64>>],
-        ) -> Result<Outputs, kalibra_filters::FilterError>,
+        run_one: impl Fn(&Failure, &[Option<DVector<f64>>]) -> Result<Outputs, FilterError>,
     ) -> PyResult<(Vec<Outputs>, (usize, usize, bool))> {
         let m = self.r.nrows();
         let z = read(measurements, "measurements")?;
@@ -543,10 +640,7 @@ impl CallbackModel {
         &self,
         py: Python<'py>,
         measurements: &Bound<'py, PyAny>,
-        run_one: impl Fn(
-            &Failure,
-            &[Option<DVector<f64>>],
-        ) -> Result<Outputs, kalibra_filters::FilterError>,
+        run_one: impl Fn(&Failure, &[Option<DVector<f64>>]) -> Result<Outputs, FilterError>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (outputs, layout) = self.run_outputs(py, measurements, run_one)?;
         outputs_dict(py, &outputs, layout, (self.x0.len(), self.r.nrows()))
@@ -717,6 +811,9 @@ impl ExtendedKalmanFilter {
 ///         update) or "maximum_posterior", choosing kappa from kappa_grid at every update.
 ///     kappa_grid: the candidate values (required with adaptive_kappa).
 ///     residual: residual(z, zhat) -> (m,) for angles; start: as for KalmanFilter.
+///     form: "standard" (default) or "square_root" (kalibra's `SqrtUkf`: the same points from
+///         a Cholesky factor carried by QR factorisations, positive definite where the
+///         standard form's covariance stops being so); "square_root" has no adaptive kappa.
 ///
 /// Returns of run: the arrays of `KalmanFilter.run`, and "kappa" (K,): the kappa of each
 /// update (NaN without a measurement).
@@ -736,6 +833,23 @@ pub struct UnscentedKalmanFilter {
     model: CallbackModel,
     set: SigmaSet,
     adaptive: Option<(KappaCriterion, KappaGrid)>,
+    form: Form,
+}
+
+/// The filter of an `UnscentedKalmanFilter`, of either form.
+type AnyUkf<'a> = EitherForm<
+    Ukf<Dyn, Dyn, PyDynamics<'a>, PyMeasurement<'a>>,
+    SqrtUkf<Dyn, Dyn, PyDynamics<'a>, PyMeasurement<'a>>,
+>;
+
+impl AnyUkf<'_> {
+    /// The kappa of the last update (the square-root UKF's is its set's).
+    fn last_kappa(&self) -> Option<f64> {
+        match self {
+            Self::Standard(ukf) => ukf.last_kappa(),
+            Self::SquareRoot(ukf) => Some(ukf.sigma_set().kappa()),
+        }
+    }
 }
 
 impl UnscentedKalmanFilter {
@@ -743,19 +857,23 @@ impl UnscentedKalmanFilter {
         &self,
         model: &'a CallbackModel,
         failure: &'a Failure,
-    ) -> Result<Ukf<Dyn, Dyn, PyDynamics<'a>, PyMeasurement<'a>>, kalibra_filters::FilterError>
-    {
-        let ukf = Ukf::new(
-            model.dynamics(failure),
-            model.measurement(failure),
-            model.x0.clone(),
-            model.p0.clone(),
-            self.set,
-        )?;
-        match &self.adaptive {
-            Some((criterion, grid)) => ukf.with_adaptive_kappa(*criterion, grid.clone()),
-            None => Ok(ukf),
+    ) -> Result<AnyUkf<'a>, FilterError> {
+        let (dynamics, measurement) = (model.dynamics(failure), model.measurement(failure));
+        let (x0, p0) = (model.x0.clone(), model.p0.clone());
+        if self.form == Form::SquareRoot {
+            return Ok(EitherForm::SquareRoot(SqrtUkf::new(
+                dynamics,
+                measurement,
+                x0,
+                p0,
+                self.set,
+            )?));
         }
+        let ukf = Ukf::new(dynamics, measurement, x0, p0, self.set)?;
+        Ok(EitherForm::Standard(match &self.adaptive {
+            Some((criterion, grid)) => ukf.with_adaptive_kappa(*criterion, grid.clone())?,
+            None => ukf,
+        }))
     }
 }
 
@@ -764,7 +882,8 @@ impl UnscentedKalmanFilter {
     #[new]
     #[pyo3(signature = (
         f, h, Q, R, x0, P0, *, points="symmetric", kappa=None, alpha=1.0, beta=2.0,
-        adaptive_kappa=None, kappa_grid=None, residual=None, start="predict_first"
+        adaptive_kappa=None, kappa_grid=None, residual=None, start="predict_first",
+        form="standard"
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -782,7 +901,9 @@ impl UnscentedKalmanFilter {
         kappa_grid: Option<Vec<f64>>,
         residual: Option<&Bound<'_, PyAny>>,
         start: &str,
+        form: &str,
     ) -> PyResult<Self> {
+        let form = form_of(form)?;
         let model = CallbackModel::new(
             [
                 ("f", Some(f)),
@@ -814,7 +935,7 @@ impl UnscentedKalmanFilter {
                 )));
             }
         };
-        let invalid = |e: kalibra_filters::FilterError| error(e.to_string());
+        let invalid = |e: FilterError| error(e.to_string());
         let adaptive = match (adaptive_kappa, kappa_grid) {
             (None, None) => None,
             (None, Some(_)) => {
@@ -842,10 +963,17 @@ impl UnscentedKalmanFilter {
                 Some((criterion, KappaGrid::new(grid).map_err(invalid)?))
             }
         };
+        if form == Form::SquareRoot && adaptive.is_some() {
+            return Err(error(
+                "argument form \"square_root\" has no adaptive kappa (adaptive_kappa must be \
+                 None with it)",
+            ));
+        }
         let filter = Self {
             model,
             set,
             adaptive,
+            form,
         };
         let failure = Failure::default();
         filter
@@ -874,10 +1002,11 @@ impl UnscentedKalmanFilter {
 
     fn __repr__(&self) -> String {
         format!(
-            "<kalibra.UnscentedKalmanFilter n={} m={} {:?}>",
+            "<kalibra.UnscentedKalmanFilter n={} m={} {:?} form={:?}>",
             self.model.x0.len(),
             self.model.r.nrows(),
-            self.set
+            self.set,
+            self.form
         )
     }
 
@@ -905,7 +1034,7 @@ fn smooth_rows<F: Smoothable<Dyn, Dyn>>(
     filter: &mut F,
     zs: &[Option<DVector<f64>>],
     start: Start,
-) -> Result<Outputs, kalibra_filters::FilterError> {
+) -> Result<Outputs, FilterError> {
     let smoothed = filter.smooth(zs.iter().map(Option::as_ref), start)?;
     let steps = smoothed.steps();
     let mut out = Outputs::default();

@@ -385,48 +385,52 @@ fn run_command(cmd: &mut Command) -> Result<()> {
     Ok(())
 }
 
-/// The virtual environment's Python with pandas and numpy, created and installed if needed;
-/// returns it and the versions of Python, numpy and pandas.
-pub(crate) fn python_env(dir: &Path) -> Result<(PathBuf, String)> {
+/// The packages of the eval bench's environment (W4's numpy script shares it).
+pub(crate) const PANDAS: &[(&str, &str)] = &[("numpy", "numpy"), ("pandas", "pandas")];
+
+/// The virtual environment `dir/venv` with `packages` (module to import, pip requirement),
+/// created and installed from PyPI if a module does not import; returns its Python and the
+/// versions of Python and of each module.
+pub(crate) fn python_env(dir: &Path, packages: &[(&str, &str)]) -> Result<(PathBuf, String)> {
     let venv = dir.join("venv");
     let python = venv.join("bin").join("python");
     if !python.exists() {
         println!("  creating the virtual environment {}", venv.display());
         run_command(Command::new("python3").args(["-m", "venv"]).arg(&venv)).context(
-            "creating the Python virtual environment (the eval bench needs python3 with its \
-             venv module)",
+            "creating the Python virtual environment (the bench needs python3 with its venv \
+             module)",
         )?;
     }
-    let versions = || {
-        Command::new(&python)
-            .args([
-                "-c",
-                "import sys, numpy, pandas; \
-                 print(f'Python {sys.version.split()[0]}, numpy {numpy.__version__}, \
-                 pandas {pandas.__version__}')",
-            ])
-            .output()
-    };
+    let modules: Vec<&str> = packages.iter().map(|(module, _)| *module).collect();
+    let requirements: Vec<&str> = packages.iter().map(|(_, pip)| *pip).collect();
+    let script = format!(
+        "import importlib, sys; print(', '.join(['Python ' + sys.version.split()[0]] + \
+         [m + ' ' + importlib.import_module(m).__version__ for m in {modules:?}]))"
+    );
+    let versions = || Command::new(&python).args(["-c", &script]).output();
     let mut out = versions().with_context(|| format!("starting {}", python.display()))?;
     if !out.status.success() {
         println!(
-            "  installing pandas and numpy from PyPI into {}",
+            "  installing {} from PyPI into {}",
+            requirements.join(", "),
             venv.display()
         );
-        run_command(Command::new(&python).args([
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "--disable-pip-version-check",
-            "pandas",
-            "numpy",
-        ]))
-        .with_context(|| format!("installing pandas and numpy into {}", venv.display()))?;
+        run_command(
+            Command::new(&python)
+                .args([
+                    "-m",
+                    "pip",
+                    "install",
+                    "--quiet",
+                    "--disable-pip-version-check",
+                ])
+                .args(&requirements),
+        )
+        .with_context(|| format!("installing {requirements:?} into {}", venv.display()))?;
         out = versions()?;
         ensure!(
             out.status.success(),
-            "pandas or numpy does not import after installing them: {}",
+            "{modules:?} do not import after installing them: {}",
             String::from_utf8_lossy(&out.stderr)
         );
     }
@@ -710,7 +714,7 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
     for format in FORMATS {
         ensure_log(size, format, &dir.join(size.file_name(format)))?;
     }
-    let (python, versions) = python_env(&dir)?;
+    let (python, versions) = python_env(&dir, PANDAS)?;
     let polars_version = ensure_polars(&python)?;
     let kalibra = build_kalibra(&root)?;
     println!(

@@ -1,7 +1,7 @@
 //! `cargo xtask bench`: the library against hand-written nalgebra loops, in one process, with
 //! the figures written as data.
 //!
-//! `cargo xtask bench [w1|w2|w3|w4|eval|shards|all] [--out DIR] [--runs N] [--steps N]
+//! `cargo xtask bench [w1|w2|w3|w4|eval|shards|smooth|all] [--out DIR] [--runs N] [--steps N]
 //! [--threads N] [--repeats N] [--seed N] [--sizes N,N,...] [--kernels] [--ukf] [--no-python]
 //! [--shard-runs N]`; one module per workload:
 //!
@@ -14,6 +14,8 @@
 //! * [`eval`]: the `kalibra` executable against a pandas + numpy script on generated logs;
 //!   it needs Python, PyPI and over a gigabyte of logs, so not part of `all`.
 //! * [`shards`]: W1 as 1, 2 and 4 shards against one process (`--shard-runs` runs).
+//! * [`smooth`]: the KF's RTS smoother on W1's model against a hand-written loop and FilterPy
+//!   (Python and PyPI unless `--no-python`), and the square-root KF's cost; not part of `all`.
 //!
 //! `all` runs W1, W2 and W3. Each workload prints its figures and collects them
 //! ([`figures::Figures`]); after it, they are written with their provenance to
@@ -23,6 +25,7 @@
 mod eval;
 mod figures;
 mod shards;
+mod smooth;
 mod timing;
 mod w1;
 mod w2;
@@ -61,6 +64,8 @@ enum Workloads {
     /// W1 cut into 1, 2 and 4 shards: slowest shard plus merge against one process
     /// (`--shard-runs` runs, default 10^5).
     Shards,
+    /// The KF's RTS smoother on W1's model: library, hand-written loop and FilterPy.
+    Smooth,
 }
 
 /// `cargo xtask bench` arguments.
@@ -146,6 +151,7 @@ pub fn main(args: &Args) -> Result<()> {
             Workloads::W4 => w4::run(args)?,
             Workloads::Eval => eval::run(args)?,
             Workloads::Shards => shards::run(args)?,
+            Workloads::Smooth => smooth::run(args)?,
             Workloads::All => anyhow::bail!("`all` is expanded into its workloads above"),
         };
         let command = std::iter::once("cargo xtask".to_string())

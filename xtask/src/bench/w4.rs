@@ -399,7 +399,8 @@ fn numpy_times(
     sizes: &[usize],
     min_blocks: usize,
 ) -> Result<(Vec<(usize, f64)>, String)> {
-    let (python, versions) = super::eval::python_env(&root.join("target").join("bench-eval"))?;
+    let (python, versions) =
+        super::eval::python_env(&root.join("target").join("bench-eval"), super::eval::PANDAS)?;
     let script = root.join("xtask").join("bench").join("w4_numpy.py");
     let sizes: Vec<String> = sizes.iter().map(usize::to_string).collect();
     let out = Command::new(&python)

@@ -4,7 +4,9 @@
 //! # What is here
 //! * [`Smoothable`]: the filters a smoother runs over, [`Kf`](crate::Kf),
 //!   [`Ekf`](crate::Ekf) and [`Ukf`](crate::Ukf), with provided methods that run and smooth in
-//!   one call ([`Smoothable::smooth`], [`Smoothable::smooth_fixed_lag`]).
+//!   one call ([`Smoothable::smooth`], [`Smoothable::smooth_fixed_lag`]); the square-root
+//!   filters ([`SqrtKf`](crate::SqrtKf), [`SqrtUkf`](crate::SqrtUkf)) as the KF and the UKF,
+//!   over the covariances their factors stand for (the backward pass is the covariance form).
 //! * [`ForwardPass`]: a run stored for smoothing ([`Smoothable::forward`]), smoothed later
 //!   without the filter ([`ForwardPass::smooth`]) into [`Smoothed`] steps.
 //! * [`FixedLagSmoother`]: one measurement at a time, memory for `lag + 2` steps.

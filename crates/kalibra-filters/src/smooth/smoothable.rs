@@ -12,7 +12,8 @@ use crate::{Ekf, Filter, FilterError, Kf, SigmaSpace, Start};
 /// A [`Filter`] that a Rauch-Tung-Striebel smoother runs over: its prediction says, besides
 /// the prior, how the predicted state co-varies with the state before it.
 ///
-/// Implemented by [`Kf`] and [`Ekf`] (checked algebra) and [`crate::Ukf`]; the provided methods
+/// Implemented by [`Kf`] and [`Ekf`] (checked algebra), [`crate::Ukf`] and the square-root
+/// [`crate::SqrtKf`] and [`crate::SqrtUkf`]; the provided methods
 /// run the filter and smooth in one call.
 ///
 /// ```

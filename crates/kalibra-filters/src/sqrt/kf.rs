@@ -4,10 +4,10 @@ use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite,
     check_finite, symmetrize,
 };
-use kalibra_models::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
+use kalibra_models::{LinearDynamics, LinearMeasurement};
 
-use crate::core::{KalmanCore, UpdateParts, check_model_output, reject_as_given};
-use crate::kalman::{check_model_sizes, core_accessors};
+use crate::core::{KalmanCore, UpdateParts, check_model_output};
+use crate::kalman::{checked_core, core_accessors};
 use crate::sqrt::noise_root::NoiseRoot;
 use crate::sqrt::qr::{Array, lower_root, lower_root_of_sum};
 use crate::{Filter, FilterError, FilterOptions, StepRecord, UpdateForm};
@@ -107,14 +107,15 @@ where
         }
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
         let (nv, mv) = (n.value(), m.value());
-        let (core, factor, scratch) = start(
+        let core = checked_core(
             &dynamics,
             &measurement,
             x0,
             p0,
             options,
-            (nv + mv).pow(2).max(2 * nv * nv),
+            Some(SQRT_AS_GIVEN),
         )?;
+        let (factor, scratch) = initial_factor(&core, (nv + mv).pow(2).max(2 * nv * nv))?;
         Ok(Self {
             dynamics,
             measurement,
@@ -143,36 +144,28 @@ where
     }
 }
 
-/// A square-root filter's core, initial factor and QR work array.
-pub(crate) type Started<N, M> = (KalmanCore<N, M>, OMatrix<f64, N, N>, Vec<f64>);
+/// What a square-root filter refuses for an as-given initial covariance.
+pub(crate) const SQRT_AS_GIVEN: &str =
+    "a square-root filter with an as-given initial covariance (it needs a factor)";
 
-/// What both square-root filters build at construction: the models' sizes checked (as the
-/// standard filters check them), the core with the checked initial estimate, the initial
-/// factor (Cholesky's, or for a singular covariance the pivoted semi-definite factor made
-/// triangular), and a QR work array of `scratch_len` entries.
-pub(crate) fn start<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>>(
-    dynamics: &D,
-    measurement: &H,
-    x0: OVector<f64, N>,
-    p0: OMatrix<f64, N, N>,
-    options: FilterOptions,
+/// A square-root filter's factor and QR work array.
+pub(crate) type FactorAndScratch<N> = (OMatrix<f64, N, N>, Vec<f64>);
+
+/// A square-root filter's initial factor, from its checked core (Cholesky's, or for a
+/// singular covariance the pivoted semi-definite factor made triangular), and a QR work array
+/// of `scratch_len` entries.
+pub(crate) fn initial_factor<N: Dim, M: Dim>(
+    core: &KalmanCore<N, M>,
     scratch_len: usize,
-) -> Result<Started<N, M>, FilterError>
+) -> Result<FactorAndScratch<N>, FilterError>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    reject_as_given(
-        &options,
-        "a square-root filter with an as-given initial covariance (it needs a factor)",
-    )?;
-    check_model_sizes(dynamics, measurement)?;
-    let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
-    let core = KalmanCore::new(n, m, x0, p0, options)?;
     let (root, _) = kalibra_linalg::semidefinite_factor(core.cov(), "initial covariance")
         .map_err(FilterError::Initial)?;
     let mut scratch = vec![0.0; scratch_len];
     let factor = lower_root(&mut scratch, &root);
-    Ok((core, factor, scratch))
+    Ok((factor, scratch))
 }
 
 /// The square-root prediction `S- = tria([F S, sqrt(Q)])` for the mean `x_pred` already

@@ -1,8 +1,8 @@
 //! The square-root unscented Kalman filter (Van der Merwe and Wan, 2001).
 
 use kalibra_linalg::{
-    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, U1, all_finite,
-    check_finite, propagate, symmetrize,
+    Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite,
+    check_finite, symmetrize,
 };
 use std::sync::Arc;
 
@@ -11,9 +11,13 @@ use kalibra_models::{Dynamics, Measurement};
 use crate::core::{KalmanCore, UpdateParts, check_model_output};
 use crate::kalman::core_accessors;
 use crate::sqrt::cholupdate::rank_one;
-use crate::sqrt::kf::{factor_predict, start};
+use crate::sqrt::kf::{SQRT_AS_GIVEN, factor_predict, initial_factor};
 use crate::sqrt::noise_root::NoiseRoot;
 use crate::sqrt::qr::Array;
+use crate::ukf::points::{
+    cross_covariance, measure, plain_mean, residual, space_deviations, transform,
+};
+use crate::ukf::{Unscented, unscented_builders};
 use crate::{
     Filter, FilterError, FilterOptions, SigmaSet, SigmaSpace, SigmaWeights, StepRecord,
     UkfPrediction,
@@ -68,17 +72,11 @@ where
     core: KalmanCore<N, M>,
     /// Lower triangular, `factor factor^T` the current (prior or posterior) covariance.
     factor: OMatrix<f64, N, N>,
-    set: SigmaSet,
-    prediction: UkfPrediction,
+    sigma: Unscented<N, M>,
     q_root: NoiseRoot<N>,
     r_root: NoiseRoot<M>,
     /// The QR work array, sized at construction for the largest array, `(2n + n) x n`.
     scratch: Vec<f64>,
-    // The 2n transformed points (then their deviations), allocated once.
-    scratch_x: Vec<OVector<f64, N>>,
-    scratch_z: Vec<OVector<f64, M>>,
-    state_space: Option<Arc<dyn SigmaSpace<N>>>,
-    measurement_mean: Option<Arc<dyn SigmaSpace<M>>>,
 }
 
 impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> SqrtUkf<N, M, D, H>
@@ -117,133 +115,49 @@ where
     ) -> Result<Self, FilterError> {
         let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
         let (nv, mv) = (n.value(), m.value());
-        set.weights(nv)?;
+        let (core, sigma) =
+            Unscented::start(&dynamics, &measurement, x0, p0, set, options, SQRT_AS_GIVEN)?;
         // The largest QR array: the prediction's 3n x n, the update's (2n + m) x m and
         // (2n + m) x n, or the linearised prediction's 2n x n.
         let len = (3 * nv * nv).max((2 * nv + mv) * mv.max(nv));
-        let (core, factor, scratch) = start(&dynamics, &measurement, x0, p0, options, len)?;
+        let (factor, scratch) = initial_factor(&core, len)?;
         Ok(Self {
             dynamics,
             measurement,
             core,
             factor,
-            set,
-            prediction: UkfPrediction::default(),
+            sigma,
             q_root: NoiseRoot::new(n),
             r_root: NoiseRoot::new(m),
             scratch,
-            scratch_x: vec![OVector::<f64, N>::zeros_generic(n, U1); 2 * nv],
-            scratch_z: vec![OVector::<f64, M>::zeros_generic(m, U1); 2 * nv],
-            state_space: None,
-            measurement_mean: None,
         })
     }
 
-    /// The same filter with a non-Euclidean state space, as
-    /// [`Ukf::with_state_space`](crate::Ukf::with_state_space): the predicted mean and the
-    /// deviations the predicted factor is built from go through the space, and the updated
-    /// mean is normalised.
-    ///
-    /// # Errors
-    /// [`SigmaSpace::check`]'s error if the space does not fit the state dimension.
-    pub fn with_state_space(
-        mut self,
-        space: impl SigmaSpace<N> + 'static,
-    ) -> Result<Self, FilterError> {
-        space.check(self.dynamics.state_dim().value())?;
-        self.state_space = Some(Arc::new(space));
-        Ok(self)
-    }
-
-    /// The same filter forming the predicted measurement with `mean`, as
-    /// [`Ukf::with_measurement_mean`](crate::Ukf::with_measurement_mean).
-    ///
-    /// # Errors
-    /// [`SigmaSpace::check`]'s error if `mean` does not fit the measurement dimension.
-    pub fn with_measurement_mean(
-        mut self,
-        mean: impl SigmaSpace<M> + 'static,
-    ) -> Result<Self, FilterError> {
-        mean.check(self.measurement.meas_dim().value())?;
-        self.measurement_mean = Some(Arc::new(mean));
-        Ok(self)
-    }
-
-    /// The same filter predicting as `prediction` says ([`UkfPrediction::Linearised`]: the
-    /// square-root KF's QR prediction with the Jacobian).
-    #[must_use]
-    pub fn with_prediction(mut self, prediction: UkfPrediction) -> Self {
-        self.prediction = prediction;
-        self
-    }
+    unscented_builders!();
 
     /// The lower-triangular factor `S` of the current covariance (`P = S S^T`).
     pub fn factor(&self) -> &OMatrix<f64, N, N> {
         &self.factor
     }
 
-    /// The sigma set.
-    pub fn sigma_set(&self) -> SigmaSet {
-        self.set
-    }
-
-    /// The dynamics model.
-    pub fn dynamics(&self) -> &D {
-        &self.dynamics
-    }
-
-    /// The measurement model.
-    pub fn measurement(&self) -> &H {
-        &self.measurement
-    }
-
     fn unscented_predict(&mut self) -> Result<(), FilterError> {
         let k = self.core.step();
         let n = self.dynamics.state_dim().value();
-        let w = self.set.weights(n)?;
+        let w = self.sigma.set.weights(n)?;
         let x = self.core.mean().clone();
-        let fx = "predicted sigma point f(x)";
-        let x0 = self.dynamics.transition(k, &x);
-        check_model_output(fx, &x0, (n, 1), k)?;
-        for j in 0..n {
-            let d = self.factor.column(j) * w.spread;
-            let (plus, minus) = (
-                self.dynamics.transition(k, &(&x + &d)),
-                self.dynamics.transition(k, &(&x - &d)),
-            );
-            check_model_output(fx, &plus, (n, 1), k)?;
-            check_model_output(fx, &minus, (n, 1), k)?;
-            self.scratch_x[j] = plus;
-            self.scratch_x[n + j] = minus;
-        }
+        let points = &mut self.sigma.scratch_x;
+        let x0 = transform(&self.dynamics, k, &x, &self.factor, &w, points)?;
         // The mean, then every point replaced by its deviation from it.
-        let (mean, d0) = match &self.state_space {
+        let (mean, d0) = match &self.sigma.state_space {
             None => {
-                let mut mean = &x0 * w.mean_center;
-                for xi in &self.scratch_x {
-                    mean += xi * w.other;
-                }
-                for xi in &mut self.scratch_x {
+                let mean = plain_mean(&x0, points, &w);
+                for xi in points.iter_mut() {
                     *xi -= &mean;
                 }
                 let d0 = &x0 - &mean;
                 (mean, d0)
             }
-            Some(space) => {
-                let mut points = Vec::with_capacity(2 * n + 1);
-                points.push(x0);
-                points.extend(self.scratch_x.iter().cloned());
-                let mean = space.mean(&points, &w);
-                check_model_output("state space's sigma-point mean", &mean, (n, 1), k)?;
-                let residual = "state space's sigma-point residual";
-                for (slot, xi) in self.scratch_x.iter_mut().zip(&points[1..]) {
-                    *slot = space.residual(xi, &mean);
-                    check_model_output(residual, slot, (n, 1), k)?;
-                }
-                let d0 = space.residual(&points[0], &mean);
-                check_model_output(residual, &d0, (n, 1), k)?;
-                (mean, d0)
-            }
+            Some(space) => space_deviations(space.as_ref(), k, x0, points, &w)?,
         };
         let f = self.dynamics.jacobian(k, &x);
         check_model_output("transition Jacobian F", &f, (n, n), k)?;
@@ -253,7 +167,8 @@ where
             .q_root
             .root(&q, "process noise covariance Q")
             .map_err(|e| FilterError::at(k, e))?;
-        let predicted = weighted_factor(&mut self.scratch, &self.scratch_x, lq, &d0, &w).ok_or(
+        let points = &self.sigma.scratch_x;
+        let predicted = weighted_factor(&mut self.scratch, points, lq, &d0, &w).ok_or(
             FilterError::NotPositiveDefinite {
                 what: "predicted covariance factor (central point's downdate)",
                 step: k + 1,
@@ -267,19 +182,11 @@ where
         }
         // The record's prior and its split, as the Ukf records them.
         let mut cov = &d0 * d0.transpose() * w.cov_center;
-        for d in &self.scratch_x {
+        for d in points {
             cov += d * d.transpose() * w.other;
         }
         symmetrize(&mut cov);
-        let (propagated, noise) = if self.core.is_prior() {
-            let (_, old_noise) = self.core.prior_split();
-            let carried_noise = propagate(&f, old_noise);
-            (&cov - &carried_noise, carried_noise + q)
-        } else {
-            (cov, q)
-        };
-        self.core
-            .predict_split::<false>(mean, f, propagated, noise)?;
+        self.core.predict_unscented(mean, f, cov, q)?;
         self.factor = predicted;
         Ok(())
     }
@@ -291,7 +198,7 @@ where
         self.core.check_measurement(m, z)?;
         let x = self.core.update_prior().mean.clone();
         let n = x.nrows();
-        let w = self.set.weights(n)?;
+        let w = self.sigma.set.weights(n)?;
         let l = &self.factor;
         let r = self.measurement.noise_cov(k, &x);
         check_model_output("measurement noise covariance R", &r, (m, m), k)?;
@@ -303,56 +210,13 @@ where
         let z0 = self.measurement.measure(k, &x);
         check_model_output("predicted measurement h(x)", &z0, (m, 1), k)?;
         let measurement = &self.measurement;
-        let measured = |at: &OVector<f64, N>| {
-            let z = measurement.measure(k, at);
-            check_model_output("sigma measurement h(x)", &z, (m, 1), k).map(|()| z)
-        };
-        let residual_of = |a: &OVector<f64, M>, b: &OVector<f64, M>| {
-            let e = measurement.residual(a, b);
-            check_model_output("measurement residual", &e, (m, 1), k).map(|()| e)
-        };
-        let scratch = &mut self.scratch_z;
-        // The sigma measurements as residuals (from the central one, or from the chosen mean),
-        // then the cross covariance, in which the mean cancels between each pair.
-        let (mut zhat, e0) = match self.measurement_mean.as_deref() {
-            None => {
-                for j in 0..n {
-                    let d = l.column(j) * w.spread;
-                    scratch[j] = residual_of(&measured(&(&x + &d))?, &z0)?;
-                    scratch[n + j] = residual_of(&measured(&(&x - &d))?, &z0)?;
-                }
-                let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, U1);
-                for d in scratch.iter() {
-                    dbar += d * w.other;
-                }
-                (&z0 + &dbar, -dbar)
-            }
-            Some(mean) => {
-                let mut points = Vec::with_capacity(2 * n + 1);
-                points.push(z0.clone());
-                for sign in [1.0, -1.0] {
-                    for j in 0..n {
-                        let d = l.column(j) * (sign * w.spread);
-                        points.push(measured(&(&x + &d))?);
-                    }
-                }
-                let mut zhat = mean.mean(&points, &w);
-                measurement.normalize(&mut zhat);
-                check_model_output("measurement space's sigma-point mean", &zhat, (m, 1), k)?;
-                for (slot, zi) in scratch.iter_mut().zip(&points[1..]) {
-                    *slot = residual_of(zi, &zhat)?;
-                }
-                let e0 = residual_of(&z0, &zhat)?;
-                (zhat, e0)
-            }
-        };
-        let mut pxz =
-            OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
-        for j in 0..n {
-            let dz = &scratch[j] - &scratch[n + j];
-            pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
-        }
-        if self.measurement_mean.is_none() {
+        let mean_space = self.sigma.measurement_mean.as_deref();
+        let scratch = &mut self.sigma.scratch_z;
+        // The sigma measurements' deviations, then the cross covariance, in which the mean
+        // cancels between each pair.
+        let (mut zhat, e0) = measure(measurement, k, &x, l, &w, &z0, mean_space, scratch)?;
+        let pxz = cross_covariance(l, scratch, z0.shape_generic().0, &w);
+        if mean_space.is_none() {
             // Deviations from zhat: the residuals were taken from the central measurement.
             for d in scratch.iter_mut() {
                 *d += &e0;
@@ -365,7 +229,7 @@ where
             step: k,
         };
         let sz = weighted_factor(&mut self.scratch, scratch, lr, &e0, &w).ok_or(not_pd.clone())?;
-        let nu = residual_of(z, &zhat)?;
+        let nu = residual(measurement, k, z, &zhat)?;
         let mut s = &sz * sz.transpose();
         symmetrize(&mut s);
         let s = Covariance::from_symmetric(s, "innovation covariance Pz").map_err(|e| {
@@ -385,7 +249,7 @@ where
             .ok_or(not_pd)?
             .transpose();
         let mut mean = &x + &gain * &nu;
-        if let Some(space) = &self.state_space {
+        if let Some(space) = &self.sigma.state_space {
             space.normalize(&mut mean);
             check_model_output("state space's normalized mean", &mean, (n, 1), k)?;
         }
@@ -394,14 +258,15 @@ where
         // downdating S- by the columns of K S_z subtracts nearly equal numbers whenever the
         // measurement is much better than the prior (and fails on the test
         // `sqrt_ill_conditioned`'s first update).
+        let errors = &mut self.sigma.scratch_x;
         for j in 0..n {
             let d = l.column(j) * w.spread;
-            self.scratch_x[j] = &d - &gain * &scratch[j];
-            self.scratch_x[n + j] = -d - &gain * &scratch[n + j];
+            errors[j] = &d - &gain * &scratch[j];
+            errors[n + j] = -d - &gain * &scratch[n + j];
         }
         let posterior = weighted_factor(
             &mut self.scratch,
-            &self.scratch_x,
+            errors,
             &(&gain * lr),
             &(-(&gain * &e0)),
             &w,
@@ -475,7 +340,7 @@ where
     core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        match self.prediction {
+        match self.sigma.prediction {
             UkfPrediction::Unscented => self.unscented_predict(),
             UkfPrediction::Linearised => {
                 let k = self.core.step();

@@ -3,12 +3,12 @@
 
 use std::sync::Arc;
 
-use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
+use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, U1};
 use kalibra_models::{Dynamics, Measurement};
 
 use super::{KappaCriterion, KappaGrid, SigmaSet, SigmaSpace};
 use crate::core::KalmanCore;
-use crate::kalman::{core_accessors, jacobian_predict};
+use crate::kalman::{checked_core, core_accessors, jacobian_predict};
 use crate::{Filter, FilterError, FilterOptions, StepRecord};
 
 /// How the UKF predicts.
@@ -22,6 +22,130 @@ pub enum UkfPrediction {
     /// what paper 001's Alg. 1 does: only the measurement statistics are unscented). Cheaper.
     Linearised,
 }
+
+/// What the scalar and the square-root UKF share beside their covariance: the sigma set, the
+/// prediction, the optional non-Euclidean spaces, and scratch for the `2n` transformed points,
+/// allocated once so that a step allocates nothing on the fixed-size path.
+#[derive(Clone, Debug)]
+pub(crate) struct Unscented<N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    pub(crate) set: SigmaSet,
+    pub(crate) prediction: UkfPrediction,
+    pub(crate) scratch_x: Vec<OVector<f64, N>>,
+    pub(crate) scratch_z: Vec<OVector<f64, M>>,
+    // `None` keeps the plain arithmetic, bit for bit.
+    pub(crate) state_space: Option<Arc<dyn SigmaSpace<N>>>,
+    pub(crate) measurement_mean: Option<Arc<dyn SigmaSpace<M>>>,
+}
+
+impl<N: Dim, M: Dim> Unscented<N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The construction both unscented filters share: the Kalman filters' checks
+    /// ([`checked_core`], `as_given` naming the filter for an as-given `p0`), and a sigma set
+    /// valid at the state's dimension, predicting with [`UkfPrediction::Unscented`].
+    pub(crate) fn start<D: Dynamics<N>, H: Measurement<N, M>>(
+        dynamics: &D,
+        measurement: &H,
+        x0: OVector<f64, N>,
+        p0: OMatrix<f64, N, N>,
+        set: SigmaSet,
+        options: FilterOptions,
+        as_given: &'static str,
+    ) -> Result<(KalmanCore<N, M>, Self), FilterError> {
+        let core = checked_core(dynamics, measurement, x0, p0, options, Some(as_given))?;
+        let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
+        set.weights(n.value())?;
+        let zeros_z = OVector::<f64, M>::zeros_generic(m, U1);
+        let zeros_x = OVector::<f64, N>::zeros_generic(n, U1);
+        let sigma = Self {
+            set,
+            prediction: UkfPrediction::default(),
+            scratch_x: vec![zeros_x; 2 * n.value()],
+            scratch_z: vec![zeros_z; 2 * n.value()],
+            state_space: None,
+            measurement_mean: None,
+        };
+        Ok((core, sigma))
+    }
+}
+
+/// The builder methods and accessors the [`Ukf`] and the [`SqrtUkf`](crate::SqrtUkf) share,
+/// on their `sigma: Unscented` field.
+macro_rules! unscented_builders {
+    () => {
+        /// The same filter with a non-Euclidean state space (FilterPy's `x_mean_fn` and
+        /// `residual_x`): the unscented prediction averages its sigma points with
+        /// [`SigmaSpace::mean`] and forms the covariance from [`SigmaSpace::residual`]s, and
+        /// the updated mean `x- + K nu` is [`SigmaSpace::normalize`]d. With
+        /// [`AngleComponents`](crate::AngleComponents) an angle in the state near `+-pi`
+        /// averages to near `pi`, where the plain mean gives about 0. A prediction with a
+        /// space collects its sigma points in a fresh `Vec` (one allocation per step); without
+        /// one the filter keeps its allocation-free path, bit for bit.
+        ///
+        /// # Errors
+        /// [`SigmaSpace::check`]'s error if the space does not fit the state dimension.
+        pub fn with_state_space(
+            mut self,
+            space: impl SigmaSpace<N> + 'static,
+        ) -> Result<Self, FilterError> {
+            space.check(self.dynamics.state_dim().value())?;
+            self.sigma.state_space = Some(Arc::new(space));
+            Ok(self)
+        }
+
+        /// The same filter forming the predicted measurement `zhat` with `mean` (FilterPy's
+        /// `z_mean_fn`) from the sigma points' measurements, for instance the circular mean
+        /// of [`AngleComponents`](crate::AngleComponents). By default `zhat` is the central
+        /// measurement plus the mean of the others' residuals from it, which handles angles
+        /// through the model's residual; the option serves models whose residual does not
+        /// wrap, or a circular mean by choice.
+        ///
+        /// # Errors
+        /// [`SigmaSpace::check`]'s error if `mean` does not fit the measurement dimension.
+        pub fn with_measurement_mean(
+            mut self,
+            mean: impl SigmaSpace<M> + 'static,
+        ) -> Result<Self, FilterError> {
+            mean.check(self.measurement.meas_dim().value())?;
+            self.sigma.measurement_mean = Some(Arc::new(mean));
+            Ok(self)
+        }
+
+        /// The same filter predicting as `prediction` says.
+        #[must_use]
+        pub fn with_prediction(mut self, prediction: UkfPrediction) -> Self {
+            self.sigma.prediction = prediction;
+            self
+        }
+
+        /// The sigma set (its kappa is the one of the prediction, and of the update when
+        /// kappa is not adapted).
+        pub fn sigma_set(&self) -> SigmaSet {
+            self.sigma.set
+        }
+
+        /// The dynamics model.
+        pub fn dynamics(&self) -> &D {
+            &self.dynamics
+        }
+
+        /// The measurement model.
+        pub fn measurement(&self) -> &H {
+            &self.measurement
+        }
+
+        /// The prediction and the state space, for the unscented smoother
+        /// (`smooth::unscented`).
+        pub(crate) fn smoother_parts(&self) -> (UkfPrediction, Option<&Arc<dyn SigmaSpace<N>>>) {
+            (self.sigma.prediction, self.sigma.state_space.as_ref())
+        }
+    };
+}
+pub(crate) use unscented_builders;
 
 /// The unscented Kalman filter (Julier and Uhlmann), paper 001 eqs 16-22.
 ///
@@ -65,17 +189,9 @@ where
     pub(super) dynamics: D,
     pub(super) measurement: H,
     pub(super) core: KalmanCore<N, M>,
-    pub(super) set: SigmaSet,
-    pub(super) prediction: UkfPrediction,
+    pub(super) sigma: Unscented<N, M>,
     pub(super) adaptive: Option<(KappaCriterion, KappaGrid)>,
     pub(super) last_kappa: Option<f64>,
-    // Scratch for the 2n transformed points, allocated once so that a step allocates nothing
-    // on the fixed-size path.
-    pub(super) scratch_z: Vec<OVector<f64, M>>,
-    pub(super) scratch_x: Vec<OVector<f64, N>>,
-    // The optional non-Euclidean spaces; `None` keeps the plain arithmetic, bit for bit.
-    pub(super) state_space: Option<Arc<dyn SigmaSpace<N>>>,
-    pub(super) measurement_mean: Option<Arc<dyn SigmaSpace<M>>>,
 }
 
 impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Ukf<N, M, D, H>
@@ -115,73 +231,26 @@ where
         set: SigmaSet,
         options: FilterOptions,
     ) -> Result<Self, FilterError> {
-        crate::core::reject_as_given(
-            &options,
+        let (core, sigma) = Unscented::start(
+            &dynamics,
+            &measurement,
+            x0,
+            p0,
+            set,
+            options,
             "the UKF with an as-given initial covariance (sigma points need P's square root)",
         )?;
-        crate::kalman::check_model_sizes(&dynamics, &measurement)?;
-        let (n, m) = (dynamics.state_dim(), measurement.meas_dim());
-        set.weights(n.value())?;
-        let core = KalmanCore::new(n, m, x0, p0, options)?;
-        let zeros_z = OVector::<f64, M>::zeros_generic(m, nalgebra::U1);
-        let zeros_x = OVector::<f64, N>::zeros_generic(n, nalgebra::U1);
         Ok(Self {
             dynamics,
             measurement,
             core,
-            set,
-            prediction: UkfPrediction::default(),
+            sigma,
             adaptive: None,
             last_kappa: None,
-            scratch_z: vec![zeros_z; 2 * n.value()],
-            scratch_x: vec![zeros_x; 2 * n.value()],
-            state_space: None,
-            measurement_mean: None,
         })
     }
 
-    /// The same filter with a non-Euclidean state space (FilterPy's `x_mean_fn` and
-    /// `residual_x`): the unscented prediction averages its sigma points with
-    /// [`SigmaSpace::mean`] and forms the covariance from [`SigmaSpace::residual`]s, and the
-    /// updated mean `x- + K nu` is [`SigmaSpace::normalize`]d. With [`AngleComponents`](super::AngleComponents) an
-    /// angle in the state near `+-pi` averages to near `pi`, where the plain mean gives about 0.
-    /// A prediction with a space collects its sigma points in a fresh `Vec` (one allocation
-    /// per step); without one the filter keeps its allocation-free path, bit for bit.
-    ///
-    /// # Errors
-    /// [`SigmaSpace::check`]'s error if the space does not fit the state dimension.
-    pub fn with_state_space(
-        mut self,
-        space: impl SigmaSpace<N> + 'static,
-    ) -> Result<Self, FilterError> {
-        space.check(self.dynamics.state_dim().value())?;
-        self.state_space = Some(Arc::new(space));
-        Ok(self)
-    }
-
-    /// The same filter forming the predicted measurement `zhat` with `mean` (FilterPy's
-    /// `z_mean_fn`) from the sigma points' measurements, for instance the circular mean of
-    /// [`AngleComponents`](super::AngleComponents). By default `zhat` is the central measurement plus the mean of the
-    /// others' residuals from it, which handles angles through the model's residual; the option
-    /// serves models whose residual does not wrap, or a circular mean by choice.
-    ///
-    /// # Errors
-    /// [`SigmaSpace::check`]'s error if `mean` does not fit the measurement dimension.
-    pub fn with_measurement_mean(
-        mut self,
-        mean: impl SigmaSpace<M> + 'static,
-    ) -> Result<Self, FilterError> {
-        mean.check(self.measurement.meas_dim().value())?;
-        self.measurement_mean = Some(Arc::new(mean));
-        Ok(self)
-    }
-
-    /// The same filter predicting as `prediction` says.
-    #[must_use]
-    pub fn with_prediction(mut self, prediction: UkfPrediction) -> Self {
-        self.prediction = prediction;
-        self
-    }
+    unscented_builders!();
 
     /// The same filter choosing kappa at every update: the value of `grid` minimising
     /// `criterion` (UKF-ML, UKF-MPP of paper 001). The prediction keeps the set's own kappa.
@@ -195,35 +264,15 @@ where
     ) -> Result<Self, FilterError> {
         let n = self.dynamics.state_dim().value();
         for &kappa in grid.values() {
-            self.set.with_kappa(kappa).weights(n)?;
+            self.sigma.set.with_kappa(kappa).weights(n)?;
         }
         self.adaptive = Some((criterion, grid));
         Ok(self)
     }
 
-    /// The sigma set (its kappa is the one used when not adapting, and in the prediction).
-    pub fn sigma_set(&self) -> SigmaSet {
-        self.set
-    }
-
     /// The kappa of the last update (the chosen one when adapting); `None` before the first.
     pub fn last_kappa(&self) -> Option<f64> {
         self.last_kappa
-    }
-
-    /// The dynamics model.
-    pub fn dynamics(&self) -> &D {
-        &self.dynamics
-    }
-
-    /// The measurement model.
-    pub fn measurement(&self) -> &H {
-        &self.measurement
-    }
-
-    /// The prediction and the state space, for the unscented smoother (`smooth::unscented`).
-    pub(crate) fn smoother_parts(&self) -> (UkfPrediction, Option<&Arc<dyn SigmaSpace<N>>>) {
-        (self.prediction, self.state_space.as_ref())
     }
 }
 
@@ -234,7 +283,7 @@ where
     core_accessors!();
 
     fn predict(&mut self) -> Result<(), FilterError> {
-        match self.prediction {
+        match self.sigma.prediction {
             UkfPrediction::Unscented => self.unscented_predict(),
             UkfPrediction::Linearised => {
                 jacobian_predict::<false, _, _, _>(&mut self.core, &self.dynamics)

@@ -7,6 +7,7 @@ use kalibra_linalg::{
 };
 use kalibra_models::{Dynamics, Measurement};
 
+use super::points::{cross_covariance, measure, residual};
 use super::{KappaCriterion, SigmaSpace, SigmaWeights, Ukf};
 use crate::core::{UpdateParts, check_model_output};
 use crate::{Estimate, FilterError, StepRecord};
@@ -33,17 +34,17 @@ where
         let z0 = self.measurement.measure(k, &prior.mean);
         check_model_output("predicted measurement h(x)", &z0, (m, 1), k)?;
         let spaces = Spaces {
-            state: self.state_space.as_deref(),
-            measurement_mean: self.measurement_mean.as_deref(),
+            state: self.sigma.state_space.as_deref(),
+            measurement_mean: self.sigma.measurement_mean.as_deref(),
         };
 
         let best = match &self.adaptive {
             None => {
-                let kappa = self.set.kappa();
-                let w = self.set.weights(n)?;
+                let kappa = self.sigma.set.kappa();
+                let w = self.sigma.set.weights(n)?;
                 let c = candidate(
                     &self.measurement,
-                    &mut self.scratch_z,
+                    &mut self.sigma.scratch_z,
                     k,
                     &prior,
                     &l,
@@ -60,10 +61,10 @@ where
                 let mut best: Option<(f64, f64, Candidate<N, M>)> = None;
                 let mut first_error = None;
                 for &kappa in grid.values() {
-                    let w = self.set.with_kappa(kappa).weights(n)?;
+                    let w = self.sigma.set.with_kappa(kappa).weights(n)?;
                     let c = match candidate(
                         &self.measurement,
-                        &mut self.scratch_z,
+                        &mut self.sigma.scratch_z,
                         k,
                         &prior,
                         &l,
@@ -185,78 +186,43 @@ where
     let n = prior.mean.nrows();
     let m = z0.nrows();
     let x = &prior.mean;
-    // The model's answers are checked as they come, as in the prediction.
-    let (hx, residual) = ("sigma measurement h(x)", "measurement residual");
-    let measured = |at: &OVector<f64, N>| {
-        let z = measurement.measure(k, at);
-        check_model_output(hx, &z, (m, 1), k).map(|()| z)
-    };
-    let residual_of = |a: &OVector<f64, M>, b: &OVector<f64, M>| {
-        let e = measurement.residual(a, b);
-        check_model_output(residual, &e, (m, 1), k).map(|()| e)
-    };
     // Fixed sizes write the sigma-point sums out, run-time sizes call the kernels (which may
     // hand them to faer): the same arithmetic below the faer threshold, but the kernel calls
     // change how the compiler inlines the fixed-size update (`cargo xtask bench w2`).
     let fixed = N::try_to_usize().is_some() && M::try_to_usize().is_some();
-    let (zhat, mut pz) = match spaces.measurement_mean {
-        None => {
-            // Sigma measurements as residuals from the central one: unwrapped around it.
-            for j in 0..n {
-                let d = l.column(j) * w.spread;
-                scratch[j] = residual_of(&measured(&(x + &d))?, z0)?;
-                scratch[n + j] = residual_of(&measured(&(x - &d))?, z0)?;
-            }
-            let mut dbar = OVector::<f64, M>::zeros_generic(z0.shape_generic().0, nalgebra::U1);
+    let (zhat, e0) = measure(
+        measurement,
+        k,
+        x,
+        l,
+        &w,
+        z0,
+        spaces.measurement_mean,
+        scratch,
+    )?;
+    let mut pz = &e0 * e0.transpose() * w.cov_center;
+    match spaces.measurement_mean {
+        // The deviations from zhat are the residuals from the central measurement plus e0.
+        None if fixed => {
             for d in scratch.iter() {
-                dbar += d * w.other;
+                let dd = d + &e0;
+                pz += &dd * dd.transpose() * w.other;
             }
-            let mut pz = &dbar * dbar.transpose() * w.cov_center;
-            if fixed {
-                for d in scratch.iter() {
-                    let dd = d - &dbar;
-                    pz += &dd * dd.transpose() * w.other;
-                }
-            } else {
-                add_scatter(&mut pz, scratch, &dbar, w.other);
-            }
-            (z0 + &dbar, pz)
         }
-        Some(mean) => {
-            // The sigma measurements as measured, averaged by the chosen mean, then their
-            // residuals from it.
-            let mut points = Vec::with_capacity(2 * n + 1);
-            points.push(z0.clone());
-            for sign in [1.0, -1.0] {
-                for j in 0..n {
-                    let d = l.column(j) * (sign * w.spread);
-                    points.push(measured(&(x + &d))?);
-                }
-            }
-            let mut zhat = mean.mean(&points, &w);
-            measurement.normalize(&mut zhat);
-            check_model_output("measurement space's sigma-point mean", &zhat, (m, 1), k)?;
-            for (slot, zi) in scratch.iter_mut().zip(&points[1..]) {
-                *slot = residual_of(zi, &zhat)?;
-            }
-            let e0 = residual_of(z0, &zhat)?;
-            let mut pz = &e0 * e0.transpose() * w.cov_center;
+        None => add_scatter(&mut pz, scratch, &(-&e0), w.other),
+        Some(_) => {
             for e in scratch.iter() {
                 pz += e * e.transpose() * w.other;
             }
-            (zhat, pz)
         }
-    };
+    }
     pz += r;
     symmetrize(&mut pz);
-    // The central point has no state deviation, and the mean cancels between each pair.
-    let mut pxz = OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
-    if fixed {
-        for j in 0..n {
-            let dz = &scratch[j] - &scratch[n + j];
-            pxz += l.column(j) * dz.transpose() * (w.spread * w.other);
-        }
+    let pxz = if fixed {
+        cross_covariance(l, scratch, z0.shape_generic().0, &w)
     } else {
+        let mut pxz =
+            OMatrix::<f64, N, M>::zeros_generic(x.shape_generic().0, z0.shape_generic().0);
         add_cross_scatter(
             &mut pxz,
             l,
@@ -264,13 +230,14 @@ where
             &scratch[n..],
             w.spread * w.other,
         );
-    }
+        pxz
+    };
     let mut zhat = zhat;
     if spaces.measurement_mean.is_none() {
         measurement.normalize(&mut zhat);
         check_model_output("normalized measurement", &zhat, (m, 1), k)?;
     }
-    let nu = residual_of(z, &zhat)?;
+    let nu = residual(measurement, k, z, &zhat)?;
     let s = Covariance::from_symmetric(pz, "innovation covariance Pz").map_err(|e| {
         let e = if all_finite(&zhat) {
             e
