@@ -358,22 +358,65 @@ where
     /// no prediction since (a filter that starts by updating), the current posterior. Nothing
     /// changes until the update succeeds ([`KalmanCore::begin_record`]), so a failed update
     /// leaves the filter and its last record as they were.
+    ///
+    /// The posterior comes from an out-of-line call: when both fields are plain reads, the
+    /// compiler loads both matrices and blends them, which cost the scalar KF about a hundred
+    /// instructions per step (`examples/kf_w1.rs` under callgrind).
+    #[inline(always)]
     pub(crate) fn update_prior(&self) -> &Estimate<N> {
-        self.current()
+        match self.phase {
+            Phase::Prior => &self.record.prior,
+            Phase::Posterior => self.posterior_cold(),
+        }
+    }
+
+    /// The posterior, out of line (see [`KalmanCore::update_prior`]).
+    #[cold]
+    #[inline(never)]
+    fn posterior_cold(&self) -> &Estimate<N> {
+        &self.record.posterior
+    }
+
+    /// The estimate a prediction starts from: the last update's posterior, or the prior of
+    /// the last prediction (a second prediction without an update, out of line for the reason
+    /// given at [`KalmanCore::update_prior`]).
+    #[inline(always)]
+    pub(crate) fn predict_base(&self) -> &Estimate<N> {
+        match self.phase {
+            Phase::Posterior => &self.record.posterior,
+            Phase::Prior => self.prior_cold(),
+        }
+    }
+
+    /// The prior, out of line (see [`KalmanCore::predict_base`]).
+    #[cold]
+    #[inline(never)]
+    fn prior_cold(&self) -> &Estimate<N> {
+        &self.record.prior
     }
 
     /// On a successful update's way into the record: when no prediction ran since the last
     /// update, the prior is that update's posterior, all of it counted as "propagated"
     /// (`B_k = 0`, `F = I`).
+    #[inline(always)]
     fn begin_record(&mut self) {
         if self.phase == Phase::Posterior {
-            let rec = &mut self.record;
-            rec.prior = rec.posterior.clone();
-            rec.propagated = rec.prior.cov.clone();
-            rec.process_noise.fill(0.0);
-            rec.f.fill_with_identity();
-            self.phase = Phase::Prior;
+            self.begin_record_cold();
         }
+    }
+
+    /// [`KalmanCore::begin_record`]'s copy, out of line: an update with no prediction before
+    /// it is rare, and the copy's code inlined into every update lengthens the step a little
+    /// (`examples/kf_w1.rs` under callgrind).
+    #[cold]
+    #[inline(never)]
+    fn begin_record_cold(&mut self) {
+        let rec = &mut self.record;
+        rec.prior = rec.posterior.clone();
+        rec.propagated = rec.prior.cov.clone();
+        rec.process_noise.fill(0.0);
+        rec.f.fill_with_identity();
+        self.phase = Phase::Prior;
     }
 
     /// Stores an update computed by the caller (the unscented and shifted Rayleigh filters) and

@@ -232,7 +232,7 @@ where
     let k = core.step();
     let m = measurement.meas_dim().value();
     core.check_measurement(m, z)?;
-    let x = core.mean();
+    let x = &core.update_prior().mean;
     let n = x.nrows();
     let zhat = measurement.measure(k, x);
     check_model_output("predicted measurement h(x)", &zhat, (m, 1), k)?;
@@ -286,9 +286,10 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let k = core.step();
-    let x_pred = dynamics.transition(k, core.mean());
+    let x = &core.predict_base().mean;
+    let x_pred = dynamics.transition(k, x);
     let (f, q) = (dynamics.matrix(k), dynamics.noise_cov(k));
-    check_prediction(k, core.mean().nrows(), &x_pred, &f, &q)?;
+    check_prediction(k, x.nrows(), &x_pred, &f, &q)?;
     core.predict::<AS_GIVEN>(x_pred, f, q)
 }
 

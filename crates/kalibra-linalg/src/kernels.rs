@@ -14,16 +14,26 @@ use crate::{Alloc, LinalgError, backend};
 /// The documented panic of the kernels below on `Dyn` sizes that do not fit. Checked before
 /// the backend is chosen: faer's branch reads some operands as raw slices by the sizes of the
 /// others (`R` by `H`'s rows), where a wrong size would read the wrong entries instead of
-/// panicking. For fixed sizes the comparisons are constant and vanish.
+/// panicking. For fixed sizes the comparisons are constant and vanish, which needs the check
+/// inlined into the calling crate: a plain non-generic function is not, and its nine calls
+/// cost the scalar KF about 120 instructions per step (kalibra-filters' `examples/kf_w1.rs`
+/// under callgrind).
+#[inline(always)]
 #[track_caller]
 fn assert_shape(what: &str, found: (usize, usize), expected: (usize, usize)) {
-    assert!(
-        found == expected,
+    if found != expected {
+        shape_mismatch(what, found, expected);
+    }
+}
+
+/// The panic of [`assert_shape`], out of line so that the inlined check stays a comparison.
+#[cold]
+#[inline(never)]
+#[track_caller]
+fn shape_mismatch(what: &str, found: (usize, usize), expected: (usize, usize)) -> ! {
+    panic!(
         "{what} is {}x{} where {}x{} is expected",
-        found.0,
-        found.1,
-        expected.0,
-        expected.1
+        found.0, found.1, expected.0, expected.1
     );
 }
 

@@ -7,7 +7,9 @@
 //! S: the slowest shard, the merge, their sum beside the one-process time, and the merge as a
 //! share of a shard; the merged report is checked equal to the one-process report, bit for bit.
 //! Partials are encoded as the shard files hold them (CBOR, `study::write_partial`).
-//! Last, a projection to 100 machines from the measured per-run cost and merge.
+//! Then the S = 4 merge once more from the same partials encoded as JSON (what the CBOR byte
+//! strings save), and last a projection to 100 machines from the measured per-run cost and
+//! merge. Every printed figure is also recorded for `docs/benchmarks/`.
 
 use anyhow::{Result, ensure};
 use kalibra_sim::Shard;
@@ -39,6 +41,8 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
     );
     println!("|---|---|---|---|---|---|---|---|");
     let mut merge_costs = Vec::new();
+    // The last (S = 4) partials' encodings, merged once more from JSON below.
+    let mut last_texts = Vec::new();
     for count in [1usize, 2, 4] {
         let mut slowest = 0f64;
         let mut texts = Vec::with_capacity(count);
@@ -51,6 +55,7 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
             slowest = slowest.max(seconds);
         }
         let bytes: usize = texts.iter().map(Vec::len).sum();
+        let texts_copy = texts.clone();
         let (merge, merged) = timed(|| -> Result<_> {
             let parts = kalibra_studies::study::read_partials("w1", texts)?;
             Ok(w1::merge(&config, parts)?)
@@ -64,6 +69,16 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
         merge_costs.push(merge);
         figures.push(format!("{count} shards: slowest shard"), slowest, "s");
         figures.push(format!("{count} shards: merge"), merge, "s");
+        figures.push(
+            format!("{count} shards: one process / (slowest + merge)"),
+            one_process / (slowest + merge),
+            "x",
+        );
+        figures.push(
+            format!("{count} shards: merge / shard"),
+            100.0 * merge / slowest,
+            "%",
+        );
         figures.push(format!("{count} shards: partials"), bytes as f64, "bytes");
         println!(
             "| {count} | {slowest:.2} | {merge:.3} | {:.2} | {:.2}x | {:.2}% | {} | yes |",
@@ -72,7 +87,32 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
             100.0 * merge / slowest,
             bytes,
         );
+        last_texts = texts_copy;
     }
+    // The same merge from the partials encoded as JSON (the structures serialise to plain
+    // arrays of decimal numbers there): what the CBOR byte strings save.
+    let json: Vec<Vec<u8>> = kalibra_studies::study::read_partials::<w1::Acc>("w1", last_texts)?
+        .iter()
+        .map(serde_json::to_vec)
+        .collect::<Result<_, _>>()?;
+    let json_bytes: usize = json.iter().map(Vec::len).sum();
+    let (json_merge, merged) = timed(|| -> Result<_> {
+        let parts = json
+            .iter()
+            .map(|bytes| serde_json::from_slice::<kalibra_sim::Partial<w1::Acc>>(bytes))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(w1::merge(&config, parts)?)
+    });
+    ensure!(
+        serde_json::to_string(&merged?)? == whole_bits,
+        "the merge of JSON partials differs from the one-process report"
+    );
+    println!(
+        "4 shards merged from JSON partials: {json_merge:.3} s ({json_bytes} bytes) against {:.3} s from CBOR",
+        merge_costs.last().copied().unwrap_or(f64::NAN)
+    );
+    figures.push("4 shards: merge from JSON partials", json_merge, "s");
+    figures.push("4 shards: JSON partials", json_bytes as f64, "bytes");
     // The merge handles the study's blocks (at most 64) whatever S is, so its cost at S = 4
     // stands for any S; a shard's cost is the one-process cost divided by S.
     let merge = merge_costs.iter().copied().fold(0.0, f64::max);
@@ -82,6 +122,22 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
         per_machine + merge,
         one_process / (per_machine + merge),
         one_process * 1e7 / config.runs as f64 / 100.0,
+    );
+    figures.push("projection, 100 machines: a shard", per_machine, "s");
+    figures.push(
+        "projection, 100 machines: a shard + merge",
+        per_machine + merge,
+        "s",
+    );
+    figures.push(
+        "projection, 100 machines: one process / (shard + merge)",
+        one_process / (per_machine + merge),
+        "x",
+    );
+    figures.push(
+        "projection, 10^7 runs on 100 machines: a shard",
+        one_process * 1e7 / config.runs as f64 / 100.0,
+        "s",
     );
     Ok(figures)
 }
