@@ -139,7 +139,7 @@ pub struct ParameterCurve {
 ///
 /// At `p = 0` every curve passes through the estimate itself, so the `J1`, `J2` of that point
 /// agree across curves. When `Qw` is a scaled form and `R` fixed, the multiplier's curve is
-/// the `Q` sweep of `Tuning::tune` with `Q_nom` the estimate (checked
+/// the `Q` sweep of [`Tuning::tune`](crate::Tuning::tune) with `Q_nom` the estimate (checked
 /// by `tests/j1j2.rs`).
 ///
 /// ```

@@ -1,19 +1,74 @@
-//! Noise estimators for `kalibra-tune`: EM, ALS and J1/J2 on every parameter.
+//! Choose the noise covariances `Q` and `R` of a Kalman-type filter from recorded measurements.
 //!
-//! This manifest and this file are the estimators' branch's stand-in for the crate's own (on
-//! merging, the crate's `lib.rs` gains `mod als; mod em; mod j1j2;` and the re-exports below,
-//! and `shim` is dropped for `noise` and `problem`).
+//! # What this crate is for
+//! An engineer with a measurement log and a model whose noise levels can only be guessed needs
+//! a `Q` and an `R`, and to know how far the data support them. This crate holds the methods
+//! that answer from the data:
+//! * the offline `Q` sweep of Saha, Goswami and Ghosh ([`Tuning::tune`] on a [`TuneProblem`]:
+//!   `F`, `H`, `Q_nom`, `R`, `x0`, `P0` and measurements with gaps), which runs a Kalman filter
+//!   at every `Q = 10^p Q_nom` of a grid and reports `J1`, `J2`, `nq`, their crossover and the
+//!   recommended `Q` in a serialisable [`TuneReport`]; it is the library behind `kalibra tune`;
+//! * the tuning helpers the reproduced studies use: [`grid`] and [`sweep`] (any function over
+//!   a grid of exponents, in parallel, results in grid order), two-point initialisation
+//!   ([`two_point_init`]) and the adaptive initial covariance and process noise of Saha, Ghosh
+//!   and Goswami ([`p_ad`], [`q_ad`]).
 //!
-//! * [`Em`]: expectation-maximisation (Shumway and Stoffer), honouring each form.
-//! * [`Als`]: autocovariance least squares (Odelson, Rajamani and Rawlings 2006).
-//! * [`ParameterSweep`]: the J1/J2 crossover on every free parameter around an estimate.
+//! It is not for judging a filter's logs (that is `kalibra-eval`, which this crate does not
+//! need) and it does no I/O: reading MODEL.toml and measurement files belongs to `kalibra-io`.
+//!
+//! # Notation
+//! `n` states, `m` measurements; the model `x_k = F x_{k-1} + w_k`, `z_k = H x_k + v_k` with
+//! `w_k ~ N(0, Q)`, `v_k ~ N(0, R)`; `x0`, `P0` the initial estimate and covariance, taken at
+//! the step before the first measurement or at the first measurement according to
+//! [`Start`]. A measurement sequence is one `Option` per step (`None`: no measurement, the
+//! filter predicts through).
+//!
+//! # Numerical choices
+//! Every filter run is the library's own [`kalibra_filters::Kf`], so the numbers are those of
+//! a user's filter with the same matrices; sweeps over a grid evaluate each point
+//! independently and in parallel and return them in grid order, so results do not depend on
+//! the thread count (thread pools as `kalibra-sim` builds them, [`kalibra_sim::in_pool`]).
+//! Grid points are computed as `from + i step`, never by accumulation.
+//!
+//! # Where each job lives
+//! * `sweep_q`: the offline `Q` sweep ([`Tuning`], [`TuneProblem`], [`TuneReport`],
+//!   [`TuneError`]).
+//! * `tuning`: [`grid`], [`sweep`], [`two_point_init`], [`p_ad`], [`q_ad`] and their
+//!   [`TuningError`].
+//! * `em`: expectation-maximisation for `Qw` and `R` honouring their forms ([`Em`],
+//!   [`EmEstimate`], [`EmError`]); the M-step of each form and its derivation in `em/mstep.rs`.
+//! * `als`: autocovariance least squares ([`Als`], [`AlsEstimate`], [`AlsError`]).
+//! * `j1j2`: the J1/J2 crossover on every free parameter around an estimate
+//!   ([`ParameterSweep`], [`ParameterCurve`], [`SweepError`]).
+//! * `shim`: stand-ins for the parametrisation types ([`Parametrisation`], [`NoiseProblem`],
+//!   ...) until the `noise` module replaces them.
+//!
+//! # Example
+//! ```
+//! use kalibra_tune::{DMatrix, DVector, TuneProblem, Tuning};
+//!
+//! // A scalar random walk seen directly, tuned over Q = 10^p * 0.1 for p in -3..=3.
+//! let one = |v: f64| DMatrix::from_element(1, 1, v);
+//! let zs: Vec<Option<DVector<f64>>> = [0.3, -0.1, 0.8, 1.1, 0.6, 1.9, 2.2, 1.7]
+//!     .iter()
+//!     .map(|&z| Some(DVector::from_element(1, z)))
+//!     .collect();
+//! let problem = TuneProblem::new(one(1.0), one(1.0), one(0.1), one(0.5),
+//!     DVector::zeros(1), one(1.0), zs)?;
+//! let report = Tuning::new().exponents(-3.0, 3.0, 0.5)?.tune(&problem)?;
+//! assert_eq!(report.points.len(), 13);
+//! # Ok::<(), kalibra_tune::TuneError>(())
+//! ```
 
-// Library code returns typed errors; an unwrap or expect must say why it cannot fail.
+// Library code returns typed errors; an unwrap or expect must say why it cannot fail
+// (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod als;
 mod em;
 mod j1j2;
 mod shim;
+mod sweep_q;
+mod tuning;
 
 pub use als::{ALS_LAGS, ALS_MAX_ITERATIONS, ALS_RANK_TOLERANCE, Als, AlsError, AlsEstimate};
 pub use em::{EM_MAX_ITERATIONS, EM_TOLERANCE, Em, EmError, EmEstimate};
@@ -21,11 +76,18 @@ pub use j1j2::{
     CurveCrossover, CurvePoint, J_SWEEP_FROM, J_SWEEP_STEP, J_SWEEP_TO, ParameterCurve,
     ParameterSweep, SweepError,
 };
-/// The start convention of a [`NoiseProblem`].
+/// The start convention of a [`TuneProblem`] (predict first or update first), re-exported so
+/// that a caller (the `kalibra` executable) needs no other kalibra crate.
 pub use kalibra_filters::Start;
-/// The matrix and vector types of a [`NoiseProblem`].
+/// The matrix and vector types of a [`TuneProblem`].
 pub use kalibra_linalg::{DMatrix, DVector};
 pub use shim::{
     CovarianceForm, FormKind, NoiseError, NoiseMatrices, NoiseMatrix, NoiseProblem, Parameter,
     ParameterKind, Parametrisation, Run,
 };
+pub use sweep_q::{
+    InitialCovariance, JDivisor, NoCrossover, PointRmse, RmseMinimum, TUNE_SCHEMA_VERSION,
+    TuneCrossover, TuneError, TuneFindings, TunePoint, TuneProblem, TuneReport, Tuning,
+    matrix_from_rows,
+};
+pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};

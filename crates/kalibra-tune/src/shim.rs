@@ -1,5 +1,5 @@
 //! Minimal stand-ins for the parametrisation types of the `noise` and `problem` modules, which
-//! another branch is writing: the same names and signatures for the part EM, ALS and the
+//! another branch is writing (not merged when the estimators were): the same names and signatures for the part EM, ALS and the
 //! parameter sweep use, so that their code compiles and is tested here. On merging with
 //! `noise`, this file is deleted and `lib.rs` re-exports `noise`'s types instead (the
 //! estimators need no change); `noise` is the one definition of these types.

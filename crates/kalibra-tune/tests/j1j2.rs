@@ -2,10 +2,9 @@
 //! through the estimate at `p = 0`, crossovers are reported on the parameters' own scale and
 //! off-diagonal entries are skipped with a reason.
 
-use kalibra_eval::{TuneProblem, Tuning};
 use kalibra_tune::{
     CovarianceForm, DMatrix, DVector, NoiseMatrices, NoiseProblem, ParameterSweep, Parametrisation,
-    Run, Start,
+    Run, Start, TuneProblem, Tuning,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
