@@ -12,6 +12,10 @@
 //!   a grid of exponents, in parallel, results in grid order), two-point initialisation
 //!   ([`two_point_init`]) and the adaptive initial covariance and process noise of Saha, Ghosh
 //!   and Goswami ([`p_ad`], [`q_ad`]).
+//! * parametrised noise ([`Parametrisation`]): `Q = G Qw G^T` with an optional `G`, `Qw` and
+//!   `R` each fixed, scaled, diagonal or full (log-Cholesky), with chosen entries fixed, mapped
+//!   to and from an unconstrained vector for the estimators, and refused when it asks for more
+//!   than the `n m + m (m + 1) / 2` parameters innovations can identify.
 //!
 //! It is not for judging a filter's logs (that is `kalibra-eval`, which this crate does not
 //! need) and it does no I/O: reading MODEL.toml and measurement files belongs to `kalibra-io`.
@@ -35,6 +39,10 @@
 //!   [`TuneError`]).
 //! * `tuning`: [`grid`], [`sweep`], [`two_point_init`], [`p_ad`], [`q_ad`] and their
 //!   [`TuningError`].
+//! * `noise`: what is known of the noise ([`Parametrisation`] of `Q = G Qw G^T` and `R` from
+//!   [`CovarianceForm`]s) and the map between an optimiser's vector and the matrices;
+//!   `problem`: [`NoiseProblem`], the model, the initial estimate and the runs of
+//!   measurements the estimators work on; `error`: their [`NoiseError`].
 //!
 //! # Example
 //! ```
@@ -56,8 +64,17 @@
 // Library code returns typed errors; an unwrap or expect must say why it cannot fail
 // (an `#[allow]` with a comment), never be a hidden panic on data.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+mod error;
+mod noise;
+mod problem;
 mod sweep_q;
 mod tuning;
+
+pub use error::NoiseError;
+pub use noise::{
+    CovarianceForm, FormKind, NoiseMatrices, NoiseMatrix, Parameter, ParameterKind, Parametrisation,
+};
+pub use problem::{NoiseProblem, Run};
 
 /// The start convention of a [`TuneProblem`] (predict first or update first), re-exported so
 /// that a caller (the `kalibra` executable) needs no other kalibra crate.
