@@ -12,6 +12,10 @@
 //!   a grid of exponents, in parallel, results in grid order), two-point initialisation
 //!   ([`two_point_init`]) and the adaptive initial covariance and process noise of Saha, Ghosh
 //!   and Goswami ([`p_ad`], [`q_ad`]).
+//! * parametrised noise ([`Parametrisation`]): `Q = G Qw G^T` with an optional `G`, `Qw` and
+//!   `R` each fixed, scaled, diagonal or full (log-Cholesky), with chosen entries fixed, mapped
+//!   to and from an unconstrained vector for the estimators, and refused when it asks for more
+//!   than the `n m + m (m + 1) / 2` parameters innovations can identify.
 //!
 //! It is not for judging a filter's logs (that is `kalibra-eval`, which this crate does not
 //! need) and it does no I/O: reading MODEL.toml and measurement files belongs to `kalibra-io`.
@@ -40,8 +44,10 @@
 //! * `als`: autocovariance least squares ([`Als`], [`AlsEstimate`], [`AlsError`]).
 //! * `j1j2`: the J1/J2 crossover on every free parameter around an estimate
 //!   ([`ParameterSweep`], [`ParameterCurve`], [`SweepError`]).
-//! * `shim`: stand-ins for the parametrisation types ([`Parametrisation`], [`NoiseProblem`],
-//!   ...) until the `noise` module replaces them.
+//! * `noise`: what is known of the noise ([`Parametrisation`] of `Q = G Qw G^T` and `R` from
+//!   [`CovarianceForm`]s) and the map between an optimiser's vector and the matrices;
+//!   `problem`: [`NoiseProblem`], the model, the initial estimate and the runs of
+//!   measurements the estimators work on; `error`: their [`NoiseError`].
 //!
 //! # Example
 //! ```
@@ -65,10 +71,18 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod als;
 mod em;
+mod error;
 mod j1j2;
-mod shim;
+mod noise;
+mod problem;
 mod sweep_q;
 mod tuning;
+
+pub use error::NoiseError;
+pub use noise::{
+    CovarianceForm, FormKind, NoiseMatrices, NoiseMatrix, Parameter, ParameterKind, Parametrisation,
+};
+pub use problem::{NoiseProblem, Run};
 
 pub use als::{ALS_LAGS, ALS_MAX_ITERATIONS, ALS_RANK_TOLERANCE, Als, AlsError, AlsEstimate};
 pub use em::{EM_MAX_ITERATIONS, EM_TOLERANCE, Em, EmError, EmEstimate};
@@ -81,10 +95,6 @@ pub use j1j2::{
 pub use kalibra_filters::Start;
 /// The matrix and vector types of a [`TuneProblem`].
 pub use kalibra_linalg::{DMatrix, DVector};
-pub use shim::{
-    CovarianceForm, FormKind, NoiseError, NoiseMatrices, NoiseMatrix, NoiseProblem, Parameter,
-    ParameterKind, Parametrisation, Run,
-};
 pub use sweep_q::{
     InitialCovariance, JDivisor, NoCrossover, PointRmse, RmseMinimum, TUNE_SCHEMA_VERSION,
     TuneCrossover, TuneError, TuneFindings, TunePoint, TuneProblem, TuneReport, Tuning,
