@@ -16,6 +16,10 @@
 //!   `R` each fixed, scaled, diagonal or full (log-Cholesky), with chosen entries fixed, mapped
 //!   to and from an unconstrained vector for the estimators, and refused when it asks for more
 //!   than the `n m + m (m + 1) / 2` parameters innovations can identify.
+//! * maximum likelihood ([`MaximumLikelihood::estimate`]): the exact log-likelihood of the
+//!   innovations maximised over the free parameters from several starts, with standard errors
+//!   and 95% intervals on the matrices' own scale, and what the data cannot identify named in
+//!   words.
 //!
 //! It is not for judging a filter's logs (that is `kalibra-eval`, which this crate does not
 //! need) and it does no I/O: reading MODEL.toml and measurement files belongs to `kalibra-io`.
@@ -48,6 +52,11 @@
 //!   [`CovarianceForm`]s) and the map between an optimiser's vector and the matrices;
 //!   `problem`: [`NoiseProblem`], the model, the initial estimate and the runs of
 //!   measurements the estimators work on; `error`: their [`NoiseError`].
+//! * `likelihood`: [`log_likelihood`], the exact Gaussian log-likelihood of the innovations
+//!   (the sum of `StepRecord::log_likelihood` over the library's `Kf`).
+//! * `ml`: [`MaximumLikelihood`] -> [`MlEstimate`] (estimates, standard errors and 95% intervals
+//!   from the observed information, [`Identifiability`], [`MlWarning`]s); `optim`: its BFGS
+//!   minimiser and finite differences (why not argmin: in `optim`'s docs).
 //!
 //! # Example
 //! ```
@@ -73,15 +82,24 @@ mod als;
 mod em;
 mod error;
 mod j1j2;
+mod likelihood;
+mod ml;
 mod noise;
+mod optim;
 mod problem;
 mod sweep_q;
 mod tuning;
 
 pub use error::NoiseError;
+pub use likelihood::{LikelihoodError, log_likelihood, log_likelihood_of};
+pub use ml::{
+    Bound, Combination, Identifiability, MaximumLikelihood, MlError, MlEstimate, MlWarning,
+    ParameterEstimate, StartOutcome,
+};
 pub use noise::{
     CovarianceForm, FormKind, NoiseMatrices, NoiseMatrix, Parameter, ParameterKind, Parametrisation,
 };
+pub use optim::StopReason;
 pub use problem::{NoiseProblem, Run};
 
 pub use als::{ALS_LAGS, ALS_MAX_ITERATIONS, ALS_RANK_TOLERANCE, Als, AlsError, AlsEstimate};

@@ -392,7 +392,7 @@ impl Checked {
                         let pivot = v[(i, i)] - dot;
                         // Not `pivot <= 0.0` alone: a NaN pivot (from an overflowing
                         // candidate) is refused too.
-                        if !(pivot > 0.0) {
+                        if pivot.is_nan() || pivot <= 0.0 {
                             return Err(NoiseError::Infeasible {
                                 matrix: self.matrix.name(),
                                 index: i,
@@ -497,7 +497,7 @@ impl Checked {
             FormKind::Scaled => {
                 // The least-squares multiplier: exact for a multiple of the nominal matrix.
                 let s = m.dot(v) / v.dot(v);
-                if !(s > 0.0) {
+                if s.is_nan() || s <= 0.0 {
                     return Err(NoiseError::NotPositive {
                         name: self.matrix.multiplier().to_string(),
                         value: s,
@@ -570,7 +570,8 @@ fn entry_name(matrix: &str, i: usize, j: usize) -> String {
 ///     CovarianceForm::scaled(DMatrix::from_element(1, 1, 1.0)),
 ///     CovarianceForm::diagonal(DMatrix::from_element(1, 1, 4.0)),
 /// )?;
-/// let names: Vec<_> = noise.parameters().iter().map(|p| p.name.as_str()).collect();
+/// let params = noise.parameters();
+/// let names: Vec<_> = params.iter().map(|p| p.name.as_str()).collect();
 /// assert_eq!(names, ["q", "R[0,0]"]);
 /// let theta = noise.start();
 /// let m = noise.matrices(theta.as_slice())?;
