@@ -47,6 +47,7 @@ pub use kalibra_linalg as linalg;
 pub use kalibra_metrics as metrics;
 pub use kalibra_models as models;
 pub use kalibra_sim as sim;
+pub use kalibra_tune as tune;
 
 pub mod prelude;
 
@@ -88,10 +89,10 @@ pub enum Error {
     Eval(#[from] kalibra_eval::EvalError),
     /// A tuning problem from recorded measurements could not be built or tuned.
     #[error(transparent)]
-    Tune(#[from] kalibra_eval::TuneError),
+    Tune(#[from] kalibra_tune::TuneError),
     /// A tuning helper (grid, initial tuning) failed.
     #[error(transparent)]
-    Tuning(#[from] kalibra_sim::TuningError),
+    Tuning(#[from] kalibra_tune::TuningError),
     /// A Monte Carlo run failed (the lowest-numbered failing run).
     #[error("Monte Carlo run {run} failed: {source}")]
     Run {

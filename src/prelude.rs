@@ -49,9 +49,8 @@ pub use kalibra_metrics::{
 
 pub use kalibra_bounds::{ErgodicAverage, Pcrlb, Surrogate};
 
-pub use kalibra_sim::{ChaCha8Rng, MonteCarlo, grid, sweep};
+pub use kalibra_sim::{ChaCha8Rng, MonteCarlo};
 
-pub use kalibra_eval::{
-    Evaluation, Evaluator, FilterLog, Matrices, Report, TuneProblem, TuneReport, Tuning, Vectors,
-    VerdictKind,
-};
+pub use kalibra_tune::{TuneProblem, TuneReport, Tuning, grid, sweep};
+
+pub use kalibra_eval::{Evaluation, Evaluator, FilterLog, Matrices, Report, Vectors, VerdictKind};

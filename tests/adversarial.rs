@@ -30,7 +30,7 @@ use kalibra::models::{
     Bearing, BearingReference, Coordinate, LinearGaussian, LinearObservation, Measurement,
     Stationary, wrap_angle,
 };
-use kalibra::sim::{GRID_MAX_POINTS, grid, q_ad};
+use kalibra::tune::{GRID_MAX_POINTS, grid, q_ad};
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
 

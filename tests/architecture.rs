@@ -44,12 +44,13 @@ fn crate_dependencies_follow_the_design() {
         ("kalibra-bounds", &["kalibra-linalg"]),
         // Figures are data and their SVG writer: nothing of the filters or the studies.
         ("kalibra-plot", &[]),
-        // The log evaluation takes data, like the metrics, and uses the metrics' statistics.
-        // Its `tune` module alone (the Q sweep of `kalibra tune`) runs a Kalman filter on
-        // recorded measurements, which brings the models, the filters and the simulation's
-        // parallel sweep; the evaluation of logs uses none of them. Never the studies.
+        // The log evaluation takes data, like the metrics, and uses the metrics' statistics;
+        // it runs no filter. Never the studies.
+        ("kalibra-eval", &["kalibra-linalg", "kalibra-metrics"]),
+        // Choosing Q and R from measurements runs the library's filters on the models, with
+        // the metrics' J1/J2 and the simulation's thread pools. Never the studies.
         (
-            "kalibra-eval",
+            "kalibra-tune",
             &[
                 "kalibra-linalg",
                 "kalibra-models",
@@ -61,10 +62,16 @@ fn crate_dependencies_follow_the_design() {
         // Reading logs and tuning inputs into kalibra-eval's types, and writing the report
         // (kalibra-eval's reports as documents, with kalibra-plot's figures). The one library
         // that touches files.
-        ("kalibra-io", &["kalibra-eval", "kalibra-plot"]),
+        (
+            "kalibra-io",
+            &["kalibra-eval", "kalibra-plot", "kalibra-tune"],
+        ),
         // The `kalibra` executable: parses arguments, reads and writes through kalibra-io,
         // evaluates and tunes with kalibra-eval.
-        ("kalibra-cli", &["kalibra-io", "kalibra-eval"]),
+        (
+            "kalibra-cli",
+            &["kalibra-io", "kalibra-eval", "kalibra-tune"],
+        ),
         // The Python package: a front end like the executable, reading arrays with the NPZ
         // rules and writing reports through kalibra-io, evaluating with kalibra-eval, plus the
         // filters, models, simulation and metrics it exposes on arrays.
@@ -78,6 +85,7 @@ fn crate_dependencies_follow_the_design() {
                 "kalibra-filters",
                 "kalibra-metrics",
                 "kalibra-sim",
+                "kalibra-tune",
             ],
         ),
         (
@@ -94,6 +102,7 @@ fn crate_dependencies_follow_the_design() {
                 "kalibra-bounds",
                 "kalibra-sim",
                 "kalibra-plot",
+                "kalibra-tune",
             ],
         ),
     ];

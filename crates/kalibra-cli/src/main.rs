@@ -5,11 +5,11 @@
 //!   with `kalibra_eval::Evaluation` and writes `report.json`, `report.md`, SVG figures and a
 //!   self-contained `report.html` into DIR.
 //! * `kalibra tune MODEL.toml MEASUREMENTS.csv [--p FROM:TO:STEP] [--truth TRUTH.csv]
-//!   [--out DIR] [--threads N]` sweeps `Q = 10^p Q_nom` with `kalibra_eval::Tuning` and writes
+//!   [--out DIR] [--threads N]` sweeps `Q = 10^p Q_nom` with `kalibra_tune::Tuning` and writes
 //!   the crossover, the recommended `Q` and the sweep's figures the same way.
 //!
 //! This binary is a thin layer: it parses arguments, reads the files and writes the report
-//! through `kalibra_io`, and evaluates and tunes with `kalibra_eval`. Exit codes: 0 success, 1
+//! through `kalibra_io`, and evaluates with `kalibra_eval` and tunes with `kalibra_tune`. Exit codes: 0 success, 1
 //! the run failed (bad input, or a report that could not be written), 2 bad usage (clap's own
 //! errors). Errors are one message naming the file and the row and column (CSV), the array and
 //! index (JSON, NPZ), the key (MODEL.toml) or the option; never a panic or a backtrace.
@@ -21,8 +21,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use kalibra_eval::{EvalError, Evaluation, Tuning};
+use kalibra_eval::{EvalError, Evaluation};
 use kalibra_io::{Error, document, input, output, tune_input};
+use kalibra_tune::Tuning;
 
 /// Judge a Kalman-type filter from its logs: is its covariance telling the truth?
 #[derive(Debug, Parser)]

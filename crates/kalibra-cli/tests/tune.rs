@@ -4,8 +4,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use kalibra_eval::{InitialCovariance, TuneError, TuneProblem, TuneReport, Tuning};
 use kalibra_linalg::{DMatrix, DVector};
+use kalibra_tune::{InitialCovariance, TuneError, TuneProblem, TuneReport, Tuning};
 
 use common::{fixture, kalibra, scratch, text};
 

@@ -13,10 +13,8 @@
 //! It is the library the `kalibra` command line and the Python package call unchanged. It does
 //! no I/O: reading CSV, NPZ or JSON belongs to its callers.
 //!
-//! It also tunes: [`Tuning::tune`] runs the offline `Q` tuning of Saha, Goswami and Ghosh on a
-//! linear model ([`TuneProblem`]: `F`, `H`, `Q_nom`, `R`, `x0`, `P0` and measurements with
-//! gaps), sweeping `Q = 10^p Q_nom` and reporting `J1`, `J2`, `nq`, their crossover and the
-//! recommended `Q` in a serialisable [`TuneReport`] (module docs at [`Tuning`]).
+//! Choosing `Q` and `R` (the `Q` sweep behind `kalibra tune`, and the estimators) is the job of
+//! the `kalibra-tune` crate; this crate only judges logs.
 //!
 //! Every number comes from `kalibra-metrics` ([`kalibra_metrics::nees`],
 //! [`kalibra_metrics::nis`], [`kalibra_metrics::StepMean`], [`kalibra_metrics::ChiSquareBand`],
@@ -72,7 +70,6 @@
 //!   innovation sides' sums), `per_run` (the runs' time-average sums) and `state`
 //!   ([`EvaluatorState`], an evaluator as data for a shard).
 //! * `report`: the serialisable [`Report`] and its parts.
-//! * `tune`: the offline `Q` tuning ([`Tuning`], [`TuneProblem`], [`TuneReport`]).
 //! * `error`: [`EvalError`].
 //!
 //! # Example
@@ -99,15 +96,9 @@ mod evaluate;
 mod log;
 mod report;
 mod stream;
-mod tune;
 
 pub use error::EvalError;
 pub use evaluate::{Evaluation, Group};
-/// The types a [`TuneProblem`] is built from, re-exported so that a caller (the `kalibra`
-/// executable) needs no other kalibra crate.
-pub use kalibra_filters::Start;
-/// The matrix and vector types of a [`TuneProblem`].
-pub use kalibra_linalg::{DMatrix, DVector};
 pub use log::{FilterLog, MAX_DIM, Matrices, Scope, Vectors};
 pub use report::{
     Band, ComponentWindow, ConsistencyTest, Finding, FindingCount, Findings, JReport, LagReport,
@@ -116,9 +107,4 @@ pub use report::{
 };
 pub use stream::{
     Cell, Contents, Evaluator, EvaluatorState, MAX_RUNS, MAX_STEPS, MatrixCell, ModelCell,
-};
-pub use tune::{
-    InitialCovariance, JDivisor, NoCrossover, PointRmse, RmseMinimum, TUNE_SCHEMA_VERSION,
-    TuneCrossover, TuneError, TuneFindings, TunePoint, TuneProblem, TuneReport, Tuning,
-    matrix_from_rows,
 };

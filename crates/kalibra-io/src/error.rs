@@ -4,7 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
-use kalibra_eval::{EvalError, TuneError};
+use kalibra_eval::EvalError;
+use kalibra_tune::TuneError;
 
 /// What went wrong reading a log, a model or a series, or writing a report.
 ///

@@ -5,7 +5,8 @@
 
 use std::path::Path;
 
-use kalibra_eval::{Evaluation, Report, TuneReport, Tuning};
+use kalibra_eval::{Evaluation, Report};
+use kalibra_tune::{TuneReport, Tuning};
 
 use crate::error::Error;
 use crate::finite::first_non_finite;

@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use kalibra_eval::{NoCrossover, TuneReport};
 use kalibra_plot::{Annotation, Figure, Series};
+use kalibra_tune::{NoCrossover, TuneReport};
 
 use crate::document::{Block, Document, fmt};
 
@@ -118,7 +118,7 @@ impl Document {
                     "x0 at the first measurement (update first)"
                 },
                 match report.initial_covariance {
-                    kalibra_eval::InitialCovariance::AsGiven => "taken as given",
+                    kalibra_tune::InitialCovariance::AsGiven => "taken as given",
                     _ => "checked symmetric positive semi-definite",
                 },
                 report.meas_dim

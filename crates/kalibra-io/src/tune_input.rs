@@ -1,9 +1,9 @@
-//! Reading `kalibra tune`'s inputs: MODEL.toml into a `kalibra_eval::TuneProblem`, and the
+//! Reading `kalibra tune`'s inputs: MODEL.toml into a `kalibra_tune::TuneProblem`, and the
 //! measurement and truth CSVs into sequences with gaps.
 
 use std::path::Path;
 
-use kalibra_eval::{DMatrix, DVector, Start, TuneProblem, matrix_from_rows};
+use kalibra_tune::{DMatrix, DVector, Start, TuneProblem, matrix_from_rows};
 use serde::Deserialize;
 
 use crate::csv_rows::Rows;

@@ -121,8 +121,8 @@ impl At {
 
     /// Where a tuning's error is at fault (the matrix, or the step of the measurements or the
     /// truth).
-    pub(crate) fn of_tune(e: &kalibra_eval::TuneError) -> Self {
-        use kalibra_eval::TuneError as T;
+    pub(crate) fn of_tune(e: &kalibra_tune::TuneError) -> Self {
+        use kalibra_tune::TuneError as T;
         let argument = |a: &str| Some(a.to_string());
         match e {
             T::NotSquare { matrix, .. }
@@ -248,7 +248,7 @@ pub(crate) fn eval_error(e: &kalibra_eval::EvalError) -> PyErr {
 }
 
 /// A tuning's error as a `kalibra.KalibraError`.
-pub(crate) fn tune_error(e: &kalibra_eval::TuneError) -> PyErr {
+pub(crate) fn tune_error(e: &kalibra_tune::TuneError) -> PyErr {
     error_at(e.to_string(), &At::of_tune(e))
 }
 

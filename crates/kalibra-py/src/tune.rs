@@ -2,8 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use kalibra_eval::{DMatrix, DVector, Start, TuneProblem, Tuning};
 use kalibra_io::document::Document;
+use kalibra_tune::{DMatrix, DVector, Start, TuneProblem, Tuning};
 use numpy::PyArrayDyn;
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
@@ -19,7 +19,7 @@ use crate::{error, tune_error};
 /// the answer; `save(dir)` writes the files the command writes.
 #[pyclass(module = "kalibra", frozen)]
 pub struct TuneReport {
-    report: kalibra_eval::TuneReport,
+    report: kalibra_tune::TuneReport,
     doc: Document,
 }
 
@@ -119,7 +119,7 @@ impl TuneReport {
     fn series<'py>(
         &self,
         py: Python<'py>,
-        f: fn(&kalibra_eval::TunePoint) -> f64,
+        f: fn(&kalibra_tune::TunePoint) -> f64,
     ) -> Bound<'py, PyArrayDyn<f64>> {
         let values: Vec<f64> = self.report.points.iter().map(f).collect();
         new_array(py, &[values.len()], values)
@@ -238,7 +238,7 @@ fn sweep_q(
     } else {
         TuneProblem::new
     };
-    let tune_error = |e: kalibra_eval::TuneError| tune_error(&e);
+    let tune_error = |e: kalibra_tune::TuneError| tune_error(&e);
     let mut problem = build(
         matrix(F, "F")?,
         matrix(H, "H")?,

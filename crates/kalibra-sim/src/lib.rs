@@ -33,7 +33,6 @@
 //!   `ziggurat_tables.rs` rand_distr's tables.
 //! * `shard.rs`: studies split across processes and merged ([`Shard`], [`Partial`],
 //!   [`merge`]).
-//! * `tuning.rs`: noise-tuning sweeps and grids ([`sweep`], [`grid`], [`q_ad`], [`p_ad`]).
 //!
 //! The SIMD vocabulary (the instruction set, [`BATCH`](kalibra_linalg::simd::BATCH) and the
 //! lane type) is kalibra-linalg's [`simd`](kalibra_linalg::simd) module.
@@ -60,7 +59,6 @@
 mod batch;
 mod lanes;
 mod shard;
-mod tuning;
 mod ziggurat_tables;
 
 pub use batch::{LinearTruthBatch, RunFailure, TruthBatch};
@@ -71,7 +69,6 @@ pub use shard::{
     PARTIAL_FORMAT_VERSION, Partial, Shard, ShardError, StudyId, blocks_in_order, config_hash,
     merge,
 };
-pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};
 
 use kalibra_metrics::Merge;
 use rand_chacha::rand_core::SeedableRng;
@@ -262,7 +259,19 @@ pub(crate) fn fold_blocks<A: Merge>(blocks: impl IntoIterator<Item = A>) -> Opti
 pub const MAX_THREADS: usize = 4096;
 
 /// Runs `work` on a pool of `threads` threads, or on rayon's global pool for `None`.
-pub(crate) fn in_pool<T: Send, E: std::error::Error + Send + 'static>(
+///
+/// Public so that other crates' parallel loops (kalibra-tune's `sweep`) build their explicit
+/// pool the way the studies do, with the same [`SimError::ThreadPool`].
+///
+/// ```
+/// let sum = kalibra_sim::in_pool(Some(2), || Ok::<_, kalibra_sim::SimError<std::fmt::Error>>(1 + 1))?;
+/// assert_eq!(sum, 2);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// # Errors
+/// [`SimError::ThreadPool`] if the pool cannot be built; otherwise `work`'s result.
+pub fn in_pool<T: Send, E: std::error::Error + Send + 'static>(
     threads: Option<usize>,
     work: impl FnOnce() -> Result<T, SimError<E>> + Send,
 ) -> Result<T, SimError<E>> {

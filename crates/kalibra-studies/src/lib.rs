@@ -97,7 +97,7 @@ pub enum StudyError {
     Lanes(#[from] kalibra_sim::LanesError),
     /// A tuning helper failed (sweep grid, `P_ad`, `Q_ad`).
     #[error(transparent)]
-    Tuning(#[from] kalibra_sim::TuningError),
+    Tuning(#[from] kalibra_tune::TuningError),
     /// A linear-algebra computation failed (a Lyapunov or Riccati limit).
     #[error(transparent)]
     Linalg(#[from] kalibra_linalg::LinalgError),

@@ -49,7 +49,7 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
     let radar = RadarRates::new(r())?;
     let truth_model = reentry::dynamics(qt())?;
     let horizon = reentry::noise_free_truth()?.len() - 1;
-    let grid = kalibra_sim::grid(-10.0..=10.0, 0.5)?;
+    let grid = kalibra_tune::grid(-10.0..=10.0, 0.5)?;
     let models = grid
         .iter()
         .map(|&p| reentry::dynamics(reentry::scaled(&q_nom(), p)))

@@ -257,11 +257,11 @@ impl Report {
 /// [`StudyError`] if a filter run fails or `config.fine_step` is not positive.
 pub fn run(config: &Config) -> Result<Report, StudyError> {
     let setup = Setup::new()?;
-    let fine = kalibra_sim::grid(-13.0..=6.0, config.fine_step)?;
+    let fine = kalibra_tune::grid(-13.0..=6.0, config.fine_step)?;
     let mut readings = Vec::new();
     for reading in &READINGS {
         let sweep_of = |kind, grid: &[f64]| -> Result<Vec<SweepRow>, StudyError> {
-            Ok(kalibra_sim::sweep(grid, config.threads, |p| {
+            Ok(kalibra_tune::sweep(grid, config.threads, |p| {
                 point(&setup, reading, kind, p)
             })?)
         };

@@ -176,9 +176,9 @@ fn sweep_reading(
     config: &Config,
 ) -> Result<ReadingReport, StudyError> {
     let integer: Vec<f64> = (-10..=10).map(f64::from).collect();
-    let fine = kalibra_sim::grid(-10.0..=10.0, config.fine_step)?;
+    let fine = kalibra_tune::grid(-10.0..=10.0, config.fine_step)?;
     let run = |grid: &[f64]| -> Result<Vec<SweepRow>, StudyError> {
-        Ok(kalibra_sim::sweep(grid, config.threads, |p| {
+        Ok(kalibra_tune::sweep(grid, config.threads, |p| {
             point(setup, reading.divisor, p)
         })?)
     };
@@ -234,14 +234,14 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
 
     // Initial tuning along the noise-free truth.
     let truth_model = reentry::dynamics(qt())?;
-    let p_ad = kalibra_sim::p_ad(&truth_model, &setup.radar, &setup.truth, 0)?;
+    let p_ad = kalibra_tune::p_ad(&truth_model, &setup.radar, &setup.truth, 0)?;
     let table_p0 = p0_table();
     let p_ad_diagonal = (0..4)
         .map(|i| Entry::new(table_p0[(i, i)], p_ad[(i, i)]))
         .collect();
     let mut ekf = Ekf::new(&truth_model, &setup.radar, x0_table(), p_ad)?;
     let records = ekf.run_collect(setup.measurements.iter().map(Some), Start::PredictFirst)?;
-    let q_ad = kalibra_sim::q_ad(
+    let q_ad = kalibra_tune::q_ad(
         &qt(),
         records.iter().map(|r| (&r.prior().cov, &r.posterior().cov)),
     )?;

@@ -2,13 +2,13 @@
 //! from the library's own pieces (Kf, j_step, JHorizon, crossover), for thread invariance,
 //! gaps, typed errors, the RMSE against a truth, and the J1/J2 monotonicity and bounds.
 
-use kalibra_eval::{
-    InitialCovariance, JDivisor, NoCrossover, TuneError, TuneProblem, TuneReport, Tuning,
-};
 use kalibra_filters::{Filter, Kf, Start};
 use kalibra_linalg::{DMatrix, DVector, Dyn};
 use kalibra_metrics::{JHorizon, SweepPoint, crossover, j_step};
 use kalibra_models::{LinearGaussian, LinearObservation, simulate};
+use kalibra_tune::{
+    InitialCovariance, JDivisor, NoCrossover, TuneError, TuneProblem, TuneReport, Tuning,
+};
 use rand_chacha::{ChaCha8Rng, rand_core::SeedableRng};
 
 const STEPS: usize = 120;
@@ -104,7 +104,7 @@ fn results_match_the_librarys_own_sweep_exactly() {
         &Tuning::new().threads(2),
         &problem(&cv, zs.clone()).unwrap(),
     );
-    let grid = kalibra_sim::grid(-6.0..=6.0, 0.5).unwrap();
+    let grid = kalibra_tune::grid(-6.0..=6.0, 0.5).unwrap();
     assert_eq!(
         report.points.iter().map(|p| p.p).collect::<Vec<_>>(),
         grid,
@@ -182,7 +182,7 @@ fn results_match_the_librarys_own_sweep_exactly() {
     }
     // A compromise within a few decades of the truth's p = -0.52.
     assert!(c.p > -3.0 && c.p < 2.0, "p_c = {}", c.p);
-    assert_eq!(report.schema_version, kalibra_eval::TUNE_SCHEMA_VERSION);
+    assert_eq!(report.schema_version, kalibra_tune::TUNE_SCHEMA_VERSION);
     assert_eq!(report.initial_covariance, InitialCovariance::Checked);
     assert!(report.findings.no_crossover.is_none());
     // The report serialises and reads back (serde_json's default float parsing may differ in
@@ -570,7 +570,7 @@ fn every_bad_input_is_a_typed_error() {
     );
     // Ragged rows from a file.
     assert_eq!(
-        kalibra_eval::matrix_from_rows("Q_nom", &[vec![1.0, 0.0], vec![0.0]]).unwrap_err(),
+        kalibra_tune::matrix_from_rows("Q_nom", &[vec![1.0, 0.0], vec![0.0]]).unwrap_err(),
         TuneError::Ragged {
             matrix: "Q_nom",
             row: 1,

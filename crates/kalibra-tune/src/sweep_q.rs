@@ -194,10 +194,10 @@ pub enum TuneError {
 /// ragged rows or no rows.
 ///
 /// ```
-/// let f = kalibra_eval::matrix_from_rows("F", &[vec![1.0, 1.0], vec![0.0, 1.0]])?;
+/// let f = kalibra_tune::matrix_from_rows("F", &[vec![1.0, 1.0], vec![0.0, 1.0]])?;
 /// assert_eq!(f[(0, 1)], 1.0);
-/// assert!(kalibra_eval::matrix_from_rows("F", &[vec![1.0, 1.0], vec![0.0]]).is_err());
-/// # Ok::<(), kalibra_eval::TuneError>(())
+/// assert!(kalibra_tune::matrix_from_rows("F", &[vec![1.0, 1.0], vec![0.0]]).is_err());
+/// # Ok::<(), kalibra_tune::TuneError>(())
 /// ```
 ///
 /// # Errors
@@ -623,7 +623,7 @@ pub enum JDivisor {
 ///   (the checked `j_step` refuses the asymmetric `A_k` such a run produces). Updates where
 ///   `A_k + B_k` is not positive definite are counted per point and in the report's findings.
 ///
-/// Points run in parallel ([`kalibra_sim::sweep`]); each is a deterministic filter run, so the
+/// Points run in parallel ([`crate::sweep`]); each is a deterministic filter run, so the
 /// report is identical for any thread count.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tuning {
@@ -640,7 +640,7 @@ impl Default for Tuning {
 }
 
 /// The default grid: `p` from -6 to 6 in steps of 0.5, 25 points computed as
-/// `kalibra_sim::grid(-6.0..=6.0, 0.5)` computes them (`from + i step`; a unit test checks the
+/// `crate::grid(-6.0..=6.0, 0.5)` computes them (`from + i step`; a unit test checks the
 /// two agree), written out so that no fallible call sits in a constructor.
 fn default_grid() -> Vec<f64> {
     (0..=24).map(|i| -6.0 + f64::from(i) * 0.5).collect()
@@ -658,14 +658,14 @@ impl Tuning {
         }
     }
 
-    /// The grid `from, from + step, ..., to` ([`kalibra_sim::grid`]: each point
+    /// The grid `from, from + step, ..., to` ([`crate::grid`]: each point
     /// `from + i step`, `to` included within `step / 1000`), as `--p FROM:TO:STEP` gives it.
     ///
     /// # Errors
     /// [`TuneError::InvalidOption`] unless `step > 0`, `to >= from` and all are finite.
     pub fn exponents(mut self, from: f64, to: f64, step: f64) -> Result<Self, TuneError> {
-        self.grid = kalibra_sim::grid(from..=to, step).map_err(|e| match e {
-            kalibra_sim::TuningError::InvalidParameter { name, value } => {
+        self.grid = crate::grid(from..=to, step).map_err(|e| match e {
+            crate::TuningError::InvalidParameter { name, value } => {
                 TuneError::InvalidOption { name, value }
             }
             _ => TuneError::InvalidOption {
@@ -712,7 +712,7 @@ impl Tuning {
     /// the thread count.
     ///
     /// ```
-    /// use kalibra_eval::{TuneProblem, Tuning};
+    /// use kalibra_tune::{TuneProblem, Tuning};
     /// use kalibra_linalg::{DMatrix, DVector};
     ///
     /// // A scalar random walk seen directly: x_{k+1} = x_k + w, z_k = x_k + v.
@@ -729,7 +729,7 @@ impl Tuning {
     /// let c = report.crossover.expect("J1 and J2 cross on this grid");
     /// let q = report.recommended_q.expect("a crossover gives a Q");
     /// assert!((q[0][0] - 0.1 * 10f64.powf(c.p)).abs() < 1e-12);
-    /// # Ok::<(), kalibra_eval::TuneError>(())
+    /// # Ok::<(), kalibra_tune::TuneError>(())
     /// ```
     ///
     /// # Errors
@@ -750,7 +750,7 @@ impl Tuning {
             JDivisor::Updates => problem.updates(),
             JDivisor::Steps => problem.steps(),
         };
-        let points = kalibra_sim::sweep(&self.grid, self.threads, |p| {
+        let points = crate::sweep(&self.grid, self.threads, |p| {
             point(problem, p, divisor, self.position.as_deref())
         })
         .map_err(|e| match e {
@@ -1236,7 +1236,7 @@ mod tests {
 
     #[test]
     fn default_grid_is_the_sim_grid() {
-        assert_eq!(default_grid(), kalibra_sim::grid(-6.0..=6.0, 0.5).unwrap());
+        assert_eq!(default_grid(), crate::grid(-6.0..=6.0, 0.5).unwrap());
         assert_eq!(Tuning::new().exponents_grid(), default_grid().as_slice());
     }
 }

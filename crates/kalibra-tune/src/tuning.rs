@@ -17,7 +17,7 @@ use kalibra_linalg::{
 use kalibra_models::{Dynamics, Measurement, ModelError};
 use rayon::prelude::*;
 
-use crate::SimError;
+use kalibra_sim::SimError;
 
 /// Errors of the tuning helpers.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -59,7 +59,7 @@ pub const GRID_MAX_POINTS: usize = 10_000_000;
 /// The ends come as a range so that they cannot be swapped with the step.
 ///
 /// ```
-/// let g = kalibra_sim::grid(-2.0..=1.0, 0.5).unwrap();
+/// let g = kalibra_tune::grid(-2.0..=1.0, 0.5).unwrap();
 /// assert_eq!(g, vec![-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0]);
 /// ```
 ///
@@ -117,7 +117,7 @@ pub fn grid(range: RangeInclusive<f64>, step: f64) -> Result<Vec<f64>, TuningErr
 /// failing point in grid order is returned, as `SimError::Run { run: index, .. }`.
 ///
 /// ```
-/// let squares = kalibra_sim::sweep(&[1.0, 2.0, 3.0], 2, |p| Ok::<_, std::fmt::Error>(p * p))?;
+/// let squares = kalibra_tune::sweep(&[1.0, 2.0, 3.0], 2, |p| Ok::<_, std::fmt::Error>(p * p))?;
 /// assert_eq!(squares, vec![1.0, 4.0, 9.0]);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
@@ -138,7 +138,7 @@ where
             .into_iter()
             .collect()
     };
-    crate::in_pool((threads > 0).then_some(threads), work)
+    kalibra_sim::in_pool((threads > 0).then_some(threads), work)
 }
 
 /// Two-point differencing (Bar-Shalom, Li, Kirubarajan 2001, p. 247): from two position
@@ -150,12 +150,12 @@ where
 ///
 /// ```
 /// use kalibra_linalg::{Gaussian, Matrix1, Vector1};
-/// let Gaussian { mean: x, cov: p } = kalibra_sim::two_point_init::<2, 1>(
+/// let Gaussian { mean: x, cov: p } = kalibra_tune::two_point_init::<2, 1>(
 ///     &Vector1::new(10.0), &Vector1::new(14.0), &Matrix1::new(1.0), &Matrix1::new(1.0), 2.0, [0], [1])?;
 /// assert_eq!(x, kalibra_linalg::Vector2::new(14.0, 2.0));
 /// // var(v) = (r1 + r2) / t^2, cov(x, v) = r2 / t.
 /// assert_eq!(p, kalibra_linalg::Matrix2::new(1.0, 0.5, 0.5, 0.5));
-/// # Ok::<(), kalibra_sim::TuningError>(())
+/// # Ok::<(), kalibra_tune::TuningError>(())
 /// ```
 ///
 /// # Errors
