@@ -36,7 +36,7 @@ use kalibra::models::{
     AngularTarget, BearingReference, Kinematic, LinearGaussian, LinearObservation, Order,
     wrap_angle,
 };
-use kalibra::sim::{grid, p_ad, q_ad, two_point_init};
+use kalibra::tune::{grid, p_ad, q_ad, two_point_init};
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
 
@@ -555,6 +555,10 @@ const MODEL_PAPER: &str = "model of a reproduced study with its fixed physical c
 
 /// Every public function of the library crates that takes `f64` data (or `Lanes`), with how
 /// it is covered. `Type::name` for methods; `$name` is the macro that writes `Kf` and `Ekf`.
+const TUNE_PENDING: &str = "kalibra-tune's noise estimation (parametrisation, ML, EM, ALS, the \
+    per-parameter sweep): not yet driven with extreme values, a known gap; its own tests cover \
+    ordinary values";
+
 pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     // kalibra-bounds
     ("Pcrlb::new", Cover::Driven),
@@ -900,6 +904,25 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("params", Cover::Reason(STUDY)),
     ("dynamics", Cover::Reason(STUDY)),
     ("scaled", Cover::Reason(STUDY)),
+    ("Als::gain", Cover::Reason(TUNE_PENDING)),
+    ("CovarianceForm::diagonal", Cover::Reason(TUNE_PENDING)),
+    ("CovarianceForm::fixed", Cover::Reason(TUNE_PENDING)),
+    ("CovarianceForm::full", Cover::Reason(TUNE_PENDING)),
+    ("CovarianceForm::scaled", Cover::Reason(TUNE_PENDING)),
+    ("Em::tolerance", Cover::Reason(TUNE_PENDING)),
+    (
+        "MaximumLikelihood::gradient_tolerance",
+        Cover::Reason(TUNE_PENDING),
+    ),
+    ("MaximumLikelihood::starts", Cover::Reason(TUNE_PENDING)),
+    ("NoiseProblem::new", Cover::Reason(TUNE_PENDING)),
+    ("ParameterSweep::grid", Cover::Reason(TUNE_PENDING)),
+    ("Parametrisation::jacobian", Cover::Reason(TUNE_PENDING)),
+    ("Parametrisation::matrices", Cover::Reason(TUNE_PENDING)),
+    ("Parametrisation::natural", Cover::Reason(TUNE_PENDING)),
+    ("Parametrisation::new", Cover::Reason(TUNE_PENDING)),
+    ("Parametrisation::theta_of", Cover::Reason(TUNE_PENDING)),
+    ("log_likelihood", Cover::Reason(TUNE_PENDING)),
 ];
 
 /// The list above is the scanned sources' list: no public function taking `f64` data is

@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use extreme::Cover;
 use kalibra::bounds::{ErgodicAverage, Surrogate, observability_singular_values};
-use kalibra::eval::{Evaluation, FilterLog, Matrices, Tuning, Vectors};
+use kalibra::eval::{Evaluation, FilterLog, Matrices, Vectors};
 use kalibra::filters::{
     AngleComponents, ConstantGainKf, FixedLagSmoother, KappaGrid, Kf, SigmaSet, Start,
 };
@@ -37,7 +37,8 @@ use kalibra::models::{
     AccelAxis, Bearing, BearingReference, Kinematic, Order, Simulator, Stationary, Target3dParams,
     check_dynamics_jacobian, check_measurement_jacobian, simulate, simulate_until,
 };
-use kalibra::sim::{MonteCarlo, Shard, p_ad, sweep, two_point_init};
+use kalibra::sim::{MonteCarlo, Shard};
+use kalibra::tune::{Tuning, p_ad, sweep, two_point_init};
 use proptest::prelude::*;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
@@ -937,6 +938,10 @@ const IO: &str = "kalibra-io reader plumbing (shapes and columns from files): \
     log_from_arrays checks its shape product with checked_mul before anything is allocated";
 
 /// Every public function of the library crates that takes a `usize`, with how it is covered.
+const TUNE_PENDING: &str = "kalibra-tune's noise estimation (parametrisation, ML, EM, ALS, the \
+    per-parameter sweep): not yet driven with extreme values, a known gap; its own tests cover \
+    ordinary values";
+
 pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
     // kalibra-bounds
     ("observability_singular_values", Cover::Driven),
@@ -1112,6 +1117,20 @@ pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
     ("replay", Cover::Reason(STUDY)),
     ("table_p", Cover::Reason(STUDY)),
     ("kappa_grid", Cover::Reason(STUDY)),
+    ("Als::lags", Cover::Reason(TUNE_PENDING)),
+    ("Als::skip", Cover::Reason(TUNE_PENDING)),
+    ("CovarianceForm::fix", Cover::Reason(TUNE_PENDING)),
+    ("CovarianceForm::is_fixed", Cover::Reason(TUNE_PENDING)),
+    ("Em::exact_iterations", Cover::Reason(TUNE_PENDING)),
+    ("Em::max_iterations", Cover::Reason(TUNE_PENDING)),
+    (
+        "MaximumLikelihood::max_iterations",
+        Cover::Reason(TUNE_PENDING),
+    ),
+    (
+        "in_pool",
+        Cover::Reason("the thread pool of `sweep`, driven here through `sweep`'s thread count"),
+    ),
 ];
 
 /// The list above is the scanned sources' list, and every `Driven` entry is called above.

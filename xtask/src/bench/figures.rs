@@ -282,6 +282,18 @@ mod tests {
         r
     }
 
+    /// The committed table is generated from the committed JSON (`cargo xtask bench table`
+    /// regenerates it), so the two never disagree.
+    #[test]
+    fn the_committed_table_is_generated_from_its_json() {
+        let dir = crate::workspace_root().join("docs").join("benchmarks");
+        let committed = std::fs::read_to_string(dir.join(TABLE)).unwrap();
+        assert!(
+            committed == render(&read_all(&dir).unwrap()),
+            "docs/benchmarks/README.md is stale: run `cargo xtask bench table`"
+        );
+    }
+
     #[test]
     fn records_round_trip_through_json_with_non_finite_values_as_null() {
         let r = record(

@@ -66,6 +66,9 @@ enum Workloads {
     Shards,
     /// The KF's RTS smoother on W1's model: library, hand-written loop and FilterPy.
     Smooth,
+    /// Measures nothing: regenerates `README.md` in the output directory from its JSON files
+    /// (after a merge of branches that each ran a workload).
+    Table,
 }
 
 /// `cargo xtask bench` arguments.
@@ -136,6 +139,12 @@ pub fn main(args: &Args) -> Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| crate::workspace_root().join("docs").join("benchmarks"));
+    if matches!(args.workloads, Workloads::Table) {
+        let table = out.join(figures::TABLE);
+        std::fs::write(&table, figures::render(&figures::read_all(&out)?))?;
+        println!("figures: {} regenerated", table.display());
+        return Ok(());
+    }
     let workloads = match args.workloads {
         Workloads::All => vec![Workloads::W1, Workloads::W2, Workloads::W3],
         one => vec![one],
@@ -152,7 +161,9 @@ pub fn main(args: &Args) -> Result<()> {
             Workloads::Eval => eval::run(args)?,
             Workloads::Shards => shards::run(args)?,
             Workloads::Smooth => smooth::run(args)?,
-            Workloads::All => anyhow::bail!("`all` is expanded into its workloads above"),
+            Workloads::All | Workloads::Table => {
+                anyhow::bail!("`all` and `table` are handled above")
+            }
         };
         let command = std::iter::once("cargo xtask".to_string())
             .chain(std::env::args().skip(1))
