@@ -553,12 +553,12 @@ const STORE: &str = "stores the values for later use, computing nothing from the
 const MODEL_PAPER: &str = "model of a reproduced study with its fixed physical constants \
     (re-entry, manoeuvres); exercised by kalibra-studies' tests";
 
-/// Every public function of the library crates that takes `f64` data (or `Lanes`), with how
-/// it is covered. `Type::name` for methods; `$name` is the macro that writes `Kf` and `Ekf`.
 const TUNE_PENDING: &str = "kalibra-tune's noise estimation (parametrisation, ML, EM, ALS, the \
     per-parameter sweep): not yet driven with extreme values, a known gap; its own tests cover \
     ordinary values";
 
+/// Every public function of the library crates that takes `f64` data (or `Lanes`), with how
+/// it is covered. `Type::name` for methods; `$name` is the macro that writes `Kf` and `Ekf`.
 pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     // kalibra-bounds
     ("Pcrlb::new", Cover::Driven),

@@ -937,11 +937,11 @@ const IO: &str = "kalibra-io reader plumbing (shapes and columns from files): \
     crates/kalibra-io/tests/readers_fuzz.rs and errors.rs feed it hostile files, and \
     log_from_arrays checks its shape product with checked_mul before anything is allocated";
 
-/// Every public function of the library crates that takes a `usize`, with how it is covered.
 const TUNE_PENDING: &str = "kalibra-tune's noise estimation (parametrisation, ML, EM, ALS, the \
     per-parameter sweep): not yet driven with extreme values, a known gap; its own tests cover \
     ordinary values";
 
+/// Every public function of the library crates that takes a `usize`, with how it is covered.
 pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
     // kalibra-bounds
     ("observability_singular_values", Cover::Driven),

@@ -9,8 +9,8 @@
 //!   unsharded run writes, bit for bit (docs/distributed.md).
 //! * `cargo xtask compare BEFORE AFTER`: compares two `reproduce --out` trees value by value,
 //!   skipping only the commit and the values measured with a clock (`compare.rs`).
-//! * `cargo xtask bench [w1|w2|w3|w4|eval|shards|smooth|all|table] [--out DIR] ...`: runs the benchmark
-//!   workloads through the public API and through hand-written nalgebra loops in the same
+//! * `cargo xtask bench [w1|w2|w3|w4|eval|shards|smooth|all|table] [--out DIR] ...`: runs the
+//!   benchmark workloads through the public API and through hand-written nalgebra loops in the same
 //!   process, prints steps per second and their ratio, and writes the figures as JSON into
 //!   `DIR` (default `docs/benchmarks/`) with the Markdown table generated from them
 //!   (`bench/mod.rs` lists the workloads; `eval` times the release `kalibra eval` against a
