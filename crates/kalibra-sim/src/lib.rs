@@ -253,8 +253,8 @@ pub(crate) fn fold_blocks<A: Merge>(blocks: impl IntoIterator<Item = A>) -> Opti
     Some(total)
 }
 
-/// The most threads a dedicated pool ([`MonteCarlo::threads`], [`sweep`]) is built with: far
-/// beyond any machine's cores. rayon reserves its per-thread state before it spawns, so
+/// The most threads a dedicated pool ([`MonteCarlo::threads`], `kalibra_tune::sweep`) is built
+/// with: far beyond any machine's cores. rayon reserves its per-thread state before it spawns, so
 /// `usize::MAX` threads would be a "capacity overflow" panic (`tests/extreme_sizes.rs`).
 pub const MAX_THREADS: usize = 4096;
 
