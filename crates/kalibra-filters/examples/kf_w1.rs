@@ -1,7 +1,7 @@
 //! Steps the scalar [`Kf`] on W1's model (the 4-state constant-velocity KF of `cargo xtask
 //! bench w1`) with each update's NEES and NIS, for profilers: the filter's cost per step
-//! without the truth simulation or the study's bookkeeping (callgrind counts its instructions
-//! repeatably; `examples/w1_scalar.rs` of kalibra-studies runs the whole scalar study).
+//! without the truth simulation or the study's bookkeeping, for `valgrind --tool=callgrind`
+//! (`examples/w1_scalar.rs` of kalibra-studies runs the whole scalar study).
 //!
 //! `cargo run --release -p kalibra-filters --example kf_w1 -- [runs] [steps]`
 //!

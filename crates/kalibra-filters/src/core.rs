@@ -359,9 +359,9 @@ where
     /// changes until the update succeeds ([`KalmanCore::begin_record`]), so a failed update
     /// leaves the filter and its last record as they were.
     ///
-    /// The posterior comes from an out-of-line call: when both fields are plain reads, the
-    /// compiler loads both matrices and blends them, which cost the scalar KF about a hundred
-    /// instructions per step (`examples/kf_w1.rs` under callgrind).
+    /// The posterior comes from an out-of-line call because, when both fields are plain reads,
+    /// the compiler loads both matrices and blends them on every step; `examples/kf_w1.rs`
+    /// under callgrind shows the cost.
     #[inline(always)]
     pub(crate) fn update_prior(&self) -> &Estimate<N> {
         match self.phase {
@@ -406,8 +406,8 @@ where
     }
 
     /// [`KalmanCore::begin_record`]'s copy, out of line: an update with no prediction before
-    /// it is rare, and the copy's code inlined into every update lengthens the step a little
-    /// (`examples/kf_w1.rs` under callgrind).
+    /// it is rare, and its code inlined would lengthen every update (`examples/kf_w1.rs` under
+    /// callgrind shows it).
     #[cold]
     #[inline(never)]
     fn begin_record_cold(&mut self) {
