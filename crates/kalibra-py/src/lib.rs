@@ -19,6 +19,7 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 mod arrays;
 mod callbacks;
+mod estimate;
 mod eval;
 mod filters;
 mod metrics;
@@ -272,6 +273,7 @@ fn kalibra_py(m: &Bound<'_, PyModule>) -> PyResult<()> {
     metrics::register(m)?;
     filters::register(m)?;
     tune::register(m)?;
+    estimate::register(m)?;
     montecarlo::register(m)?;
     shards::register(m)?;
     Ok(())

@@ -25,7 +25,9 @@ The building blocks: ``nees``, ``nis``, ``nci``, ``chi2_band``, ``rmse``,
 many at once, returning numpy arrays named as ``evaluate``'s arguments), and
 ``ExtendedKalmanFilter`` and ``UnscentedKalmanFilter`` on your own model given as Python
 callables (symmetric or scaled sigma points, adaptive kappa). Tuning: ``sweep_q``, the
-J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command. Simulation:
+J1/J2 sweep of ``Q = 10^p Q_nom`` of the ``kalibra tune`` command, and ``estimate_noise``,
+``Q`` and ``R`` from the measurements alone by maximum likelihood (with intervals and what the
+data identify), EM, ALS or J1/J2 on every parameter. Simulation:
 ``monte_carlo``, a seeded Monte Carlo of a linear model through the Kalman filter, evaluated,
 all in Rust and bit-identical for any thread count; with ``shard=(i, S)`` it returns a
 picklable ``Partial`` and ``merge`` of all S gives the one-process report to the bit (Dask,
@@ -46,12 +48,14 @@ from ._kalibra import (
     ExtendedKalmanFilter,
     KalibraError,
     KalmanFilter,
+    NoiseEstimate,
     Partial,
     Report,
     TuneReport,
     UnscentedKalmanFilter,
     __version__,
     chi2_band,
+    estimate_noise,
     evaluate,
     merge,
     monte_carlo,
@@ -67,12 +71,14 @@ __all__ = [
     "ExtendedKalmanFilter",
     "KalibraError",
     "KalmanFilter",
+    "NoiseEstimate",
     "Partial",
     "Report",
     "TuneReport",
     "UnscentedKalmanFilter",
     "__version__",
     "chi2_band",
+    "estimate_noise",
     "evaluate",
     "merge",
     "monte_carlo",

@@ -38,6 +38,8 @@ __all__ = [
     "UnscentedKalmanFilter",
     "TuneReport",
     "sweep_q",
+    "NoiseEstimate",
+    "estimate_noise",
     "monte_carlo",
     "Partial",
     "merge",
@@ -225,6 +227,68 @@ def sweep_q(
     threads: int = 0,
     names: Tuple[str, str] = ...,  # ("model", "measurements")
 ) -> TuneReport: ...
+
+_Form = Literal["fixed", "scaled", "diagonal", "full"]
+# What is known of a noise matrix: a matrix (fixed), (form, value), (form, value, fixed) or
+# {"form": form, "value": value, "fixed": [(row, col), ...]} ("fixed" optional).
+_NoiseSpec = Union[
+    _ArrayLike,
+    Tuple[_Form, _ArrayLike],
+    Tuple[_Form, _ArrayLike, Sequence[Tuple[int, int]]],
+    Mapping[str, Any],
+]
+
+@final
+class NoiseEstimate:
+    """Q and R estimated from measurements (``kalibra tune --method``'s report)."""
+
+    @property
+    def method(self) -> Literal["ml", "em", "als", "j1j2"]: ...
+    @property
+    def log_likelihood(self) -> Optional[float]: ...
+    @property
+    def start_log_likelihood(self) -> Optional[float]: ...
+    @property
+    def Q(self) -> _FloatArray: ...
+    @property
+    def Qw(self) -> _FloatArray: ...
+    @property
+    def R(self) -> _FloatArray: ...
+    # One dict per free parameter: name (str), value (float or None), stderr (float or
+    # None), ci95 ((low, high) or None).
+    @property
+    def parameters(self) -> list[dict[str, Any]]: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def iterations(self) -> Optional[int]: ...
+    # identifiable (bool), rank, parameters, condition (None: infinite), unidentifiable
+    # (list of str), message.
+    @property
+    def identifiable(self) -> Optional[dict[str, Any]]: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def to_json(self) -> str: ...
+    def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
+
+def estimate_noise(
+    F: _ArrayLike,
+    H: _ArrayLike,
+    measurements: _ArrayLike,
+    *,
+    Q: _NoiseSpec,
+    R: _NoiseSpec,
+    x0: _ArrayLike,
+    P0: _ArrayLike,
+    G: Optional[_ArrayLike] = None,
+    method: Literal["ml", "em", "als", "j1j2"] = "ml",
+    start: _Start = "predict_first",
+    iterations: Optional[int] = None,
+    tolerance: Optional[float] = None,
+    lags: Optional[int] = None,
+    p: Optional[Tuple[float, float, float]] = None,
+) -> NoiseEstimate: ...
 
 # The return type follows `shard` and `return_log`: a shard's partial, the report with the
 # simulated log, or the report (the last overload takes what is known only at run time).

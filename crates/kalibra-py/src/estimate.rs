@@ -1,0 +1,828 @@
+//! `kalibra.estimate_noise` and its `NoiseEstimate`: `Q` and `R` from measurements by maximum
+//! likelihood, EM, ALS or J1/J2 on every parameter (`kalibra_tune`'s estimators), on numpy
+//! arrays.
+
+use std::path::PathBuf;
+
+use kalibra_tune::{
+    Als, CovarianceForm, DMatrix, DVector, Em, MaximumLikelihood, NoiseError, NoiseMatrices,
+    NoiseProblem, ParameterSweep, Parametrisation, Run, Start, log_likelihood_of,
+};
+use numpy::PyArrayDyn;
+use pyo3::exceptions::PyOSError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyString, PyTuple};
+use serde::Serialize;
+
+use crate::arrays::{new_array, read};
+use crate::{At, error, error_at};
+
+/// The estimators `estimate_noise` offers, by their names.
+const METHODS: [&str; 4] = ["ml", "em", "als", "j1j2"];
+
+/// The forms of a noise matrix, by their names.
+const FORMS: [&str; 4] = ["fixed", "scaled", "diagonal", "full"];
+
+/// One free parameter's estimate as `report.json` holds it.
+#[derive(Clone, Debug, Serialize)]
+struct ParameterRow {
+    /// `q`, `r`, `Qw[i,j]` or `R[i,j]`.
+    name: String,
+    /// The estimate on the matrices' own scale.
+    value: Option<f64>,
+    /// Its standard error (maximum likelihood only).
+    stderr: Option<f64>,
+    /// Its 95% interval (maximum likelihood only); an end at a bound is 0 or infinity.
+    ci95: Option<[f64; 2]>,
+}
+
+/// What the data identify, as `report.json` holds it.
+#[derive(Clone, Debug, Serialize)]
+struct IdentifiableRow {
+    /// Whether every free parameter is identified.
+    identifiable: bool,
+    /// The rank of the information (ML) or of the least-squares matrix (ALS).
+    rank: usize,
+    /// The free parameters.
+    parameters: usize,
+    /// Its condition number (`None`: infinite).
+    condition: Option<f64>,
+    /// The parameter combinations the data cannot separate, in words.
+    unidentifiable: Vec<String>,
+    /// In words.
+    message: String,
+}
+
+/// The estimate as `report.json` holds it: the fields of `kalibra tune --method`'s report.
+#[derive(Clone, Debug, Serialize)]
+struct EstimateReport {
+    method: &'static str,
+    /// At the estimate (`None` where the filter cannot run there).
+    log_likelihood: Option<f64>,
+    /// At the starting point (the forms' given matrices).
+    start_log_likelihood: Option<f64>,
+    #[serde(rename = "Q")]
+    q: Vec<Vec<f64>>,
+    #[serde(rename = "Qw")]
+    qw: Vec<Vec<f64>>,
+    #[serde(rename = "R")]
+    r: Vec<Vec<f64>>,
+    parameters: Vec<ParameterRow>,
+    converged: bool,
+    iterations: Option<usize>,
+    identifiable: Option<IdentifiableRow>,
+    warnings: Vec<String>,
+    /// J1/J2 on every parameter (method `j1j2`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    curves: Option<Vec<kalibra_tune::ParameterCurve>>,
+}
+
+fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
+        .collect()
+}
+
+/// The noise covariances `Q` and `R` estimated from measurements: what `kalibra tune
+/// --method` writes as `report.json`.
+///
+/// Returned by `kalibra.estimate_noise`. `Q` (n, n, the state's, `G Qw G^T`), `Qw` (the
+/// channels'; `Q` itself without `G`) and `R` are the estimate as arrays; `parameters` lists
+/// every free parameter on the matrices' own scale (a dict of `name`, `value`, `stderr`,
+/// `ci95`); `identifiable` says what the data can separate. `to_dict()` holds every field
+/// (the keys of `report.json`); `save(dir)` writes `report.json`.
+#[pyclass(module = "kalibra", frozen)]
+pub struct NoiseEstimate {
+    report: EstimateReport,
+}
+
+fn matrix_array<'py>(py: Python<'py>, rows: &[Vec<f64>]) -> Bound<'py, PyArrayDyn<f64>> {
+    let cols = rows.first().map_or(0, Vec::len);
+    new_array(
+        py,
+        &[rows.len(), cols],
+        rows.iter().flatten().copied().collect(),
+    )
+}
+
+#[pymethods]
+impl NoiseEstimate {
+    /// The estimator: "ml", "em", "als" or "j1j2".
+    #[getter]
+    fn method(&self) -> &'static str {
+        self.report.method
+    }
+
+    /// The log-likelihood of the measurements at the estimate (natural log with the 2 pi
+    /// constant; the sum of the Kalman filter's per-update log-densities), or None where the
+    /// filter cannot run there.
+    #[getter]
+    fn log_likelihood(&self) -> Option<f64> {
+        self.report.log_likelihood
+    }
+
+    /// The log-likelihood at the starting point (the forms' given matrices).
+    #[getter]
+    fn start_log_likelihood(&self) -> Option<f64> {
+        self.report.start_log_likelihood
+    }
+
+    /// The state's process noise `Q = G Qw G^T` at the estimate, (n, n).
+    #[getter(Q)]
+    fn q<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<f64>> {
+        matrix_array(py, &self.report.q)
+    }
+
+    /// The noise of the channels `Qw` at the estimate, (g, g) (`Q` itself without `G`).
+    #[getter(Qw)]
+    fn qw<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<f64>> {
+        matrix_array(py, &self.report.qw)
+    }
+
+    /// The measurement noise `R` at the estimate, (m, m).
+    #[getter(R)]
+    fn r<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<f64>> {
+        matrix_array(py, &self.report.r)
+    }
+
+    /// Every free parameter, in order (`Q`'s, then `R`'s; entries row by row of the lower
+    /// triangle): a dict of `name` (`"q"`, `"r"` for a scaled form's multiplier,
+    /// `"Qw[i,j]"`, `"R[i,j]"` for an entry), `value`, `stderr` and `ci95` (a `(low, high)`
+    /// tuple; maximum likelihood only, else None; an end at a bound is 0 or inf).
+    #[getter]
+    fn parameters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let list = PyList::empty(py);
+        for p in &self.report.parameters {
+            let d = PyDict::new(py);
+            d.set_item("name", &p.name)?;
+            d.set_item("value", p.value)?;
+            d.set_item("stderr", p.stderr)?;
+            d.set_item("ci95", p.ci95.map(|[lo, hi]| (lo, hi)))?;
+            list.append(d)?;
+        }
+        Ok(list)
+    }
+
+    /// Whether the estimator met its tolerance (ML: the gradient; EM: the log-likelihood's
+    /// increase, always true for exact iterations; ALS and J1/J2: true, they do not iterate to
+    /// a tolerance).
+    #[getter]
+    fn converged(&self) -> bool {
+        self.report.converged
+    }
+
+    /// The iterations run (ML: of the best start; EM: M-steps), or None (ALS, J1/J2).
+    #[getter]
+    fn iterations(&self) -> Option<usize> {
+        self.report.iterations
+    }
+
+    /// What the data identify, as a dict: `identifiable` (bool), `rank`, `parameters`,
+    /// `condition` (None: infinite), `unidentifiable` (the combinations the data cannot
+    /// separate, in words) and `message`; None for EM and J1/J2, which do not compute it.
+    #[getter]
+    fn identifiable<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        self.report
+            .identifiable
+            .as_ref()
+            .map(|id| json_value(py, id))
+            .transpose()
+    }
+
+    /// What the user must know about the estimate, in words (not converged, a parameter at a
+    /// bound, unidentifiable parameters, local maxima, an ALS estimate that is not unique).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.report.warnings.clone()
+    }
+
+    /// Every field as a dict with the keys of `report.json`.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_value(py, &self.report)
+    }
+
+    /// The report as JSON text: `report.json` without its final newline.
+    fn to_json(&self) -> PyResult<String> {
+        serde_json::to_string_pretty(&self.report)
+            .map_err(|e| error(format!("cannot serialise the report: {e}")))
+    }
+
+    /// Writes `report.json` into `dir` (created if missing; an earlier `report.json` there is
+    /// replaced).
+    ///
+    /// Raises:
+    ///     OSError: `dir` cannot be created or written.
+    fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
+        let json = self.to_json()? + "\n";
+        py.detach(|| {
+            std::fs::create_dir_all(&dir)?;
+            std::fs::write(dir.join("report.json"), json)
+        })
+        .map_err(|e| PyOSError::new_err(format!("write {}: {e}", dir.display())))
+    }
+
+    fn __repr__(&self) -> String {
+        let params: Vec<String> = self
+            .report
+            .parameters
+            .iter()
+            .map(|p| {
+                format!(
+                    "{}={}",
+                    p.name,
+                    p.value.map_or("-".into(), |v| format!("{v:.4}"))
+                )
+            })
+            .collect();
+        format!(
+            "<kalibra.NoiseEstimate method={} {}>",
+            self.report.method,
+            params.join(" ")
+        )
+    }
+}
+
+/// A serialisable value as a Python object, through JSON.
+fn json_value<'py>(py: Python<'py>, value: &impl Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let json = serde_json::to_string(value).map_err(|e| error(format!("cannot serialise: {e}")))?;
+    py.import("json")?.call_method1("loads", (json,))
+}
+
+/// The Python argument of a library matrix name (`Qw` is given as `Q`).
+fn argument_of(matrix: &str) -> &str {
+    match matrix {
+        "Qw" | "q" => "Q",
+        "r" => "R",
+        other => other.split('[').next().unwrap_or(other),
+    }
+}
+
+/// A noise problem's error as a `KalibraError` naming the argument.
+fn noise_error(e: &NoiseError) -> PyErr {
+    use NoiseError as N;
+    let named = |matrix: &str| At {
+        argument: Some(argument_of(matrix).to_string()),
+        ..At::default()
+    };
+    let at = match e {
+        N::Shape { matrix, .. }
+        | N::Matrix { matrix, .. }
+        | N::NotDiagonal { matrix, .. }
+        | N::ZeroNominal { matrix }
+        | N::FixedEntryOutOfRange { matrix, .. }
+        | N::FixedEntryInScaled { matrix }
+        | N::Infeasible { matrix, .. } => named(matrix),
+        N::Empty { what } | N::NonFinite { what } => named(what),
+        N::NotPositive { name, .. } => named(name),
+        N::NonFiniteMeasurement { run, step } | N::MeasurementLength { run, step, .. } => At {
+            argument: Some("measurements".into()),
+            run: Some(*run),
+            step: Some(*step),
+            ..At::default()
+        },
+        N::NoMeasurements => named("measurements"),
+        _ => At::default(),
+    };
+    let message = match &at.argument {
+        Some(a) => format!("argument {a}: {e}"),
+        None => format!("arguments Q, R: {e}"),
+    };
+    error_at(message, &at)
+}
+
+/// A `(rows, cols)` matrix argument.
+fn matrix(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<DMatrix<f64>> {
+    let a = read(obj, name)?;
+    match a.shape.as_slice() {
+        [r, c] => Ok(DMatrix::from_row_slice(*r, *c, &a.data)),
+        other => Err(error(format!(
+            "argument {name} has shape {other:?}; expected a matrix (rows, cols)"
+        ))),
+    }
+}
+
+/// A form's fixed entries: `(row, col)` pairs.
+fn fixed_entries(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<(usize, usize)>> {
+    obj.extract::<Vec<(usize, usize)>>().map_err(|_| {
+        error(format!(
+            "argument {name}: fixed must be a list of (row, col) pairs of non-negative integers"
+        ))
+    })
+}
+
+/// A noise form from its name, value and fixed entries.
+fn form_named(
+    kind: &str,
+    value: &Bound<'_, PyAny>,
+    fixed: Option<&Bound<'_, PyAny>>,
+    name: &str,
+) -> PyResult<CovarianceForm> {
+    let value = matrix(value, name)?;
+    let mut form = match kind {
+        "fixed" => CovarianceForm::fixed(value),
+        "scaled" => CovarianceForm::scaled(value),
+        "diagonal" => CovarianceForm::diagonal(value),
+        "full" => CovarianceForm::full(value),
+        other => {
+            return Err(error(format!(
+                "argument {name}: form {other:?} is not one of {}",
+                FORMS.map(|f| format!("{f:?}")).join(", ")
+            )));
+        }
+    };
+    if let Some(fixed) = fixed.filter(|f| !f.is_none()) {
+        for (row, col) in fixed_entries(fixed, name)? {
+            form = form.fix(row, col);
+        }
+    }
+    Ok(form)
+}
+
+/// A noise argument: a matrix (fixed), `(form, value)`, `(form, value, fixed)`, or a dict
+/// with the keys `form`, `value` and optionally `fixed`.
+fn form_of(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<CovarianceForm> {
+    if let Ok(dict) = obj.cast::<PyDict>() {
+        for key in dict.keys() {
+            let key: String = key.extract().unwrap_or_else(|_| key.to_string());
+            if !["form", "value", "fixed"].contains(&key.as_str()) {
+                return Err(error(format!(
+                    "argument {name}: unknown key {key:?}; expected \"form\", \"value\" and \
+                     optionally \"fixed\""
+                )));
+            }
+        }
+        let kind = dict
+            .get_item("form")?
+            .ok_or_else(|| error(format!("argument {name}: the dict has no \"form\"")))?;
+        let kind: String = kind
+            .extract()
+            .map_err(|_| error(format!("argument {name}: \"form\" must be a string")))?;
+        let value = dict
+            .get_item("value")?
+            .ok_or_else(|| error(format!("argument {name}: the dict has no \"value\"")))?;
+        let fixed = dict.get_item("fixed")?;
+        return form_named(&kind, &value, fixed.as_ref(), name);
+    }
+    if let Ok(tuple) = obj.cast::<PyTuple>()
+        && tuple.len() > 0
+        && tuple.get_item(0)?.is_instance_of::<PyString>()
+    {
+        let kind: String = tuple.get_item(0)?.extract()?;
+        return match tuple.len() {
+            2 => form_named(&kind, &tuple.get_item(1)?, None, name),
+            3 => form_named(&kind, &tuple.get_item(1)?, Some(&tuple.get_item(2)?), name),
+            k => Err(error(format!(
+                "argument {name}: a tuple of {k} items; expected (form, value) or (form, value, \
+                 fixed)"
+            ))),
+        };
+    }
+    if obj.is_instance_of::<PyString>() {
+        let kind: String = obj.extract()?;
+        return Err(error(format!(
+            "argument {name} is the string {kind:?}; give (form, value), a dict or a matrix"
+        )));
+    }
+    Ok(CovarianceForm::fixed(matrix(obj, name)?))
+}
+
+/// The runs of `(K, m)` or `(R, K, m)` measurements: a row of NaN has no measurement.
+fn runs_of(obj: &Bound<'_, PyAny>, m: usize) -> PyResult<Vec<Run>> {
+    let a = read(obj, "measurements")?;
+    let (runs, k) = match a.shape.as_slice() {
+        [k, mm] if *mm == m => (1, *k),
+        [r, k, mm] if *mm == m => (*r, *k),
+        other => {
+            return Err(error(format!(
+                "argument measurements has shape {other:?}; expected (K, {m}) or (R, K, {m}) \
+                 (H has {m} rows)"
+            )));
+        }
+    };
+    let batch = a.shape.len() == 3;
+    (0..runs)
+        .map(|r| {
+            a.data[r * k * m..(r + 1) * k * m]
+                .chunks(m)
+                .enumerate()
+                .map(
+                    |(step, row)| match row.iter().filter(|v| v.is_nan()).count() {
+                        0 => Ok(Some(DVector::from_column_slice(row))),
+                        nan if nan == m => Ok(None),
+                        _ => {
+                            let run = if batch {
+                                format!("run {r}, ")
+                            } else {
+                                String::new()
+                            };
+                            Err(error_at(
+                                format!(
+                                    "argument measurements: {run}step {step} holds NaN in some \
+                                 components only; a row is a measurement or all NaN (none)"
+                                ),
+                                &At {
+                                    argument: Some("measurements".into()),
+                                    run: Some(r),
+                                    step: Some(step),
+                                    ..At::default()
+                                },
+                            ))
+                        }
+                    },
+                )
+                .collect()
+        })
+        .collect()
+}
+
+/// The 95% interval of a likelihood-free estimator: none.
+fn plain_rows(names: &[kalibra_tune::Parameter], values: &[f64]) -> Vec<ParameterRow> {
+    names
+        .iter()
+        .zip(values)
+        .map(|(p, &v)| ParameterRow {
+            name: p.name.clone(),
+            value: Some(v),
+            stderr: None,
+            ci95: None,
+        })
+        .collect()
+}
+
+/// The options of one estimator, checked before the GIL is released.
+enum Estimator {
+    Ml(MaximumLikelihood),
+    Em(Em),
+    Als(Als),
+    J1j2(ParameterSweep),
+}
+
+/// An ML warning in words.
+fn ml_warning(w: &kalibra_tune::MlWarning) -> String {
+    use kalibra_tune::MlWarning as W;
+    match w {
+        W::NotConverged {
+            stop,
+            gradient,
+            iterations,
+        } => format!(
+            "the optimiser did not converge: it stopped ({stop:?}) after {iterations} \
+             iterations with gradient {gradient:e}"
+        ),
+        W::AtBound { parameter, bound } => format!(
+            "{parameter} ran to its bound {}: the data cannot tell it from that bound",
+            match bound {
+                kalibra_tune::Bound::Zero => "0",
+                kalibra_tune::Bound::Infinity => "infinity",
+            }
+        ),
+        W::Unidentifiable { message } => message.clone(),
+        W::NotAMaximum { eigenvalue } => format!(
+            "the estimate is not a maximum: the observed information has eigenvalue \
+             {eigenvalue:e}"
+        ),
+        W::LocalMaxima { best, other } => format!(
+            "starts reached different maxima (log-likelihood {best} and {other}); the best is \
+             reported"
+        ),
+        W::NoInformation => {
+            "the observed information could not be computed: no standard errors".to_string()
+        }
+        other => format!("{other:?}"),
+    }
+}
+
+impl Estimator {
+    fn run(&self, problem: &NoiseProblem) -> Result<EstimateReport, String> {
+        let noise = problem.noise();
+        let start_matrices = noise
+            .matrices(noise.start().as_slice())
+            .map_err(|e| e.to_string())?;
+        let start_ll = log_likelihood_of(problem, &start_matrices).ok();
+        let report = |method, matrices: &NoiseMatrices| EstimateReport {
+            method,
+            log_likelihood: log_likelihood_of(problem, matrices).ok(),
+            start_log_likelihood: start_ll,
+            q: rows_of(&matrices.q),
+            qw: rows_of(&matrices.qw),
+            r: rows_of(&matrices.r),
+            parameters: Vec::new(),
+            converged: true,
+            iterations: None,
+            identifiable: None,
+            warnings: Vec::new(),
+            curves: None,
+        };
+        match self {
+            Estimator::Ml(ml) => {
+                let est = ml.estimate(problem).map_err(|e| e.to_string())?;
+                let mut out = report("ml", &est.matrices);
+                out.log_likelihood = Some(est.log_likelihood);
+                out.parameters = est
+                    .parameters
+                    .iter()
+                    .map(|p| ParameterRow {
+                        name: p.parameter.name.clone(),
+                        value: Some(p.value),
+                        stderr: p.stderr,
+                        ci95: p.ci95,
+                    })
+                    .collect();
+                out.converged = est.converged;
+                out.iterations = Some(est.iterations);
+                out.identifiable = est.identifiability.as_ref().map(|id| IdentifiableRow {
+                    identifiable: id.identifiable,
+                    rank: id.rank,
+                    parameters: id.parameters,
+                    condition: id.condition_number,
+                    unidentifiable: id.flat_directions.iter().map(|c| c.text.clone()).collect(),
+                    message: id.message.clone(),
+                });
+                out.warnings = est.warnings.iter().map(ml_warning).collect();
+                Ok(out)
+            }
+            Estimator::Em(em) => {
+                let est = em.estimate(problem).map_err(|e| e.to_string())?;
+                let mut out = report("em", &est.matrices);
+                out.log_likelihood = Some(est.final_log_likelihood());
+                out.parameters = plain_rows(&est.parameters, &est.values);
+                out.converged = est.converged;
+                out.iterations = Some(est.iterations);
+                if !est.converged {
+                    out.warnings.push(format!(
+                        "EM did not converge in {} iterations",
+                        est.iterations
+                    ));
+                }
+                Ok(out)
+            }
+            Estimator::Als(als) => {
+                let est = als.estimate(problem).map_err(|e| e.to_string())?;
+                let mut out = report("als", &est.matrices);
+                out.parameters = plain_rows(&est.parameters, &est.values);
+                out.identifiable = Some(IdentifiableRow {
+                    identifiable: est.unique(),
+                    rank: est.rank,
+                    parameters: est.free,
+                    condition: est.condition.is_finite().then_some(est.condition),
+                    unidentifiable: Vec::new(),
+                    message: est.warning().unwrap_or_else(|| {
+                        format!(
+                            "the autocovariances at {} lags determine every free parameter",
+                            est.lags
+                        )
+                    }),
+                });
+                out.warnings.extend(est.warning());
+                if est.constrained {
+                    out.warnings.push(
+                        "the unconstrained least-squares solution was not positive \
+                         semi-definite; the constrained solution is reported"
+                            .to_string(),
+                    );
+                }
+                Ok(out)
+            }
+            Estimator::J1j2(sweep) => {
+                let curves = sweep
+                    .sweep(problem, &start_matrices)
+                    .map_err(|e| e.to_string())?;
+                let mut out = report("j1j2", &start_matrices);
+                out.parameters = curves
+                    .iter()
+                    .map(|c| ParameterRow {
+                        name: c.parameter.name.clone(),
+                        value: c.crossover.as_ref().map(|x| x.value),
+                        stderr: None,
+                        ci95: None,
+                    })
+                    .collect();
+                for c in &curves {
+                    if let Some(why) = &c.skipped {
+                        out.warnings
+                            .push(format!("{} not swept: {why}", c.parameter.name));
+                    } else if c.crossover.is_none() {
+                        out.warnings.push(format!(
+                            "{}: J1 and J2 do not cross on the grid",
+                            c.parameter.name
+                        ));
+                    }
+                }
+                out.curves = Some(curves);
+                Ok(out)
+            }
+        }
+    }
+}
+
+/// The estimator of `method` with its options.
+fn estimator(
+    method: &str,
+    iterations: Option<usize>,
+    tolerance: Option<f64>,
+    lags: Option<usize>,
+    p: Option<(f64, f64, f64)>,
+) -> PyResult<Estimator> {
+    let only = |name: &str, given: bool, methods: &str| {
+        if given {
+            Err(error(format!(
+                "argument {name} applies to method {methods}, not {method:?}"
+            )))
+        } else {
+            Ok(())
+        }
+    };
+    let tolerance_error = |e: String| error(format!("argument tolerance: {e}"));
+    match method {
+        "ml" => {
+            only("lags", lags.is_some(), "\"als\"")?;
+            only("p", p.is_some(), "\"j1j2\"")?;
+            let mut ml = MaximumLikelihood::new();
+            if let Some(t) = tolerance {
+                ml = ml
+                    .gradient_tolerance(t)
+                    .map_err(|e| tolerance_error(e.to_string()))?;
+            }
+            if let Some(i) = iterations {
+                ml = ml.max_iterations(i);
+            }
+            Ok(Estimator::Ml(ml))
+        }
+        "em" => {
+            only("lags", lags.is_some(), "\"als\"")?;
+            only("p", p.is_some(), "\"j1j2\"")?;
+            let mut em = Em::new();
+            if let Some(t) = tolerance {
+                em = em
+                    .tolerance(t)
+                    .map_err(|e| tolerance_error(e.to_string()))?;
+            }
+            if let Some(i) = iterations {
+                em = em.exact_iterations(i);
+            }
+            Ok(Estimator::Em(em))
+        }
+        "als" => {
+            only("iterations", iterations.is_some(), "\"ml\" and \"em\"")?;
+            only("tolerance", tolerance.is_some(), "\"ml\" and \"em\"")?;
+            only("p", p.is_some(), "\"j1j2\"")?;
+            let mut als = Als::new();
+            if let Some(l) = lags {
+                als = als
+                    .lags(l)
+                    .map_err(|e| error(format!("argument lags: {e}")))?;
+            }
+            Ok(Estimator::Als(als))
+        }
+        "j1j2" => {
+            only("iterations", iterations.is_some(), "\"ml\" and \"em\"")?;
+            only("tolerance", tolerance.is_some(), "\"ml\" and \"em\"")?;
+            only("lags", lags.is_some(), "\"als\"")?;
+            let mut sweep = ParameterSweep::new();
+            if let Some((from, to, step)) = p {
+                if !(step.is_finite() && step > 0.0 && from.is_finite() && to >= from) {
+                    return Err(error(format!(
+                        "argument p: (from, to, step) = ({from}, {to}, {step}) is not a grid \
+                         (from <= to, step > 0)"
+                    )));
+                }
+                let count = ((to - from) / step + 1e-9).floor() as usize;
+                let grid = (0..=count).map(|i| from + i as f64 * step).collect();
+                sweep = sweep
+                    .grid(grid)
+                    .map_err(|e| error(format!("argument p: {e}")))?;
+            }
+            Ok(Estimator::J1j2(sweep))
+        }
+        other => Err(error(format!(
+            "argument method is {other:?}; expected one of {}",
+            METHODS.map(|m| format!("{m:?}")).join(", ")
+        ))),
+    }
+}
+
+/// Estimates the noise covariances `Q` and `R` of a linear model from its measurements alone:
+/// `x_k = F x_{k-1} + G w_k`, `z_k = H x_k + v_k`, `w_k ~ N(0, Qw)`, `v_k ~ N(0, R)`
+/// (without `G`, `Qw` is `Q`), with what is known of `Qw` and `R` stated by their forms.
+/// The estimators are `kalibra tune --method`'s (the same library underneath).
+///
+/// Args:
+///     F: (n, n), H: (m, n).
+///     measurements: (K, m), one row per step, or (R, K, m) for R runs of the same system
+///         (each from x0, P0); a row of NaN has no measurement.
+///     Q, R: what is known of `Qw` (g, g; `Q` itself without `G`) and of `R` (m, m), each
+///         one of:
+///         - a matrix: fixed, nothing estimated;
+///         - `(form, value)`, with form `"fixed"` (the value), `"scaled"` (a positive
+///           multiple of the value, the nominal matrix: one parameter `q` or `r`),
+///           `"diagonal"` (each diagonal entry free and positive, starting at the value's) or
+///           `"full"` (any symmetric positive-definite matrix, starting at the value);
+///         - `(form, value, fixed)` or `{"form": ..., "value": ..., "fixed": [...]}`, where
+///           `fixed` lists `(row, col)` entries of a diagonal or full form held at the
+///           value's.
+///     x0: (n,), P0: (n, n) the initial estimate and covariance.
+///     G: (n, g), the channels through which process noise enters; default none.
+///     method: "ml" (maximum likelihood, with standard errors, 95% intervals and what the
+///         data identify), "em" (expectation-maximisation), "als" (autocovariance least
+///         squares; every step measured) or "j1j2" (J1/J2 on every parameter around the
+///         starting point; each parameter's value is its crossover).
+///     start: "predict_first" (default: x0 is one step before the first measurement) or
+///         "update_first".
+///     iterations: "ml": the iteration cap of each start; "em": exactly this many iterations.
+///     tolerance: "ml": the gradient tolerance on -ln L / N; "em": the relative tolerance on
+///         the log-likelihood's increase.
+///     lags: "als": the autocovariance lags (default 10).
+///     p: "j1j2": the grid of exponents (from, to, step), `to` included (default -3 to 3 by
+///         0.25); each parameter is its starting value times 10^p.
+///
+/// Returns:
+///     NoiseEstimate: `method`, `log_likelihood`, `Q`, `Qw`, `R`, `parameters` (name, value,
+///     stderr, ci95), `converged`, `iterations`, `identifiable`, `warnings`; `save(dir)`
+///     writes `report.json`.
+///
+/// Raises:
+///     KalibraError: naming the argument: a shape that disagrees, a non-finite value, an
+///         unknown form or method, a value its form cannot take, more free parameters than
+///         innovations can identify (n m + m (m + 1) / 2), or the estimator's refusal (a
+///         singular innovation covariance at the start, a gap in the log for ALS).
+///
+/// The GIL is released while the estimator runs.
+///
+/// Example:
+///     >>> import numpy as np, kalibra
+///     >>> rng = np.random.default_rng(1)
+///     >>> x, zs = 0.0, []
+///     >>> for k in range(500):                       # a random walk, q = 0.5, r = 2
+///     ...     x += rng.normal(0.0, 0.5 ** 0.5)
+///     ...     zs.append([x + rng.normal(0.0, 2.0 ** 0.5)])
+///     >>> est = kalibra.estimate_noise([[1.0]], [[1.0]], np.array(zs),
+///     ...     Q=("scaled", [[1.0]]), R=("scaled", [[1.0]]), x0=[0.0], P0=[[10.0]])
+///     >>> [p["name"] for p in est.parameters], est.converged
+///     (['q', 'r'], True)
+///     >>> lo, hi = est.parameters[0]["ci95"]
+///     >>> bool(lo < 0.5 < hi)
+///     True
+#[pyfunction]
+#[pyo3(signature = (
+    F, H, measurements, *, Q, R, x0, P0, G=None, method="ml", start="predict_first",
+    iterations=None, tolerance=None, lags=None, p=None
+))]
+#[allow(non_snake_case, clippy::too_many_arguments)]
+fn estimate_noise(
+    py: Python<'_>,
+    F: &Bound<'_, PyAny>,
+    H: &Bound<'_, PyAny>,
+    measurements: &Bound<'_, PyAny>,
+    Q: &Bound<'_, PyAny>,
+    R: &Bound<'_, PyAny>,
+    x0: &Bound<'_, PyAny>,
+    P0: &Bound<'_, PyAny>,
+    G: Option<&Bound<'_, PyAny>>,
+    method: &str,
+    start: &str,
+    iterations: Option<usize>,
+    tolerance: Option<f64>,
+    lags: Option<usize>,
+    p: Option<(f64, f64, f64)>,
+) -> PyResult<NoiseEstimate> {
+    let estimator = estimator(method, iterations, tolerance, lags, p)?;
+    let start = match start {
+        "predict_first" => Start::PredictFirst,
+        "update_first" => Start::UpdateFirst,
+        other => {
+            return Err(error(format!(
+                "argument start is {other:?}; expected \"predict_first\" or \"update_first\""
+            )));
+        }
+    };
+    let f = matrix(F, "F")?;
+    let h = matrix(H, "H")?;
+    let x0 = read(x0, "x0")?;
+    if x0.shape.len() != 1 {
+        return Err(error(format!(
+            "argument x0 has shape {:?}; expected (n,)",
+            x0.shape
+        )));
+    }
+    let p0 = matrix(P0, "P0")?;
+    let g = G
+        .filter(|g| !g.is_none())
+        .map(|g| matrix(g, "G"))
+        .transpose()?;
+    let qw = form_of(Q, "Q")?;
+    let r = form_of(R, "R")?;
+    let runs = runs_of(measurements, h.nrows())?;
+    let noise = Parametrisation::new(g, qw, r).map_err(|e| noise_error(&e))?;
+    let problem = NoiseProblem::new(f, h, DVector::from_vec(x0.data), p0, start, noise, runs)
+        .map_err(|e| noise_error(&e))?;
+    let report = py
+        .detach(|| estimator.run(&problem))
+        .map_err(|e| error(format!("estimate the noise by {method}: {e}")))?;
+    Ok(NoiseEstimate { report })
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<NoiseEstimate>()?;
+    m.add_function(wrap_pyfunction!(estimate_noise, m)?)?;
+    Ok(())
+}
