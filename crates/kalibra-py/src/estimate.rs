@@ -283,9 +283,14 @@ fn noise_error(e: &NoiseError) -> PyErr {
         N::NoMeasurements => named("measurements"),
         _ => At::default(),
     };
-    let message = match &at.argument {
-        Some(a) => format!("argument {a}: {e}"),
-        None => format!("arguments Q, R: {e}"),
+    let message = match (&at.argument, e) {
+        // NaN rows were read as missing steps already: what is left is an infinity.
+        (_, N::NonFiniteMeasurement { run, step }) => format!(
+            "argument measurements: run {run}, step {step} holds an infinity (a row of NaN is \
+             a missing measurement)"
+        ),
+        (Some(a), _) => format!("argument {a}: {e}"),
+        (None, _) => format!("arguments Q, R: {e}"),
     };
     error_at(message, &at)
 }

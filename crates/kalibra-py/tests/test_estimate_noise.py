@@ -186,7 +186,7 @@ def test_unidentifiable_parametrisation_is_named():
         (dict(F=[[np.inf]]), "F", "non-finite"),
         (dict(x0=[[0.0]]), "x0", "shape"),
         (dict(z=np.ones((10, 2))), "measurements", "shape"),
-        (dict(z=np.array([[1.0], [np.inf]])), "measurements", "step 1"),
+        (dict(z=np.array([[1.0], [np.inf]])), "measurements", "step 1 holds an infinity"),
         (dict(z=np.full((4, 1), np.nan)), "measurements", "no measurements"),
         (dict(method="mle"), "method", "expected one of"),
         (dict(method="em", lags=5), "lags", "applies to method"),
