@@ -5,8 +5,9 @@
 use std::path::PathBuf;
 
 use kalibra_tune::{
-    Als, CovarianceForm, DMatrix, DVector, Em, MaximumLikelihood, NoiseError, NoiseMatrices,
-    NoiseProblem, ParameterSweep, Parametrisation, Run, Start, log_likelihood_of,
+    Als, CovarianceForm, DMatrix, DVector, Em, MaximumLikelihood, Method, NoiseError, NoiseProblem,
+    NoiseReport, ParameterSweep, Parametrisation, ReportError, ReportIdentifiability,
+    ReportOptions, ReportParameter, Run, Start,
 };
 use numpy::PyArrayDyn;
 use pyo3::exceptions::PyOSError;
@@ -23,77 +24,62 @@ const METHODS: [&str; 4] = ["ml", "em", "als", "j1j2"];
 /// The forms of a noise matrix, by their names.
 const FORMS: [&str; 4] = ["fixed", "scaled", "diagonal", "full"];
 
-/// One free parameter's estimate as `report.json` holds it.
-#[derive(Clone, Debug, Serialize)]
-struct ParameterRow {
-    /// `q`, `r`, `Qw[i,j]` or `R[i,j]`.
-    name: String,
-    /// The estimate on the matrices' own scale.
-    value: Option<f64>,
-    /// Its standard error (maximum likelihood only).
-    stderr: Option<f64>,
-    /// Its 95% interval (maximum likelihood only); an end at a bound is 0 or infinity.
-    ci95: Option<[f64; 2]>,
-}
-
-/// What the data identify, as `report.json` holds it.
-#[derive(Clone, Debug, Serialize)]
-struct IdentifiableRow {
-    /// Whether every free parameter is identified.
-    identifiable: bool,
-    /// The rank of the information (ML) or of the least-squares matrix (ALS).
-    rank: usize,
-    /// The free parameters.
-    parameters: usize,
-    /// Its condition number (`None`: infinite).
-    condition: Option<f64>,
-    /// The parameter combinations the data cannot separate, in words.
-    unidentifiable: Vec<String>,
-    /// In words.
-    message: String,
-}
-
-/// The estimate as `report.json` holds it: the fields of `kalibra tune --method`'s report.
-#[derive(Clone, Debug, Serialize)]
-struct EstimateReport {
+/// The report as `report.json` holds it: [`NoiseReport`]'s fields under the names of
+/// `kalibra tune --method`'s report (`Q`, `Qw`, `R`, `identifiable`).
+#[derive(Serialize)]
+struct JsonView<'a> {
     method: &'static str,
-    /// At the estimate (`None` where the filter cannot run there).
     log_likelihood: Option<f64>,
-    /// At the starting point (the forms' given matrices).
     start_log_likelihood: Option<f64>,
     #[serde(rename = "Q")]
-    q: Vec<Vec<f64>>,
+    q: &'a [Vec<f64>],
     #[serde(rename = "Qw")]
-    qw: Vec<Vec<f64>>,
+    qw: &'a [Vec<f64>],
     #[serde(rename = "R")]
-    r: Vec<Vec<f64>>,
-    parameters: Vec<ParameterRow>,
+    r: &'a [Vec<f64>],
+    parameters: &'a [ReportParameter],
     converged: bool,
-    iterations: Option<usize>,
-    identifiable: Option<IdentifiableRow>,
-    warnings: Vec<String>,
-    /// J1/J2 on every parameter (method `j1j2`).
+    iterations: usize,
+    identifiable: Option<&'a ReportIdentifiability>,
+    warnings: &'a [String],
+    consistency: &'a kalibra_tune::Consistency,
     #[serde(skip_serializing_if = "Option::is_none")]
-    curves: Option<Vec<kalibra_tune::ParameterCurve>>,
+    j1j2: Option<&'a [kalibra_tune::ParameterCurve]>,
 }
 
-fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
-    (0..m.nrows())
-        .map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect())
-        .collect()
+impl<'a> JsonView<'a> {
+    fn of(r: &'a NoiseReport) -> Self {
+        Self {
+            method: r.method.name(),
+            log_likelihood: r.log_likelihood,
+            start_log_likelihood: r.start_log_likelihood,
+            q: &r.q,
+            qw: &r.qw,
+            r: &r.r,
+            parameters: &r.parameters,
+            converged: r.converged,
+            iterations: r.iterations,
+            identifiable: r.identifiability.as_ref(),
+            warnings: &r.warnings,
+            consistency: &r.consistency,
+            j1j2: r.j1j2.as_deref(),
+        }
+    }
 }
 
 /// The noise covariances `Q` and `R` estimated from measurements: what `kalibra tune
-/// --method` writes as `report.json`.
+/// --method` writes as `report.json` (kalibra-tune's `NoiseReport`).
 ///
 /// Returned by `kalibra.estimate_noise`. `Q` (n, n, the state's, `G Qw G^T`), `Qw` (the
 /// channels'; `Q` itself without `G`) and `R` are the estimate as arrays; `parameters` lists
 /// every free parameter on the matrices' own scale (a dict of `name`, `value`, `stderr`,
-/// `ci95`); `identifiable` says what the data can separate. `to_dict()` holds every field
-/// (the keys of `report.json`); `save(dir)` writes `report.json`.
+/// `ci95`, `at_bound`, `profile`); `identifiable` says what the data can separate;
+/// `consistency` judges the filter with the estimate and with the starting guess on the data
+/// (ANIS with its band, whiteness; ANEES and RMSE with the truth). `to_dict()` holds every
+/// field (the keys of `report.json`); `save(dir)` writes `report.json`.
 #[pyclass(module = "kalibra", frozen)]
 pub struct NoiseEstimate {
-    report: EstimateReport,
+    report: NoiseReport,
 }
 
 fn matrix_array<'py>(py: Python<'py>, rows: &[Vec<f64>]) -> Bound<'py, PyArrayDyn<f64>> {
@@ -110,7 +96,7 @@ impl NoiseEstimate {
     /// The estimator: "ml", "em", "als" or "j1j2".
     #[getter]
     fn method(&self) -> &'static str {
-        self.report.method
+        self.report.method.name()
     }
 
     /// The log-likelihood of the measurements at the estimate (natural log with the 2 pi
@@ -148,7 +134,10 @@ impl NoiseEstimate {
     /// Every free parameter, in order (`Q`'s, then `R`'s; entries row by row of the lower
     /// triangle): a dict of `name` (`"q"`, `"r"` for a scaled form's multiplier,
     /// `"Qw[i,j]"`, `"R[i,j]"` for an entry), `value`, `stderr` and `ci95` (a `(low, high)`
-    /// tuple; maximum likelihood only, else None; an end at a bound is 0 or inf).
+    /// tuple from the observed information: ML, and converged EM; else None; an end at a
+    /// bound is 0 or inf), `at_bound` (None, `"zero"` or `"infinity"`) and `profile` (the
+    /// profile likelihood: a dict of `points` (value, log_likelihood, converged),
+    /// `threshold` and the likelihood-ratio `interval`; None without one).
     #[getter]
     fn parameters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         let list = PyList::empty(py);
@@ -158,39 +147,60 @@ impl NoiseEstimate {
             d.set_item("value", p.value)?;
             d.set_item("stderr", p.stderr)?;
             d.set_item("ci95", p.ci95.map(|[lo, hi]| (lo, hi)))?;
+            d.set_item(
+                "at_bound",
+                p.at_bound.map(|b| json_value(py, &b)).transpose()?,
+            )?;
+            d.set_item(
+                "profile",
+                p.profile
+                    .as_ref()
+                    .map(|pr| json_value(py, pr))
+                    .transpose()?,
+            )?;
             list.append(d)?;
         }
         Ok(list)
     }
 
-    /// Whether the estimator met its tolerance (ML: the gradient; EM: the log-likelihood's
-    /// increase, always true for exact iterations; ALS and J1/J2: true, they do not iterate to
-    /// a tolerance).
+    /// Whether the estimator met its stopping rule (ML: the gradient tolerance; EM: the
+    /// relative tolerance, always for exact iterations; ALS: always; J1/J2: every swept
+    /// parameter has a crossover).
     #[getter]
     fn converged(&self) -> bool {
         self.report.converged
     }
 
-    /// The iterations run (ML: of the best start; EM: M-steps), or None (ALS, J1/J2).
+    /// The iterations run (ML: of the best start; EM: M-steps; ALS and J1/J2: 0).
     #[getter]
-    fn iterations(&self) -> Option<usize> {
+    fn iterations(&self) -> usize {
         self.report.iterations
     }
 
-    /// What the data identify, as a dict: `identifiable` (bool), `rank`, `parameters`,
-    /// `condition` (None: infinite), `unidentifiable` (the combinations the data cannot
-    /// separate, in words) and `message`; None for EM and J1/J2, which do not compute it.
+    /// What the data identify, as a dict: `source` ("observed information" or
+    /// "least-squares matrix"), `parameters`, `rank`, `condition` (None: infinite),
+    /// `unidentifiable` (the combinations the data cannot determine, in words) and
+    /// `message`; None where it could not be computed.
     #[getter]
     fn identifiable<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
         self.report
-            .identifiable
+            .identifiability
             .as_ref()
             .map(|id| json_value(py, id))
             .transpose()
     }
 
+    /// The filter with the estimate and with the starting guess judged on the data, as a
+    /// dict `{"estimate": ..., "start": ...}`, each with `anis` (and its test), `whiteness`,
+    /// `anees`, `rmse` and `rmse_per_component` (with the truth) and the `verdict` in words.
+    #[getter]
+    fn consistency<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_value(py, &self.report.consistency)
+    }
+
     /// What the user must know about the estimate, in words (not converged, a parameter at a
-    /// bound, unidentifiable parameters, local maxima, an ALS estimate that is not unique).
+    /// bound, unidentifiable parameters, local maxima, an ALS estimate that is not unique, a
+    /// filter that failed).
     #[getter]
     fn warnings(&self) -> Vec<String> {
         self.report.warnings.clone()
@@ -198,12 +208,12 @@ impl NoiseEstimate {
 
     /// Every field as a dict with the keys of `report.json`.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_value(py, &self.report)
+        json_value(py, &JsonView::of(&self.report))
     }
 
     /// The report as JSON text: `report.json` without its final newline.
     fn to_json(&self) -> PyResult<String> {
-        serde_json::to_string_pretty(&self.report)
+        serde_json::to_string_pretty(&JsonView::of(&self.report))
             .map_err(|e| error(format!("cannot serialise the report: {e}")))
     }
 
@@ -226,17 +236,11 @@ impl NoiseEstimate {
             .report
             .parameters
             .iter()
-            .map(|p| {
-                format!(
-                    "{}={}",
-                    p.name,
-                    p.value.map_or("-".into(), |v| format!("{v:.4}"))
-                )
-            })
+            .map(|p| format!("{}={:.4}", p.name, p.value))
             .collect();
         format!(
             "<kalibra.NoiseEstimate method={} {}>",
-            self.report.method,
+            self.report.method.name(),
             params.join(" ")
         )
     }
@@ -391,29 +395,31 @@ fn form_of(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<CovarianceForm> {
     Ok(CovarianceForm::fixed(matrix(obj, name)?))
 }
 
-/// The runs of `(K, m)` or `(R, K, m)` measurements: a row of NaN has no measurement.
-fn runs_of(obj: &Bound<'_, PyAny>, m: usize) -> PyResult<Vec<Run>> {
-    let a = read(obj, "measurements")?;
+/// The runs of `(K, dim)` or `(R, K, dim)` rows of argument `name` (`measurements`, with
+/// `dim` the rows of `H`, or `truth`, with `dim` the states): a row of NaN is a step without
+/// one.
+fn runs_of(obj: &Bound<'_, PyAny>, name: &str, dim: usize, why: &str) -> PyResult<Vec<Run>> {
+    let a = read(obj, name)?;
     let (runs, k) = match a.shape.as_slice() {
-        [k, mm] if *mm == m => (1, *k),
-        [r, k, mm] if *mm == m => (*r, *k),
+        [k, d] if *d == dim => (1, *k),
+        [r, k, d] if *d == dim => (*r, *k),
         other => {
             return Err(error(format!(
-                "argument measurements has shape {other:?}; expected (K, {m}) or (R, K, {m}) \
-                 (H has {m} rows)"
+                "argument {name} has shape {other:?}; expected (K, {dim}) or (R, K, {dim}) \
+                 ({why})"
             )));
         }
     };
     let batch = a.shape.len() == 3;
     (0..runs)
         .map(|r| {
-            a.data[r * k * m..(r + 1) * k * m]
-                .chunks(m)
+            a.data[r * k * dim..(r + 1) * k * dim]
+                .chunks(dim)
                 .enumerate()
                 .map(
                     |(step, row)| match row.iter().filter(|v| v.is_nan()).count() {
                         0 => Ok(Some(DVector::from_column_slice(row))),
-                        nan if nan == m => Ok(None),
+                        nan if nan == dim => Ok(None),
                         _ => {
                             let run = if batch {
                                 format!("run {r}, ")
@@ -422,11 +428,11 @@ fn runs_of(obj: &Bound<'_, PyAny>, m: usize) -> PyResult<Vec<Run>> {
                             };
                             Err(error_at(
                                 format!(
-                                    "argument measurements: {run}step {step} holds NaN in some \
-                                 components only; a row is a measurement or all NaN (none)"
+                                    "argument {name}: {run}step {step} holds NaN in some \
+                                 components only; a row is all values or all NaN (none)"
                                 ),
                                 &At {
-                                    argument: Some("measurements".into()),
+                                    argument: Some(name.into()),
                                     run: Some(r),
                                     step: Some(step),
                                     ..At::default()
@@ -440,183 +446,34 @@ fn runs_of(obj: &Bound<'_, PyAny>, m: usize) -> PyResult<Vec<Run>> {
         .collect()
 }
 
-/// The 95% interval of a likelihood-free estimator: none.
-fn plain_rows(names: &[kalibra_tune::Parameter], values: &[f64]) -> Vec<ParameterRow> {
-    names
-        .iter()
-        .zip(values)
-        .map(|(p, &v)| ParameterRow {
-            name: p.name.clone(),
-            value: Some(v),
-            stderr: None,
-            ci95: None,
-        })
-        .collect()
-}
-
-/// The options of one estimator, checked before the GIL is released.
-enum Estimator {
-    Ml(MaximumLikelihood),
-    Em(Em),
-    Als(Als),
-    J1j2(ParameterSweep),
-}
-
-/// An ML warning in words.
-fn ml_warning(w: &kalibra_tune::MlWarning) -> String {
-    use kalibra_tune::MlWarning as W;
-    match w {
-        W::NotConverged {
-            stop,
-            gradient,
-            iterations,
-        } => format!(
-            "the optimiser did not converge: it stopped ({stop:?}) after {iterations} \
-             iterations with gradient {gradient:e}"
-        ),
-        W::AtBound { parameter, bound } => format!(
-            "{parameter} ran to its bound {}: the data cannot tell it from that bound",
-            match bound {
-                kalibra_tune::Bound::Zero => "0",
-                kalibra_tune::Bound::Infinity => "infinity",
-            }
-        ),
-        W::Unidentifiable { message } => message.clone(),
-        W::NotAMaximum { eigenvalue } => format!(
-            "the estimate is not a maximum: the observed information has eigenvalue \
-             {eigenvalue:e}"
-        ),
-        W::LocalMaxima { best, other } => format!(
-            "starts reached different maxima (log-likelihood {best} and {other}); the best is \
-             reported"
-        ),
-        W::NoInformation => {
-            "the observed information could not be computed: no standard errors".to_string()
+/// A report's error as a `KalibraError`: the truth's errors name it, the rest are the
+/// estimator's refusal.
+fn report_error(e: &ReportError, method: &str) -> PyErr {
+    let truth = |run: Option<usize>, step: Option<usize>| At {
+        argument: Some("truth".into()),
+        run,
+        step,
+        ..At::default()
+    };
+    match e {
+        ReportError::TruthRuns { .. } => {
+            error_at(format!("argument truth: {e}"), &truth(None, None))
         }
-        other => format!("{other:?}"),
-    }
-}
-
-impl Estimator {
-    fn run(&self, problem: &NoiseProblem) -> Result<EstimateReport, String> {
-        let noise = problem.noise();
-        let start_matrices = noise
-            .matrices(noise.start().as_slice())
-            .map_err(|e| e.to_string())?;
-        let start_ll = log_likelihood_of(problem, &start_matrices).ok();
-        let report = |method, matrices: &NoiseMatrices| EstimateReport {
-            method,
-            log_likelihood: log_likelihood_of(problem, matrices).ok(),
-            start_log_likelihood: start_ll,
-            q: rows_of(&matrices.q),
-            qw: rows_of(&matrices.qw),
-            r: rows_of(&matrices.r),
-            parameters: Vec::new(),
-            converged: true,
-            iterations: None,
-            identifiable: None,
-            warnings: Vec::new(),
-            curves: None,
-        };
-        match self {
-            Estimator::Ml(ml) => {
-                let est = ml.estimate(problem).map_err(|e| e.to_string())?;
-                let mut out = report("ml", &est.matrices);
-                out.log_likelihood = Some(est.log_likelihood);
-                out.parameters = est
-                    .parameters
-                    .iter()
-                    .map(|p| ParameterRow {
-                        name: p.parameter.name.clone(),
-                        value: Some(p.value),
-                        stderr: p.stderr,
-                        ci95: p.ci95,
-                    })
-                    .collect();
-                out.converged = est.converged;
-                out.iterations = Some(est.iterations);
-                out.identifiable = est.identifiability.as_ref().map(|id| IdentifiableRow {
-                    identifiable: id.identifiable,
-                    rank: id.rank,
-                    parameters: id.parameters,
-                    condition: id.condition_number,
-                    unidentifiable: id.flat_directions.iter().map(|c| c.text.clone()).collect(),
-                    message: id.message.clone(),
-                });
-                out.warnings = est.warnings.iter().map(ml_warning).collect();
-                Ok(out)
-            }
-            Estimator::Em(em) => {
-                let est = em.estimate(problem).map_err(|e| e.to_string())?;
-                let mut out = report("em", &est.matrices);
-                out.log_likelihood = Some(est.final_log_likelihood());
-                out.parameters = plain_rows(&est.parameters, &est.values);
-                out.converged = est.converged;
-                out.iterations = Some(est.iterations);
-                if !est.converged {
-                    out.warnings.push(format!(
-                        "EM did not converge in {} iterations",
-                        est.iterations
-                    ));
-                }
-                Ok(out)
-            }
-            Estimator::Als(als) => {
-                let est = als.estimate(problem).map_err(|e| e.to_string())?;
-                let mut out = report("als", &est.matrices);
-                out.parameters = plain_rows(&est.parameters, &est.values);
-                out.identifiable = Some(IdentifiableRow {
-                    identifiable: est.unique(),
-                    rank: est.rank,
-                    parameters: est.free,
-                    condition: est.condition.is_finite().then_some(est.condition),
-                    unidentifiable: Vec::new(),
-                    message: est.warning().unwrap_or_else(|| {
-                        format!(
-                            "the autocovariances at {} lags determine every free parameter",
-                            est.lags
-                        )
-                    }),
-                });
-                out.warnings.extend(est.warning());
-                if est.constrained {
-                    out.warnings.push(
-                        "the unconstrained least-squares solution was not positive \
-                         semi-definite; the constrained solution is reported"
-                            .to_string(),
-                    );
-                }
-                Ok(out)
-            }
-            Estimator::J1j2(sweep) => {
-                let curves = sweep
-                    .sweep(problem, &start_matrices)
-                    .map_err(|e| e.to_string())?;
-                let mut out = report("j1j2", &start_matrices);
-                out.parameters = curves
-                    .iter()
-                    .map(|c| ParameterRow {
-                        name: c.parameter.name.clone(),
-                        value: c.crossover.as_ref().map(|x| x.value),
-                        stderr: None,
-                        ci95: None,
-                    })
-                    .collect();
-                for c in &curves {
-                    if let Some(why) = &c.skipped {
-                        out.warnings
-                            .push(format!("{} not swept: {why}", c.parameter.name));
-                    } else if c.crossover.is_none() {
-                        out.warnings.push(format!(
-                            "{}: J1 and J2 do not cross on the grid",
-                            c.parameter.name
-                        ));
-                    }
-                }
-                out.curves = Some(curves);
-                Ok(out)
-            }
+        ReportError::TruthLength { run, .. } => {
+            error_at(format!("argument truth: {e}"), &truth(Some(*run), None))
         }
+        ReportError::TruthValue { run, step, .. } => error_at(
+            format!("argument truth: {e}"),
+            &truth(Some(*run), Some(*step)),
+        ),
+        ReportError::TooFewMeasurements { .. } => error_at(
+            format!("argument measurements: {e}"),
+            &At {
+                argument: Some("measurements".into()),
+                ..At::default()
+            },
+        ),
+        _ => error(format!("estimate the noise by {method}: {e}")),
     }
 }
 
@@ -627,7 +484,7 @@ fn estimator(
     tolerance: Option<f64>,
     lags: Option<usize>,
     p: Option<(f64, f64, f64)>,
-) -> PyResult<Estimator> {
+) -> PyResult<Method> {
     let only = |name: &str, given: bool, methods: &str| {
         if given {
             Err(error(format!(
@@ -651,7 +508,7 @@ fn estimator(
             if let Some(i) = iterations {
                 ml = ml.max_iterations(i);
             }
-            Ok(Estimator::Ml(ml))
+            Ok(Method::MaximumLikelihood(ml))
         }
         "em" => {
             only("lags", lags.is_some(), "\"als\"")?;
@@ -665,7 +522,7 @@ fn estimator(
             if let Some(i) = iterations {
                 em = em.exact_iterations(i);
             }
-            Ok(Estimator::Em(em))
+            Ok(Method::Em(em))
         }
         "als" => {
             only("iterations", iterations.is_some(), "\"ml\" and \"em\"")?;
@@ -677,7 +534,7 @@ fn estimator(
                     .lags(l)
                     .map_err(|e| error(format!("argument lags: {e}")))?;
             }
-            Ok(Estimator::Als(als))
+            Ok(Method::Als(als))
         }
         "j1j2" => {
             only("iterations", iterations.is_some(), "\"ml\" and \"em\"")?;
@@ -697,7 +554,7 @@ fn estimator(
                     .grid(grid)
                     .map_err(|e| error(format!("argument p: {e}")))?;
             }
-            Ok(Estimator::J1j2(sweep))
+            Ok(Method::J1J2(sweep))
         }
         other => Err(error(format!(
             "argument method is {other:?}; expected one of {}",
@@ -733,17 +590,22 @@ fn estimator(
 ///         starting point; each parameter's value is its crossover).
 ///     start: "predict_first" (default: x0 is one step before the first measurement) or
 ///         "update_first".
+///     truth: the true states, (K, n) or (R, K, n) as the measurements (a row of NaN:
+///         unknown), for the ANEES and RMSE of the filter with the estimate and with the
+///         starting guess.
 ///     iterations: "ml": the iteration cap of each start; "em": exactly this many iterations.
 ///     tolerance: "ml": the gradient tolerance on -ln L / N; "em": the relative tolerance on
 ///         the log-likelihood's increase.
 ///     lags: "als": the autocovariance lags (default 10).
 ///     p: "j1j2": the grid of exponents (from, to, step), `to` included (default -3 to 3 by
 ///         0.25); each parameter is its starting value times 10^p.
+///     profile: compute the profile likelihood of every parameter (ML and converged EM; 10
+///         re-maximisations per parameter, the costliest part); default True.
 ///
 /// Returns:
 ///     NoiseEstimate: `method`, `log_likelihood`, `Q`, `Qw`, `R`, `parameters` (name, value,
-///     stderr, ci95), `converged`, `iterations`, `identifiable`, `warnings`; `save(dir)`
-///     writes `report.json`.
+///     stderr, ci95, profile), `converged`, `iterations`, `identifiable`, `consistency`,
+///     `warnings`; `save(dir)` writes `report.json`.
 ///
 /// Raises:
 ///     KalibraError: naming the argument: a shape that disagrees, a non-finite value, an
@@ -770,7 +632,7 @@ fn estimator(
 #[pyfunction]
 #[pyo3(signature = (
     F, H, measurements, *, Q, R, x0, P0, G=None, method="ml", start="predict_first",
-    iterations=None, tolerance=None, lags=None, p=None
+    truth=None, iterations=None, tolerance=None, lags=None, p=None, profile=true
 ))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 fn estimate_noise(
@@ -785,12 +647,14 @@ fn estimate_noise(
     G: Option<&Bound<'_, PyAny>>,
     method: &str,
     start: &str,
+    truth: Option<&Bound<'_, PyAny>>,
     iterations: Option<usize>,
     tolerance: Option<f64>,
     lags: Option<usize>,
     p: Option<(f64, f64, f64)>,
+    profile: bool,
 ) -> PyResult<NoiseEstimate> {
-    let estimator = estimator(method, iterations, tolerance, lags, p)?;
+    let chosen = estimator(method, iterations, tolerance, lags, p)?;
     let start = match start {
         "predict_first" => Start::PredictFirst,
         "update_first" => Start::UpdateFirst,
@@ -816,13 +680,20 @@ fn estimate_noise(
         .transpose()?;
     let qw = form_of(Q, "Q")?;
     let r = form_of(R, "R")?;
-    let runs = runs_of(measurements, h.nrows())?;
+    let m = h.nrows();
+    let runs = runs_of(measurements, "measurements", m, &format!("H has {m} rows"))?;
     let noise = Parametrisation::new(g, qw, r).map_err(|e| noise_error(&e))?;
     let problem = NoiseProblem::new(f, h, DVector::from_vec(x0.data), p0, start, noise, runs)
         .map_err(|e| noise_error(&e))?;
+    let n = problem.state_dim();
+    let truth = truth
+        .filter(|t| !t.is_none())
+        .map(|t| runs_of(t, "truth", n, &format!("the model has {n} states")))
+        .transpose()?;
+    let options = ReportOptions::new().profile(profile);
     let report = py
-        .detach(|| estimator.run(&problem))
-        .map_err(|e| error(format!("estimate the noise by {method}: {e}")))?;
+        .detach(|| NoiseReport::estimate(&problem, &chosen, options, truth.as_deref()))
+        .map_err(|e| report_error(&e, method))?;
     Ok(NoiseEstimate { report })
 }
 

@@ -25,7 +25,8 @@ def statsmodels_fixture():
 def statsmodels_ml():
     """The fixture and its ML estimate, computed once (the slowest call of this file)."""
     fx, z = statsmodels_fixture()
-    return fx, z, kalibra.estimate_noise(fx["F"], fx["H"], z, **statsmodels_problem(fx))
+    return fx, z, kalibra.estimate_noise(fx["F"], fx["H"], z, profile=False,
+                                         **statsmodels_problem(fx))
 
 
 def statsmodels_problem(fx):
@@ -64,8 +65,9 @@ def test_ml_equals_statsmodels_fit(statsmodels_ml):
     np.testing.assert_allclose(est.Qw, [[q]], rtol=1e-12)
     np.testing.assert_allclose(est.Q, np.array(fx["G"]) @ [[q]] @ np.array(fx["G"]).T, rtol=1e-12)
     np.testing.assert_allclose(est.R, [[r00, r10], [r10, r11]], rtol=1e-12)
-    assert est.identifiable["identifiable"] and est.identifiable["rank"] == 4
-    assert est.identifiable["unidentifiable"] == []
+    ident = est.identifiable
+    assert ident["rank"] == ident["parameters"] == 4 and ident["unidentifiable"] == []
+    assert ident["source"] == "observed information"
 
 
 def test_log_likelihood_is_the_kalman_filter_s(statsmodels_ml):
@@ -88,13 +90,13 @@ def test_em_equals_pykalman_after_ten_iterations():
     est = kalibra.estimate_noise(
         fx["f"], fx["h"], z, Q=("full", fx["q_start"]), R=("full", fx["r_start"]),
         x0=fx["x0"], P0=fx["p0"], start="update_first", method="em", iterations=10,
+        profile=False,
     )
     assert est.method == "em" and est.iterations == 10 and est.converged
     for ours, theirs in ((est.Q, fx["q"][-1]), (est.R, fx["r"][-1])):
         theirs = np.array(theirs)
         assert np.abs(ours - theirs).max() <= 1e-9 * np.abs(theirs).max()
     assert est.log_likelihood == pytest.approx(fx["log_likelihood"][-1], rel=1e-9)
-    assert all(p["stderr"] is None and p["ci95"] is None for p in est.parameters)
     assert len(est.parameters) == 6 + 3
 
 
@@ -116,15 +118,23 @@ def test_every_method_on_runs_of_a_random_walk():
     assert em.log_likelihood == pytest.approx(ml.log_likelihood, abs=1e-3)
     assert [p["name"] for p in ml.parameters] == ["q", "R[0,0]"]
     als = results["als"]
-    assert als.identifiable["identifiable"] and als.iterations is None
+    assert als.identifiable["rank"] == 2 and als.iterations == 0
+    assert all(p["ci95"] is None for p in als.parameters)
+    # The filter with each estimate and with the starting guess, judged on the data.
+    for est in results.values():
+        for which in ("estimate", "start"):
+            anis = est.consistency[which]["anis"]
+            assert anis["statistic"] == "anis" and anis["samples"] == z.shape[0] * z.shape[1]
     sweep = kalibra.estimate_noise([[1.0]], [[1.0]], z, method="j1j2", p=(-2, 2, 0.5), **args)
-    curves = sweep.to_dict()["curves"]
+    curves = sweep.to_dict()["j1j2"]
     assert [len(c["points"]) for c in curves] == [9, 9]
     # At p = 0 both curves pass through the starting point.
     assert curves[0]["points"][4]["j1"] == curves[1]["points"][4]["j1"]
+    # Each parameter moves to its own crossover (from its start, 1), or stays without one.
     for p, c in zip(sweep.parameters, curves):
-        assert p["value"] == (c["crossover"] or {}).get("value")
-    np.testing.assert_array_equal(sweep.R, [[1.0]])
+        crossing = c["crossover"]["value"] if c["crossover"] else 1.0
+        assert p["value"] == pytest.approx(crossing, rel=1e-12)
+        assert p["stderr"] is None
 
 
 def test_single_run_and_batch_of_one_agree():
@@ -167,7 +177,7 @@ def test_unidentifiable_parametrisation_is_named():
         np.eye(2), [[1.0, 1.0]], z, Q=("diagonal", np.eye(2)), R=[[1.0]], x0=np.zeros(2),
         P0=np.eye(2))
     ident = est.identifiable
-    assert not ident["identifiable"] and ident["rank"] == 1
+    assert ident["rank"] == 1 and ident["parameters"] == 2
     assert ident["unidentifiable"] and "Qw[0,0]" in ident["unidentifiable"][0]
     assert any("identif" in w for w in est.warnings)
 
@@ -220,7 +230,7 @@ def test_save_writes_report_json(tmp_path, statsmodels_ml):
     est.save(tmp_path / "out")
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert {"method", "log_likelihood", "Q", "Qw", "R", "parameters", "converged",
-            "iterations", "identifiable"} <= set(report)
+            "iterations", "identifiable", "consistency", "warnings"} <= set(report)
     assert report["method"] == "ml"
     assert report["log_likelihood"] == est.log_likelihood
     np.testing.assert_array_equal(report["Q"], est.Q)
@@ -243,5 +253,35 @@ def test_estimation_releases_the_gil():
     z = random_walk(steps=1000, runs=2)
     duration, pause = longest_pause_while(lambda: kalibra.estimate_noise(
         [[1.0]], [[1.0]], z, Q=("scaled", [[1.0]]), R=("scaled", [[1.0]]), x0=[0.0],
-        P0=[[1.0]]))
+        P0=[[1.0]], profile=False))
     assert pause < duration / 3, (duration, pause)
+
+
+def test_truth_adds_anees_and_rmse_and_profiles_bracket_the_estimate():
+    """With the truth, the filter with the estimate gets ANEES and RMSE beside the starting
+    guess's; each parameter's profile likelihood peaks at the estimate and its likelihood-ratio
+    interval lies about the value."""
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(0.0, np.sqrt(0.5), (2, 300)), axis=1)
+    z = (x + rng.normal(0.0, np.sqrt(2.0), x.shape))[..., None]
+    est = kalibra.estimate_noise([[1.0]], [[1.0]], z, Q=("scaled", [[0.01]]),
+                                 R=("scaled", [[1.0]]), x0=[0.0], P0=[[1.0]],
+                                 start="update_first", truth=x[..., None])
+    tuned, guess = est.consistency["estimate"], est.consistency["start"]
+    assert tuned["anees"]["statistic"] == "anees" and tuned["rmse"] is not None
+    # The starting q is 50 times too small: the tuned filter's error is smaller.
+    assert tuned["rmse"] < guess["rmse"]
+    for p in est.parameters:
+        prof = p["profile"]
+        best = max(pt["log_likelihood"] for pt in prof["points"])
+        assert best == pytest.approx(est.log_likelihood, abs=1e-6)
+        lo, hi = prof["interval"]
+        assert lo < p["value"] < hi
+        assert prof["threshold"] == pytest.approx(est.log_likelihood - 1.9207294103470620)
+    with pytest.raises(kalibra.KalibraError, match="argument truth") as info:
+        kalibra.estimate_noise([[1.0]], [[1.0]], z, Q=("scaled", [[1.0]]), R=("scaled", [[1.0]]),
+                               x0=[0.0], P0=[[1.0]], truth=x[:1, :, None], profile=False)
+    assert info.value.argument == "truth"
+    with pytest.raises(kalibra.KalibraError, match="argument truth has shape"):
+        kalibra.estimate_noise([[1.0]], [[1.0]], z, Q=("scaled", [[1.0]]), R=("scaled", [[1.0]]),
+                               x0=[0.0], P0=[[1.0]], truth=np.zeros((2, 300, 2)))

@@ -254,18 +254,22 @@ class NoiseEstimate:
     def Qw(self) -> _FloatArray: ...
     @property
     def R(self) -> _FloatArray: ...
-    # One dict per free parameter: name (str), value (float or None), stderr (float or
-    # None), ci95 ((low, high) or None).
+    # One dict per free parameter: name (str), value (float), stderr (float or None), ci95
+    # ((low, high) or None), at_bound (None, "zero" or "infinity"), profile (dict or None).
     @property
     def parameters(self) -> list[dict[str, Any]]: ...
     @property
     def converged(self) -> bool: ...
     @property
-    def iterations(self) -> Optional[int]: ...
-    # identifiable (bool), rank, parameters, condition (None: infinite), unidentifiable
-    # (list of str), message.
+    def iterations(self) -> int: ...
+    # source, parameters, rank, condition (None: infinite), unidentifiable (list of str),
+    # message.
     @property
     def identifiable(self) -> Optional[dict[str, Any]]: ...
+    # {"estimate": ..., "start": ...}: anis, whiteness, anees, rmse, rmse_per_component,
+    # verdict (each None where it does not apply).
+    @property
+    def consistency(self) -> dict[str, Any]: ...
     @property
     def warnings(self) -> list[str]: ...
     def to_dict(self) -> dict[str, Any]: ...
@@ -284,10 +288,12 @@ def estimate_noise(
     G: Optional[_ArrayLike] = None,
     method: Literal["ml", "em", "als", "j1j2"] = "ml",
     start: _Start = "predict_first",
+    truth: Optional[_ArrayLike] = None,
     iterations: Optional[int] = None,
     tolerance: Optional[float] = None,
     lags: Optional[int] = None,
     p: Optional[Tuple[float, float, float]] = None,
+    profile: bool = True,
 ) -> NoiseEstimate: ...
 
 # The return type follows `shard` and `return_log`: a shard's partial, the report with the
