@@ -20,6 +20,10 @@
 //!   innovations maximised over the free parameters from several starts, with standard errors
 //!   and 95% intervals on the matrices' own scale, and what the data cannot identify named in
 //!   words.
+//! * the same for nonlinear models ([`MaximumLikelihood::estimate_nonlinear`] on a
+//!   [`NonlinearNoiseProblem`]): any model implementing kalibra's model traits, its likelihood
+//!   from the EKF or the UKF ([`LikelihoodFilter`]) with the model's noise replaced by each
+//!   candidate's `Q` and `R` ([`WithProcessNoise`], [`WithMeasurementNoise`]).
 //!
 //! * one report for every estimator ([`NoiseReport::estimate`] with a [`Method`]): the
 //!   estimate, intervals, identifiability and warnings in words, the profile likelihood of
@@ -36,10 +40,10 @@
 //! filter predicts through).
 //!
 //! # Numerical choices
-//! Every filter run is the library's own [`kalibra_filters::Kf`], so the numbers are those of
-//! a user's filter with the same matrices; sweeps over a grid evaluate each point
-//! independently and in parallel and return them in grid order, so results do not depend on
-//! the thread count (thread pools as `kalibra-sim` builds them, [`kalibra_sim::in_pool`]).
+//! Every filter run is the library's own [`kalibra_filters::Kf`] (for a nonlinear model its
+//! `Ekf` or `Ukf`), so the numbers are those of a user's filter with the same matrices;
+//! sweeps over a grid evaluate each point independently and in parallel and return them in
+//! grid order, so results do not depend on the thread count (thread pools as `kalibra-sim` builds them, [`kalibra_sim::in_pool`]).
 //! Grid points are computed as `from + i step`, never by accumulation.
 //!
 //! # Where each job lives
@@ -63,6 +67,10 @@
 //!   minimiser and finite differences (why not argmin: in `optim`'s docs).
 //! * `report`: [`NoiseReport`], the one result of every [`Method`], with [`Profile`]s and the
 //!   [`Consistency`] of the tuned filter on the data ([`ReportError`]).
+//! * `ml_nonlinear`: maximum likelihood through the EKF or the UKF ([`NonlinearNoiseProblem`],
+//!   [`LikelihoodFilter`], [`NonlinearProblemError`], the noise-replacing models
+//!   [`WithProcessNoise`] and [`WithMeasurementNoise`]); the optimiser, the information and
+//!   the report are `ml`'s, shared.
 //!
 //! # Example
 //! ```
@@ -90,6 +98,7 @@ mod error;
 mod j1j2;
 mod likelihood;
 mod ml;
+mod ml_nonlinear;
 mod noise;
 mod optim;
 mod problem;
@@ -102,6 +111,10 @@ pub use likelihood::{LikelihoodError, log_likelihood, log_likelihood_of};
 pub use ml::{
     Bound, Combination, Identifiability, MaximumLikelihood, MlError, MlEstimate, MlWarning,
     ParameterEstimate, StartOutcome,
+};
+pub use ml_nonlinear::{
+    LikelihoodFilter, NonlinearNoiseProblem, NonlinearProblemError, NonlinearRun,
+    WithMeasurementNoise, WithProcessNoise,
 };
 pub use noise::{
     CovarianceForm, FormKind, NoiseMatrices, NoiseMatrix, Parameter, ParameterKind, Parametrisation,
@@ -122,6 +135,9 @@ pub use j1j2::{
 /// The start convention of a [`TuneProblem`] (predict first or update first), re-exported so
 /// that a caller (the `kalibra` executable) needs no other kalibra crate.
 pub use kalibra_filters::Start;
+/// The sigma set and the prediction of the UKF a [`NonlinearNoiseProblem`] may use,
+/// re-exported so that a caller needs no other kalibra crate to choose them.
+pub use kalibra_filters::{SigmaSet, UkfPrediction};
 /// The matrix and vector types of a [`TuneProblem`].
 pub use kalibra_linalg::{DMatrix, DVector};
 pub use sweep_q::{

@@ -39,7 +39,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::likelihood::{LikelihoodError, log_likelihood};
 use crate::optim::{self, Settings, StopReason};
-use crate::{NoiseMatrices, NoiseProblem, Parameter};
+use crate::{NoiseMatrices, NoiseProblem, Parameter, Parametrisation};
 
 /// Why maximum likelihood could not run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -275,8 +275,7 @@ impl MaximumLikelihood {
         self
     }
 
-    fn default_starts(problem: &NoiseProblem) -> Vec<DVector<f64>> {
-        let noise = problem.noise();
+    fn default_starts(noise: &Parametrisation) -> Vec<DVector<f64>> {
         let start = noise.start();
         let log_scale: Vec<bool> = noise
             .parameters()
@@ -323,17 +322,31 @@ impl MaximumLikelihood {
     /// at a run and step, a non-finite density). Non-convergence, a parameter at a bound,
     /// unidentifiable parameters and local maxima are [`MlWarning`]s of the estimate.
     pub fn estimate(&self, problem: &NoiseProblem) -> Result<MlEstimate, MlError> {
-        let noise = problem.noise();
+        self.estimate_with(problem.noise(), problem.measurement_count(), &|theta| {
+            log_likelihood(problem, theta)
+        })
+    }
+
+    /// [`MaximumLikelihood::estimate`] on any log-likelihood of `noise`'s `theta` (a
+    /// nonlinear model's through the EKF or the UKF, `ml_nonlinear`), with `measurements`
+    /// the measurements it sums over (the objective's scale). A candidate where `ll` fails is
+    /// infeasible: a backtrack of the line search, never a panic.
+    pub(crate) fn estimate_with(
+        &self,
+        noise: &Parametrisation,
+        measurements: usize,
+        ll: &(dyn Fn(&[f64]) -> Result<f64, LikelihoodError> + Sync),
+    ) -> Result<MlEstimate, MlError> {
         if noise.is_empty() {
             return Err(MlError::NothingToEstimate);
         }
         let reference = noise.start();
-        let start_ll = log_likelihood(problem, reference.as_slice()).map_err(MlError::Start)?;
+        let start_ll = ll(reference.as_slice()).map_err(MlError::Start)?;
         let starts = self
             .starts
             .clone()
-            .unwrap_or_else(|| Self::default_starts(problem));
-        let scale = problem.measurement_count() as f64;
+            .unwrap_or_else(|| Self::default_starts(noise));
+        let scale = measurements as f64;
         let wall_at = match starts.first() {
             Some(s) => s.clone(),
             None => reference.clone(),
@@ -346,7 +359,7 @@ impl MaximumLikelihood {
             {
                 return None;
             }
-            log_likelihood(problem, theta).ok().map(|l| -l / scale)
+            ll(theta).ok().map(|l| -l / scale)
         };
         let settings = Settings {
             gradient_tolerance: self.gradient_tolerance,
@@ -388,7 +401,7 @@ impl MaximumLikelihood {
             None => {
                 // Every start failed: say why the first one did (a singular S there, ...).
                 if let Some(first) = starts.first()
-                    && let Err(e) = log_likelihood(problem, first.as_slice())
+                    && let Err(e) = ll(first.as_slice())
                 {
                     return Err(MlError::Start(e));
                 }
@@ -437,7 +450,7 @@ impl MaximumLikelihood {
         let p = params.len();
 
         // Observed information on the theta scale, of ln L (not of the scaled objective).
-        let ll = |t: &[f64]| log_likelihood(problem, t).ok();
+        let ll = |t: &[f64]| ll(t).ok();
         let information = optim::hessian(&ll, &theta, log_likelihood_best, HESSIAN_STEP)
             .map(|h| DMatrix::from_fn(p, p, |i, j| -h[i][j]));
         evaluations += 2 * p * p + 1;

@@ -40,7 +40,8 @@ pub struct NoiseProblem {
     measurements: usize,
 }
 
-fn shape(
+/// `Ok` if `found` is `expected`, else [`NoiseError::Shape`] naming `matrix`.
+pub(crate) fn shape(
     matrix: &'static str,
     found: (usize, usize),
     expected: (usize, usize),
