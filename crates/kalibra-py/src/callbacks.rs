@@ -6,7 +6,7 @@
 //! stops at that step with a non-finite error, and the run raises the kept exception (as the
 //! cause of a `KalibraError` naming the callable and the step) instead of the filter's error.
 
-use std::cell::RefCell;
+use std::sync::Mutex;
 
 use kalibra_linalg::{DMatrix, DVector, Dyn};
 use kalibra_models::{Dynamics, Measurement};
@@ -16,22 +16,31 @@ use pyo3::prelude::*;
 use crate::arrays::read;
 use crate::error;
 
-/// The first failure of a callable during a run.
+/// The first failure of a callable during a run. A mutex, not a `RefCell`: maximum
+/// likelihood evaluates candidates on several threads (each taking the GIL to call), so the
+/// models holding it must be `Sync`.
 #[derive(Default)]
-pub(crate) struct Failure(RefCell<Option<PyErr>>);
+pub(crate) struct Failure(Mutex<Option<PyErr>>);
 
 impl Failure {
+    /// The cell; a poisoned lock (a panic while it was held) still holds a valid `Option`.
+    fn cell(&self) -> std::sync::MutexGuard<'_, Option<PyErr>> {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
     /// The kept exception, if any, leaving the cell empty.
     pub fn take(&self) -> Option<PyErr> {
-        self.0.borrow_mut().take()
+        self.cell().take()
     }
 
     fn failed(&self) -> bool {
-        self.0.borrow().is_some()
+        self.cell().is_some()
     }
 
     fn keep(&self, e: PyErr) {
-        let mut cell = self.0.borrow_mut();
+        let mut cell = self.cell();
         if cell.is_none() {
             *cell = Some(e);
         }

@@ -5,9 +5,10 @@
 use std::path::PathBuf;
 
 use kalibra_tune::{
-    Als, CovarianceForm, DMatrix, DVector, Em, MaximumLikelihood, Method, NoiseError, NoiseProblem,
-    NoiseReport, ParameterSweep, Parametrisation, ReportError, ReportIdentifiability,
-    ReportOptions, ReportParameter, Run, Start,
+    Als, Consistency, CovarianceForm, DMatrix, DVector, Em, LikelihoodFilter, MaximumLikelihood,
+    Method, MethodKind, MlEstimate, MlWarning, NoiseError, NoiseProblem, NoiseReport,
+    NonlinearNoiseProblem, NonlinearProblemError, ParameterSweep, Parametrisation, ReportError,
+    ReportIdentifiability, ReportOptions, ReportParameter, Run, SigmaSet, Start,
 };
 use numpy::PyArrayDyn;
 use pyo3::exceptions::PyOSError;
@@ -16,6 +17,7 @@ use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 use serde::Serialize;
 
 use crate::arrays::{new_array, read};
+use crate::callbacks::{Failure, PyDynamics, PyMeasurement};
 use crate::{At, error, error_at};
 
 /// The estimators `estimate_noise` offers, by their names.
@@ -563,13 +565,201 @@ fn estimator(
     }
 }
 
+/// An ML warning in words (a nonlinear estimate has no `NoiseReport::estimate` of its own).
+fn ml_warning(w: &MlWarning) -> String {
+    match w {
+        MlWarning::NotConverged {
+            stop,
+            gradient,
+            iterations,
+        } => format!(
+            "the optimiser did not converge: it stopped ({stop:?}) after {iterations} \
+             iterations with a gradient of {gradient:.2e} on -ln L / N"
+        ),
+        MlWarning::AtBound { parameter, bound } => format!(
+            "{parameter} ran to its bound {}: the data cannot tell it from that bound",
+            match bound {
+                kalibra_tune::Bound::Zero => "0",
+                kalibra_tune::Bound::Infinity => "infinity",
+            }
+        ),
+        MlWarning::Unidentifiable { message } => message.clone(),
+        MlWarning::NotAMaximum { eigenvalue } => format!(
+            "the estimate is not a maximum of the likelihood: its curvature has the negative \
+             eigenvalue {eigenvalue:.3e}"
+        ),
+        MlWarning::LocalMaxima { best, other } => format!(
+            "the starts reached different maxima (ln L = {best:.6} and {other:.6}); the best \
+             is reported"
+        ),
+        MlWarning::NoInformation => {
+            "the observed information could not be computed: no standard errors".to_string()
+        }
+        other => format!("{other:?}"),
+    }
+}
+
+/// A nonlinear model's ML estimate in the report's schema: no profile and no consistency
+/// check (the report's filter checks run the linear Kalman filter), said in a warning.
+fn nonlinear_report(est: &MlEstimate, kind: &str) -> NoiseReport {
+    let rows = |m: &DMatrix<f64>| -> Vec<Vec<f64>> {
+        (0..m.nrows())
+            .map(|i| m.row(i).iter().copied().collect())
+            .collect()
+    };
+    let mut warnings: Vec<String> = est.warnings.iter().map(ml_warning).collect();
+    warnings.push(format!(
+        "the likelihood is that of the {kind}'s Gaussian approximation (a quasi-likelihood); \
+         no profile likelihood or consistency check is computed for a model given as callables"
+    ));
+    NoiseReport {
+        method: MethodKind::Ml,
+        log_likelihood: Some(est.log_likelihood),
+        start_log_likelihood: Some(est.start_log_likelihood),
+        q: rows(&est.matrices.q),
+        qw: rows(&est.matrices.qw),
+        r: rows(&est.matrices.r),
+        parameters: est
+            .parameters
+            .iter()
+            .map(|p| ReportParameter {
+                name: p.parameter.name.clone(),
+                value: p.value,
+                stderr: p.stderr,
+                ci95: p.ci95,
+                at_bound: p.at_bound,
+                profile: None,
+            })
+            .collect(),
+        converged: est.converged,
+        iterations: est.iterations,
+        identifiability: est
+            .identifiability
+            .as_ref()
+            .map(|id| ReportIdentifiability {
+                source: "observed information".to_string(),
+                parameters: id.parameters,
+                rank: id.rank,
+                condition: id.condition_number,
+                unidentifiable: id.flat_directions.iter().map(|c| c.text.clone()).collect(),
+                message: id.message.clone(),
+            }),
+        warnings,
+        consistency: Consistency {
+            estimate: None,
+            start: None,
+        },
+        j1j2: None,
+    }
+}
+
+/// The callables of a nonlinear model: `f`, `h`, their Jacobians and the residual.
+struct Callables {
+    f: Py<PyAny>,
+    f_jacobian: Option<Py<PyAny>>,
+    h: Py<PyAny>,
+    h_jacobian: Option<Py<PyAny>>,
+    residual: Option<Py<PyAny>>,
+}
+
+/// An optional callable argument.
+fn callable(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAny>>> {
+    match obj.filter(|o| !o.is_none()) {
+        Some(o) if o.is_callable() => Ok(Some(o.clone().unbind())),
+        Some(o) => Err(error(format!(
+            "argument {name} is not callable (a {})",
+            o.get_type()
+        ))),
+        None => Ok(None),
+    }
+}
+
+/// Maximum likelihood through the EKF or the UKF on a model given as callables.
+#[allow(clippy::too_many_arguments)]
+fn estimate_nonlinear(
+    py: Python<'_>,
+    model: Callables,
+    kind: &str,
+    measurements: &Bound<'_, PyAny>,
+    noise: Parametrisation,
+    (x0, p0): (DVector<f64>, DMatrix<f64>),
+    start: Start,
+    ml: &MaximumLikelihood,
+) -> PyResult<NoiseEstimate> {
+    let (n, m) = (noise.state_dim(), noise.measurement_dim());
+    let filter = match kind {
+        "ekf" => {
+            if model.f_jacobian.is_none() || model.h_jacobian.is_none() {
+                return Err(error(
+                    "arguments F_jacobian and H_jacobian are required for kind=\"ekf\" \
+                     (or use kind=\"ukf\")",
+                ));
+            }
+            LikelihoodFilter::Ekf
+        }
+        "ukf" => LikelihoodFilter::Ukf(SigmaSet::recommended(n)),
+        other => {
+            return Err(error(format!(
+                "argument kind is {other:?}; expected \"ekf\" or \"ukf\""
+            )));
+        }
+    };
+    let runs = runs_of(measurements, "measurements", m, &format!("R is {m}x{m}"))?;
+    // The models' own noise is replaced by every candidate's; these only size them.
+    let start_matrices = noise
+        .matrices(noise.start().as_slice())
+        .map_err(|e| noise_error(&e))?;
+    let failure = Failure::default();
+    let dynamics = PyDynamics {
+        f: &model.f,
+        jacobian: model.f_jacobian.as_ref(),
+        q: &start_matrices.q,
+        failure: &failure,
+    };
+    let measurement = PyMeasurement {
+        h: &model.h,
+        jacobian: model.h_jacobian.as_ref(),
+        residual: model.residual.as_ref(),
+        r: &start_matrices.r,
+        n,
+        failure: &failure,
+    };
+    let problem =
+        NonlinearNoiseProblem::new(dynamics, measurement, filter, x0, p0, start, noise, runs)
+            .map_err(|e| match e {
+                NonlinearProblemError::Noise(e) => noise_error(&e),
+                other => error(format!("arguments F, H (the model's callables): {other}")),
+            })?;
+    if let Some(e) = failure.take() {
+        return Err(e);
+    }
+    // The GIL is released so that the optimiser's threads can each take it to call the
+    // model; the calls themselves run one at a time.
+    let result = py.detach(|| ml.estimate_nonlinear(&problem));
+    if let Some(e) = failure.take() {
+        return Err(e);
+    }
+    let est =
+        result.map_err(|e| error(format!("estimate the noise by ml through the {kind}: {e}")))?;
+    Ok(NoiseEstimate {
+        report: nonlinear_report(&est, kind),
+    })
+}
+
 /// Estimates the noise covariances `Q` and `R` of a linear model from its measurements alone:
 /// `x_k = F x_{k-1} + G w_k`, `z_k = H x_k + v_k`, `w_k ~ N(0, Qw)`, `v_k ~ N(0, R)`
 /// (without `G`, `Qw` is `Q`), with what is known of `Qw` and `R` stated by their forms.
 /// The estimators are `kalibra tune --method`'s (the same library underneath).
 ///
+/// A nonlinear model `x_k = f(x_{k-1}, k-1) + G w_k`, `z_k = h(x_k, k) + v_k` is given by
+/// callables in place of F and H, as `ExtendedKalmanFilter` and `UnscentedKalmanFilter` take
+/// them: its likelihood is that of the EKF (with `F_jacobian` and `H_jacobian`) or of the UKF
+/// (`kind="ukf"`, the recommended symmetric sigma points), maximised over the same forms
+/// (method "ml" only; no profile or consistency check).
+///
 /// Args:
-///     F: (n, n), H: (m, n).
+///     F: (n, n), or the callable f(x, k) -> (n,) of a nonlinear model.
+///     H: (m, n), or the callable h(x, k) -> (m,).
 ///     measurements: (K, m), one row per step, or (R, K, m) for R runs of the same system
 ///         (each from x0, P0); a row of NaN has no measurement.
 ///     Q, R: what is known of `Qw` (g, g; `Q` itself without `G`) and of `R` (m, m), each
@@ -599,6 +789,10 @@ fn estimator(
 ///     lags: "als": the autocovariance lags (default 10).
 ///     p: "j1j2": the grid of exponents (from, to, step), `to` included (default -3 to 3 by
 ///         0.25); each parameter is its starting value times 10^p.
+///     F_jacobian, H_jacobian: for callables F and H, their Jacobians (x, k) -> (n, n) and
+///         (m, n) (the EKF).
+///     residual: for callables, residual(z, zhat) -> (m,) (angles); default z - zhat.
+///     kind: for callables, "ekf" (default) or "ukf".
 ///     profile: compute the profile likelihood of every parameter (ML and converged EM; 10
 ///         re-maximisations per parameter, the costliest part); default True.
 ///
@@ -632,7 +826,8 @@ fn estimator(
 #[pyfunction]
 #[pyo3(signature = (
     F, H, measurements, *, Q, R, x0, P0, G=None, method="ml", start="predict_first",
-    truth=None, iterations=None, tolerance=None, lags=None, p=None, profile=true
+    truth=None, iterations=None, tolerance=None, lags=None, p=None, profile=true,
+    F_jacobian=None, H_jacobian=None, residual=None, kind="ekf"
 ))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 fn estimate_noise(
@@ -653,6 +848,10 @@ fn estimate_noise(
     lags: Option<usize>,
     p: Option<(f64, f64, f64)>,
     profile: bool,
+    F_jacobian: Option<&Bound<'_, PyAny>>,
+    H_jacobian: Option<&Bound<'_, PyAny>>,
+    residual: Option<&Bound<'_, PyAny>>,
+    kind: &str,
 ) -> PyResult<NoiseEstimate> {
     let chosen = estimator(method, iterations, tolerance, lags, p)?;
     let start = match start {
@@ -664,8 +863,6 @@ fn estimate_noise(
             )));
         }
     };
-    let f = matrix(F, "F")?;
-    let h = matrix(H, "H")?;
     let x0 = read(x0, "x0")?;
     if x0.shape.len() != 1 {
         return Err(error(format!(
@@ -680,6 +877,47 @@ fn estimate_noise(
         .transpose()?;
     let qw = form_of(Q, "Q")?;
     let r = form_of(R, "R")?;
+    if F.is_callable() || H.is_callable() {
+        let (Some(f), Some(h)) = (callable(Some(F), "F")?, callable(Some(H), "H")?) else {
+            return Err(error(
+                "arguments F, H: give both as matrices or both as callables",
+            ));
+        };
+        let Method::MaximumLikelihood(ml) = chosen else {
+            return Err(error(format!(
+                "argument method is {method:?}; a model given as callables is estimated by \
+                 \"ml\" only"
+            )));
+        };
+        if truth.is_some_and(|t| !t.is_none()) {
+            return Err(error(
+                "argument truth: not used for a model given as callables (no consistency check)",
+            ));
+        }
+        let model = Callables {
+            f,
+            f_jacobian: callable(F_jacobian, "F_jacobian")?,
+            h,
+            h_jacobian: callable(H_jacobian, "H_jacobian")?,
+            residual: callable(residual, "residual")?,
+        };
+        let noise = Parametrisation::new(g, qw, r).map_err(|e| noise_error(&e))?;
+        let initial = (DVector::from_vec(x0.data), p0);
+        return estimate_nonlinear(py, model, kind, measurements, noise, initial, start, &ml);
+    }
+    for (name, given) in [
+        ("F_jacobian", F_jacobian),
+        ("H_jacobian", H_jacobian),
+        ("residual", residual),
+    ] {
+        if given.is_some_and(|g| !g.is_none()) {
+            return Err(error(format!(
+                "argument {name} applies to a model given as callables F, H"
+            )));
+        }
+    }
+    let f = matrix(F, "F")?;
+    let h = matrix(H, "H")?;
     let m = h.nrows();
     let runs = runs_of(measurements, "measurements", m, &format!("H has {m} rows"))?;
     let noise = Parametrisation::new(g, qw, r).map_err(|e| noise_error(&e))?;

@@ -285,3 +285,35 @@ def test_truth_adds_anees_and_rmse_and_profiles_bracket_the_estimate():
     with pytest.raises(kalibra.KalibraError, match="argument truth has shape"):
         kalibra.estimate_noise([[1.0]], [[1.0]], z, Q=("scaled", [[1.0]]), R=("scaled", [[1.0]]),
                                x0=[0.0], P0=[[1.0]], truth=np.zeros((2, 300, 2)))
+
+
+def test_callables_through_the_ekf_and_the_ukf_equal_the_linear_estimate():
+    """A linear model given as callables: the EKF's and the UKF's likelihoods are the Kalman
+    filter's, so their ML estimates equal the linear one to the optimiser's tolerance."""
+    z = random_walk(steps=150, seed=9)
+    args = dict(Q=("scaled", [[1.0]]), R=("scaled", [[1.0]]), x0=[0.0], P0=[[1.0]],
+                profile=False)
+    linear = kalibra.estimate_noise([[1.0]], [[1.0]], z, **args)
+    f = lambda x, k: x
+    one = lambda x, k: np.eye(1)
+    ekf = kalibra.estimate_noise(f, f, z, F_jacobian=one, H_jacobian=one, **args)
+    ukf = kalibra.estimate_noise(f, f, z, kind="ukf", **args)
+    for est in (ekf, ukf):
+        assert est.method == "ml" and est.converged
+        assert est.log_likelihood == pytest.approx(linear.log_likelihood, abs=1e-6)
+        for p, q in zip(est.parameters, linear.parameters):
+            assert p["name"] == q["name"]
+            assert p["value"] == pytest.approx(q["value"], rel=1e-4)
+            assert p["stderr"] == pytest.approx(q["stderr"], rel=1e-2)
+        assert any("quasi-likelihood" in w for w in est.warnings)
+    with pytest.raises(kalibra.KalibraError, match="F_jacobian and H_jacobian are required"):
+        kalibra.estimate_noise(f, f, z, **args)
+    with pytest.raises(kalibra.KalibraError, match="\"ml\" only") as info:
+        kalibra.estimate_noise(f, f, z, method="em", kind="ukf", **args)
+    assert info.value.argument == "method"
+
+    def broken(x, k):
+        raise RuntimeError("model failed")
+
+    with pytest.raises(kalibra.KalibraError, match="model failed"):
+        kalibra.estimate_noise(broken, f, z, kind="ukf", **args)

@@ -277,8 +277,8 @@ class NoiseEstimate:
     def save(self, dir: Union[str, "os.PathLike[str]"]) -> None: ...
 
 def estimate_noise(
-    F: _ArrayLike,
-    H: _ArrayLike,
+    F: Union[_ArrayLike, _StateFn],
+    H: Union[_ArrayLike, _StateFn],
     measurements: _ArrayLike,
     *,
     Q: _NoiseSpec,
@@ -294,6 +294,10 @@ def estimate_noise(
     lags: Optional[int] = None,
     p: Optional[Tuple[float, float, float]] = None,
     profile: bool = True,
+    F_jacobian: Optional[_StateFn] = None,
+    H_jacobian: Optional[_StateFn] = None,
+    residual: Optional[_ResidualFn] = None,
+    kind: Literal["ekf", "ukf"] = "ekf",
 ) -> NoiseEstimate: ...
 
 # The return type follows `shard` and `return_log`: a shard's partial, the report with the
