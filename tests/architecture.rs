@@ -48,7 +48,8 @@ fn crate_dependencies_follow_the_design() {
         // it runs no filter. Never the studies.
         ("kalibra-eval", &["kalibra-linalg", "kalibra-metrics"]),
         // Choosing Q and R from measurements runs the library's filters on the models, with
-        // the metrics' J1/J2 and the simulation's thread pools. Never the studies.
+        // the metrics' J1/J2 and the simulation's thread pools, and judges the tuned filter's
+        // run with the log evaluation (which never depends on it). Never the studies.
         (
             "kalibra-tune",
             &[
@@ -56,6 +57,7 @@ fn crate_dependencies_follow_the_design() {
                 "kalibra-models",
                 "kalibra-filters",
                 "kalibra-metrics",
+                "kalibra-eval",
                 "kalibra-sim",
             ],
         ),

@@ -282,19 +282,7 @@ impl ParameterSweep {
         let mut points = Vec::with_capacity(self.grid.len());
         for &p in &self.grid {
             let scale = 10f64.powf(p);
-            let scaled = match (form.kind(), parameter.entry) {
-                (FormKind::Full, Some((i, _))) => {
-                    let mut d = DMatrix::identity(base.nrows(), base.nrows());
-                    d[(i, i)] = scale.sqrt();
-                    &d * base * &d
-                }
-                (_, Some((i, _))) => {
-                    let mut x = base.clone();
-                    x[(i, i)] *= scale;
-                    x
-                }
-                (_, None) => base * scale,
-            };
+            let scaled = scale_parameter(form.kind(), base, &parameter, scale);
             let (qw, r) = match parameter.matrix {
                 NoiseMatrix::Qw => (&scaled, &estimate.r),
                 NoiseMatrix::R => (&estimate.qw, &scaled),
@@ -332,6 +320,31 @@ impl ParameterSweep {
             }),
             skipped: None,
         })
+    }
+}
+
+/// `base` with `parameter` (a multiplier or a variance, never a covariance) multiplied by
+/// `scale` as the sweep does it (see [`ParameterSweep`]): the whole matrix for a multiplier,
+/// the entry of a diagonal form, `D X D` for a full form's variance so that its correlations
+/// are kept.
+pub(crate) fn scale_parameter(
+    kind: FormKind,
+    base: &DMatrix<f64>,
+    parameter: &Parameter,
+    scale: f64,
+) -> DMatrix<f64> {
+    match (kind, parameter.entry) {
+        (FormKind::Full, Some((i, _))) => {
+            let mut d = DMatrix::identity(base.nrows(), base.nrows());
+            d[(i, i)] = scale.sqrt();
+            &d * base * &d
+        }
+        (_, Some((i, _))) => {
+            let mut x = base.clone();
+            x[(i, i)] *= scale;
+            x
+        }
+        (_, None) => base * scale,
     }
 }
 

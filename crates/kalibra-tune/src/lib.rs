@@ -21,8 +21,12 @@
 //!   and 95% intervals on the matrices' own scale, and what the data cannot identify named in
 //!   words.
 //!
-//! It is not for judging a filter's logs (that is `kalibra-eval`, which this crate does not
-//! need) and it does no I/O: reading MODEL.toml and measurement files belongs to `kalibra-io`.
+//! * one report for every estimator ([`NoiseReport::estimate`] with a [`Method`]): the
+//!   estimate, intervals, identifiability and warnings in words, the profile likelihood of
+//!   every parameter, and the tuned filter and the starting guess judged on the data.
+//!
+//! It is not for judging a filter's logs (that is `kalibra-eval`, which the report calls to
+//! judge the tuned filter's run) and it does no I/O: reading MODEL.toml and measurement files belongs to `kalibra-io`.
 //!
 //! # Notation
 //! `n` states, `m` measurements; the model `x_k = F x_{k-1} + w_k`, `z_k = H x_k + v_k` with
@@ -57,6 +61,8 @@
 //! * `ml`: [`MaximumLikelihood`] -> [`MlEstimate`] (estimates, standard errors and 95% intervals
 //!   from the observed information, [`Identifiability`], [`MlWarning`]s); `optim`: its BFGS
 //!   minimiser and finite differences (why not argmin: in `optim`'s docs).
+//! * `report`: [`NoiseReport`], the one result of every [`Method`], with [`Profile`]s and the
+//!   [`Consistency`] of the tuned filter on the data ([`ReportError`]).
 //!
 //! # Example
 //! ```
@@ -87,6 +93,7 @@ mod ml;
 mod noise;
 mod optim;
 mod problem;
+mod report;
 mod sweep_q;
 mod tuning;
 
@@ -101,6 +108,10 @@ pub use noise::{
 };
 pub use optim::StopReason;
 pub use problem::{NoiseProblem, Run};
+pub use report::{
+    Consistency, FilterCheck, Method, MethodKind, NoiseReport, PROFILE_POINTS, Profile,
+    ProfilePoint, ReportError, ReportIdentifiability, ReportOptions, ReportParameter,
+};
 
 pub use als::{ALS_LAGS, ALS_MAX_ITERATIONS, ALS_RANK_TOLERANCE, Als, AlsError, AlsEstimate};
 pub use em::{EM_MAX_ITERATIONS, EM_TOLERANCE, Em, EmError, EmEstimate};

@@ -24,7 +24,9 @@
 //! that level is a direction along which the likelihood is flat: it is carried to the natural
 //! parameters by `J` and named, and the combinations the data do determine (the remaining
 //! eigenvectors, carried by `J^-T`) are named with it ("the data identify only
-//! `Qw[0,0] + 4 Qw[1,1]`"). Parameters in a flat direction get no standard error.
+//! `Qw[0,0] + 4 Qw[1,1]`"). Parameters in a flat direction get no standard error. A parameter
+//! at a bound (below) is stated as such ("q is at its bound 0: the data cannot tell it from
+//! 0") and the analysis, and the others' standard errors, are of the remaining parameters.
 //!
 //! # Bounds
 //! A positive parameter whose likelihood stays within the 95% threshold (`chi2_1(0.95) / 2 =
@@ -143,11 +145,12 @@ pub struct Combination {
 pub struct Identifiability {
     /// Free parameters.
     pub parameters: usize,
-    /// Rank of the observed information.
+    /// Rank of the observed information (over the parameters not at a bound).
     pub rank: usize,
     /// Largest over smallest eigenvalue (`None` when the rank is short: infinite).
     pub condition_number: Option<f64>,
-    /// The information's eigenvalues, ascending (`theta` scale).
+    /// The information's eigenvalues, ascending (`theta` scale; over the parameters not at
+    /// a bound).
     pub eigenvalues: Vec<f64>,
     /// Directions along which the likelihood is flat, on the natural scale.
     pub flat_directions: Vec<Combination>,
@@ -383,6 +386,12 @@ impl MaximumLikelihood {
         let best = match best {
             Some(b) => b,
             None => {
+                // Every start failed: say why the first one did (a singular S there, ...).
+                if let Some(first) = starts.first()
+                    && let Err(e) = log_likelihood(problem, first.as_slice())
+                {
+                    return Err(MlError::Start(e));
+                }
                 let o = optim::minimise(&objective, reference.as_slice(), settings).ok_or(
                     MlError::Start(LikelihoodError::NonFinite { run: 0, update: 0 }),
                 )?;
@@ -465,7 +474,7 @@ impl MaximumLikelihood {
         }
         let identifiability = information
             .as_ref()
-            .map(|info| identifiability(info, &jac, &params));
+            .map(|info| identifiability(info, &jac, &params, &at_bound));
         let mut stderr_theta: Vec<Option<f64>> = vec![None; p];
         let mut stderr_nat: Vec<Option<f64>> = vec![None; p];
         match (&information, &identifiability) {
@@ -480,7 +489,33 @@ impl MaximumLikelihood {
                         message: id.message.clone(),
                     });
                 }
-                let (cov, flat) = pseudo_inverse(info);
+                // A parameter at a bound is not estimated inside its domain: the others'
+                // covariance is that of the interior block, so its flat direction does not
+                // leak into theirs.
+                let interior: Vec<usize> = (0..p).filter(|&i| at_bound[i].is_none()).collect();
+                let (sub_cov, sub_flat) =
+                    pseudo_inverse(&info.select_rows(&interior).select_columns(&interior));
+                let mut cov = DMatrix::zeros(p, p);
+                for (a, &i) in interior.iter().enumerate() {
+                    for (b, &j) in interior.iter().enumerate() {
+                        cov[(i, j)] = sub_cov[(a, b)];
+                    }
+                }
+                let mut flat: Vec<DVector<f64>> = sub_flat
+                    .iter()
+                    .map(|v| {
+                        let mut full = DVector::zeros(p);
+                        for (a, &i) in interior.iter().enumerate() {
+                            full[i] = v[a];
+                        }
+                        full
+                    })
+                    .collect();
+                flat.extend((0..p).filter(|i| at_bound[*i].is_some()).map(|i| {
+                    let mut e = DVector::zeros(p);
+                    e[i] = 1.0;
+                    e
+                }));
                 let cov_nat = &jac * &cov * jac.transpose();
                 for i in 0..p {
                     // A parameter with weight in a flat direction has no standard error.
@@ -626,13 +661,66 @@ fn format_coefficient(c: f64) -> String {
     }
 }
 
-/// Rank, condition number and the named flat and identified directions of `info`.
+/// Rank, condition number and the named flat and identified directions of `info`. A
+/// parameter at a bound is stated as such (the data cannot tell it from the bound) and left
+/// out of the analysis of the others: its flat direction, carried by a Jacobian that
+/// vanishes there (`d s / d ln s = s` near 0), would otherwise be named after whichever
+/// other parameter it leans on.
 fn identifiability(
     info: &DMatrix<f64>,
     jac: &DMatrix<f64>,
     params: &[Parameter],
+    at_bound: &[Option<Bound>],
 ) -> Identifiability {
     let p = info.nrows();
+    let interior: Vec<usize> = (0..p).filter(|&i| at_bound[i].is_none()).collect();
+    if interior.len() < p {
+        let inner = identifiability(
+            &info.select_rows(&interior).select_columns(&interior),
+            &jac.select_rows(&interior).select_columns(&interior),
+            &interior
+                .iter()
+                .map(|&i| params[i].clone())
+                .collect::<Vec<_>>(),
+            &vec![None; interior.len()],
+        );
+        let mut statements = Vec::new();
+        let mut flat_directions = Vec::new();
+        for (i, bound) in at_bound.iter().enumerate() {
+            let name = &params[i].name;
+            let Some(bound) = bound else { continue };
+            statements.push(match bound {
+                Bound::Zero => format!("{name} is at its bound 0: the data cannot tell it from 0"),
+                Bound::Infinity => {
+                    format!("{name} is at its bound infinity: the data put no upper limit on it")
+                }
+            });
+            flat_directions.push(Combination {
+                terms: vec![(name.clone(), 1.0)],
+                text: name.clone(),
+            });
+        }
+        flat_directions.extend(inner.flat_directions);
+        let others = match interior.len() {
+            0 => String::new(),
+            1 if inner.identifiable => format!("; {} is identified", params[interior[0]].name),
+            _ if inner.identifiable => {
+                let names: Vec<&str> = interior.iter().map(|&i| params[i].name.as_str()).collect();
+                format!("; {} are identified", names.join(", "))
+            }
+            _ => format!("; of the others, {}", inner.message),
+        };
+        return Identifiability {
+            parameters: p,
+            rank: inner.rank,
+            condition_number: None,
+            eigenvalues: inner.eigenvalues,
+            message: format!("{}{others}", statements.join("; ")),
+            flat_directions,
+            identified: inner.identified,
+            identifiable: false,
+        };
+    }
     let eig = info.clone().symmetric_eigen();
     let mut order: Vec<usize> = (0..p).collect();
     order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
@@ -727,7 +815,7 @@ mod tests {
         let params = [param("q_pos"), param("q_vel")];
         let w = DVector::from_vec(vec![1.0, 4.0]);
         let info = &w * w.transpose() * 10.0;
-        let id = identifiability(&info, &DMatrix::identity(2, 2), &params);
+        let id = identifiability(&info, &DMatrix::identity(2, 2), &params, &[None, None]);
         assert_eq!(id.rank, 1);
         assert!(!id.identifiable);
         assert_eq!(id.identified.len(), 1);
@@ -739,7 +827,12 @@ mod tests {
             id.message
         );
         assert!(id.condition_number.is_none());
-        let full = identifiability(&DMatrix::identity(2, 2), &DMatrix::identity(2, 2), &params);
+        let full = identifiability(
+            &DMatrix::identity(2, 2),
+            &DMatrix::identity(2, 2),
+            &params,
+            &[None, None],
+        );
         assert!(full.identifiable && full.condition_number == Some(1.0));
     }
 }

@@ -1,0 +1,1183 @@
+//! One result for every noise estimator ([`NoiseReport`]): the estimate with its intervals,
+//! what the data identify, what went wrong, the profile likelihood of every parameter, and the
+//! tuned filter judged on the data beside the starting guess.
+//!
+//! # One entry point
+//! [`NoiseReport::estimate`] runs the chosen [`Method`] (maximum likelihood, EM, ALS or the
+//! J1/J2 crossover of every parameter) on a [`NoiseProblem`] and fills the same fields for
+//! each, so that a front end (the `kalibra tune` report, Python) writes one schema.
+//!
+//! # Intervals per method
+//! * Maximum likelihood: the estimator's own (the observed information; module `ml`).
+//! * EM: converged EM is a maximum of the same likelihood, so its standard errors and 95%
+//!   intervals are those of the observed information at EM's estimate, computed as maximum
+//!   likelihood computes them (the information, bounds and identifiability of
+//!   [`MaximumLikelihood`] evaluated at EM's point, with no optimiser step). EM stopped before
+//!   its tolerance gets none, with a warning.
+//! * ALS and J1/J2 are not likelihood maxima: no intervals. ALS's identifiability is that of
+//!   its least-squares matrix; J1/J2's is the observed information at its point.
+//!
+//! # Consistency on the data
+//! The filter (the library's [`kalibra_filters::Kf`]) runs over every run with the estimate
+//! and with the starting guess (the forms' given matrices), and each run is judged by
+//! [`kalibra_eval::Evaluation`], the library's evaluation of a log: ANIS with its chi-square
+//! band (one run) or its t-test (several runs), the whiteness of the normalised innovations
+//! (Box-Pierce over 10 lags, fewer on a short log) and, with the truth given, ANEES with its
+//! band and the RMSE. The innovation statistics are the data's own test of the tuned filter;
+//! the truth, when a simulation has it, is the test the data cannot give.
+//!
+//! # Profile likelihood
+//! For the likelihood methods (ML and converged EM) each free parameter's profile
+//! `max over the others of ln L` is computed on [`PROFILE_POINTS`] points (see that constant
+//! for the number and the span), each re-maximised over the other parameters (BFGS,
+//! warm-started from its neighbour nearer the estimate), the points of each parameter and the
+//! parameters side by side on rayon's pool. A parameter is held at a grid value by fixing its
+//! entry in the form (a scaled form becomes fixed at that multiple), so the profile is exact
+//! on the matrices' own scale for every form. The likelihood-ratio 95% interval is read off
+//! where the profile falls `chi2_1(0.95) / 2 = 1.92` below the maximum.
+
+use kalibra_eval::{ConsistencyTest, Evaluation, FilterLog, Matrices, Vectors, WhitenessReport};
+use kalibra_filters::{Filter, FilterError, Kf};
+use kalibra_linalg::DMatrix;
+use kalibra_models::{LinearGaussian, LinearObservation, ModelError};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::j1j2::scale_parameter;
+use crate::likelihood::{log_likelihood, log_likelihood_of};
+use crate::optim::{self, Settings, StopReason};
+use crate::{
+    Als, AlsError, Bound, CovarianceForm, Em, EmError, FormKind, MaximumLikelihood, MlError,
+    MlEstimate, MlWarning, NoiseError, NoiseMatrices, NoiseMatrix, NoiseProblem, Parameter,
+    ParameterSweep, Parametrisation, Run, SweepError,
+};
+
+/// Points of a parameter's profile: the estimate and 5 on each side, at `j / 5` of the span
+/// for `j = -5..=5`. The span is `2.5` standard errors each way (on the log scale for a
+/// positive parameter, where its interval is built), so the grid covers the 95% interval
+/// (`1.96` standard errors) with a point beyond each end, where the profile has crossed the
+/// 1.92 threshold: enough to draw the curve and read its crossing, at 10 re-maximisations per
+/// parameter (each warm-started, a few BFGS iterations).
+pub const PROFILE_POINTS: usize = 11;
+
+/// The span of a profile in standard errors each way.
+const PROFILE_SPAN: f64 = 2.5;
+/// The span (on the log scale) of a positive parameter without a standard error: a factor
+/// 10 each way.
+const PROFILE_SPAN_NO_STDERR: f64 = std::f64::consts::LN_10;
+/// Iterations of each profile point's re-maximisation.
+const PROFILE_ITERATIONS: usize = 200;
+/// The gradient tolerance of a profile point (on `-ln L / N`): looser than the estimate's,
+/// which moves the profile's log-likelihood by far less than its threshold of 1.92.
+const PROFILE_TOLERANCE: f64 = 1e-6;
+/// `chi2_1(0.95) / 2`.
+const HALF_CHI2_95: f64 = 1.920_729_410_347_062;
+/// How far the re-maximised `theta` may move from its warm start (as the estimator's wall).
+const PROFILE_WALL: f64 = 40.0;
+/// Whiteness lags of the consistency check.
+const WHITENESS_LAGS: usize = 10;
+
+/// The estimator a [`NoiseReport`] runs, with its options.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Method {
+    /// Maximum likelihood ([`MaximumLikelihood`]).
+    MaximumLikelihood(MaximumLikelihood),
+    /// Expectation-maximisation ([`Em`]).
+    Em(Em),
+    /// Autocovariance least squares ([`Als`]).
+    Als(Als),
+    /// The J1/J2 crossover of every parameter around the starting point ([`ParameterSweep`]).
+    J1J2(ParameterSweep),
+}
+
+impl Method {
+    /// The method's name in a report.
+    pub fn kind(&self) -> MethodKind {
+        match self {
+            Method::MaximumLikelihood(_) => MethodKind::Ml,
+            Method::Em(_) => MethodKind::Em,
+            Method::Als(_) => MethodKind::Als,
+            Method::J1J2(_) => MethodKind::J1j2,
+        }
+    }
+}
+
+/// A method's name, as `report.json` writes it (`"ml"`, `"em"`, `"als"`, `"j1j2"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MethodKind {
+    /// Maximum likelihood.
+    Ml,
+    /// Expectation-maximisation.
+    Em,
+    /// Autocovariance least squares.
+    Als,
+    /// The J1/J2 crossover of every parameter.
+    J1j2,
+}
+
+impl MethodKind {
+    /// `"ml"`, `"em"`, `"als"` or `"j1j2"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            MethodKind::Ml => "ml",
+            MethodKind::Em => "em",
+            MethodKind::Als => "als",
+            MethodKind::J1j2 => "j1j2",
+        }
+    }
+}
+
+/// What a [`NoiseReport`] computes beside the estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReportOptions {
+    profile: bool,
+}
+
+impl Default for ReportOptions {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ReportOptions {
+    /// Everything: the profile likelihood of every parameter (likelihood methods) and the
+    /// consistency of the estimate and the starting guess.
+    pub fn new() -> Self {
+        Self { profile: true }
+    }
+
+    /// Whether to compute the profiles (the costliest part: [`PROFILE_POINTS`] `- 1`
+    /// re-maximisations per parameter).
+    pub fn profile(mut self, profile: bool) -> Self {
+        self.profile = profile;
+        self
+    }
+}
+
+/// Why a report could not be made. Troubles with an estimate (non-convergence, a bound, an
+/// unidentified parameter, a filter that fails at the estimate) are [`NoiseReport::warnings`]
+/// instead.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReportError {
+    /// Maximum likelihood refused.
+    #[error("maximum likelihood: {0}")]
+    Ml(#[source] MlError),
+    /// EM refused.
+    #[error("EM: {0}")]
+    Em(#[source] EmError),
+    /// ALS refused.
+    #[error("ALS: {0}")]
+    Als(#[source] AlsError),
+    /// The J1/J2 sweep failed.
+    #[error("J1/J2 sweep: {0}")]
+    Sweep(#[source] SweepError),
+    /// Fewer scalar measurements than free parameters: the data cannot determine them.
+    #[error(
+        "{measurements} scalar measurements cannot determine {parameters} free noise \
+         parameters; record more, or fix or scale some entries"
+    )]
+    TooFewMeasurements {
+        /// Scalar measurements present (measurement vectors times `m`).
+        measurements: usize,
+        /// Free parameters.
+        parameters: usize,
+    },
+    /// The starting guess's matrices could not be formed.
+    #[error("starting guess: {0}")]
+    Start(#[source] NoiseError),
+    /// The truth has a different number of runs than the measurements.
+    #[error("truth has {found} runs, the measurements {expected}")]
+    TruthRuns {
+        /// Runs of measurements.
+        expected: usize,
+        /// Runs of truth.
+        found: usize,
+    },
+    /// A truth run whose length differs from its measurements'.
+    #[error("truth of run {run} has {found} steps, its measurements {expected}")]
+    TruthLength {
+        /// The run.
+        run: usize,
+        /// Steps of measurements.
+        expected: usize,
+        /// Steps of truth.
+        found: usize,
+    },
+    /// A true state of the wrong length or with NaN or an infinity (give `None` for a step
+    /// without a truth).
+    #[error(
+        "truth at run {run}, step {step} is not a finite vector of n = {expected} values \
+         (give None for a step without a truth)"
+    )]
+    TruthValue {
+        /// The run.
+        run: usize,
+        /// The step.
+        step: usize,
+        /// `n`.
+        expected: usize,
+    },
+}
+
+/// One free parameter's estimate on the matrices' own scale.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReportParameter {
+    /// `q` or `r` for a scaled form's multiplier, `Qw[i,j]` or `R[i,j]` (`i >= j`) for an
+    /// entry of a diagonal or full form.
+    pub name: String,
+    /// The estimate.
+    pub value: f64,
+    /// Its standard error (likelihood methods; `None` where the data do not identify it).
+    pub stderr: Option<f64>,
+    /// Its 95% interval `[low, high]` (as `stderr`); an end at a bound is that bound, `0` or
+    /// `f64::INFINITY` (which `serde_json` writes as `null`).
+    pub ci95: Option<[f64; 2]>,
+    /// The bound it ran to, if any.
+    pub at_bound: Option<Bound>,
+    /// Its profile likelihood (likelihood methods, when asked for).
+    pub profile: Option<Profile>,
+}
+
+/// One point of a profile likelihood.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProfilePoint {
+    /// The parameter's value (natural scale).
+    pub value: f64,
+    /// The log-likelihood maximised over the other parameters (`None`: no candidate with this
+    /// value could be evaluated, for example a full form that cannot hold it).
+    pub log_likelihood: Option<f64>,
+    /// Whether the re-maximisation met its tolerance.
+    pub converged: bool,
+}
+
+/// A parameter's profile likelihood around the estimate.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Profile {
+    /// The points, ascending in value; the estimate is one of them.
+    pub points: Vec<ProfilePoint>,
+    /// `ln L` at the estimate minus `chi2_1(0.95) / 2`: the profile above it is the
+    /// likelihood-ratio 95% interval.
+    pub threshold: f64,
+    /// That interval's ends where the profile crosses the threshold on the grid (linear
+    /// interpolation between points); `None` for an end the grid does not reach.
+    pub interval: [Option<f64>; 2],
+}
+
+/// What the data identify, in numbers and words.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReportIdentifiability {
+    /// What the numbers are of: `"observed information"` (the log-likelihood's curvature at
+    /// the estimate) or `"least-squares matrix"` (ALS).
+    pub source: String,
+    /// Free parameters.
+    pub parameters: usize,
+    /// Rank.
+    pub rank: usize,
+    /// Condition number (`None`: infinite, the rank is short).
+    pub condition: Option<f64>,
+    /// The parameter combinations the data cannot determine, in words.
+    pub unidentifiable: Vec<String>,
+    /// In words: what the data identify.
+    pub message: String,
+}
+
+/// A filter judged on the data ([`kalibra_eval::Evaluation`] of its run).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FilterCheck {
+    /// ANIS (mean NIS over `m`) with its test: the chi-square band of one run, or the t-test
+    /// over several.
+    pub anis: Option<ConsistencyTest>,
+    /// The whiteness of the first run's normalised innovations.
+    pub whiteness: Option<WhitenessReport>,
+    /// ANEES (mean NEES over `n`) with its test, with the truth given.
+    pub anees: Option<ConsistencyTest>,
+    /// The RMSE of the estimate over every state component and step with a truth.
+    pub rmse: Option<f64>,
+    /// The RMSE of each state component, with the truth given.
+    pub rmse_per_component: Vec<Option<f64>>,
+    /// The verdict in words (consistent, optimistic or pessimistic, with its evidence).
+    pub verdict: String,
+}
+
+/// The tuned filter and the starting guess judged on the same data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Consistency {
+    /// The filter with the estimate (`None`: it could not run; see the warnings).
+    pub estimate: Option<FilterCheck>,
+    /// The filter with the starting guess.
+    pub start: Option<FilterCheck>,
+}
+
+/// The result of any noise estimator, in one schema ([`NoiseReport::estimate`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NoiseReport {
+    /// The method.
+    pub method: MethodKind,
+    /// The log-likelihood of the measurements at the estimate (`None` if the filter cannot
+    /// run there).
+    pub log_likelihood: Option<f64>,
+    /// The log-likelihood at the starting guess.
+    pub start_log_likelihood: Option<f64>,
+    /// `Q = G Qw G^T`, `n x n`, row by row.
+    pub q: Vec<Vec<f64>>,
+    /// `Qw`, row by row.
+    pub qw: Vec<Vec<f64>>,
+    /// `R`, row by row.
+    pub r: Vec<Vec<f64>>,
+    /// Every free parameter, in the parametrisation's order.
+    pub parameters: Vec<ReportParameter>,
+    /// Whether the method met its stopping rule (ML: the gradient tolerance; EM: the
+    /// relative tolerance; ALS: always; J1/J2: every swept parameter has a crossover).
+    pub converged: bool,
+    /// Iterations (ML: of the best start; EM: M-steps; ALS and J1/J2: 0, not iterative).
+    pub iterations: usize,
+    /// What the data identify.
+    pub identifiability: Option<ReportIdentifiability>,
+    /// What the user must know, in words: non-convergence, bounds, unidentified
+    /// combinations, a filter that failed.
+    pub warnings: Vec<String>,
+    /// The filter with the estimate and with the starting guess, judged on the data.
+    pub consistency: Consistency,
+    /// The J1/J2 curves of every parameter (method J1/J2).
+    pub j1j2: Option<Vec<crate::ParameterCurve>>,
+}
+
+fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| m.row(i).iter().copied().collect())
+        .collect()
+}
+
+/// What each method hands to the common part of the report.
+struct Fit {
+    matrices: NoiseMatrices,
+    values: Vec<f64>,
+    converged: bool,
+    iterations: usize,
+    /// The likelihood's view at the estimate (ML: its own; EM and J1/J2: evaluated there).
+    view: Option<MlEstimate>,
+    /// Whether the view's intervals apply (a likelihood maximum).
+    intervals: bool,
+    identifiability: Option<ReportIdentifiability>,
+    warnings: Vec<String>,
+    curves: Option<Vec<crate::ParameterCurve>>,
+}
+
+impl NoiseReport {
+    /// Runs `method` on `problem` and reports (see the module docs); `truth`, one sequence of
+    /// true states per run and step (`None` where unknown), adds ANEES and RMSE.
+    ///
+    /// ```
+    /// use kalibra_tune::{CovarianceForm, DMatrix, DVector, MaximumLikelihood, Method,
+    ///     MethodKind, NoiseProblem, NoiseReport, Parametrisation, ReportOptions, Start};
+    ///
+    /// let one = |v: f64| DMatrix::from_element(1, 1, v);
+    /// let zs = [0.1, 0.5, 0.2, 1.1, 1.6, 1.2, 2.3, 2.0, 2.9, 3.4, 2.8, 3.9, 4.4, 4.1, 5.2];
+    /// let run = zs.iter().map(|&z| Some(DVector::from_element(1, z))).collect();
+    /// let noise = Parametrisation::new(None, CovarianceForm::scaled(one(1.0)),
+    ///     CovarianceForm::scaled(one(1.0)))?;
+    /// let problem = NoiseProblem::new(one(1.0), one(1.0), DVector::zeros(1), one(1.0),
+    ///     Start::PredictFirst, noise, vec![run])?;
+    /// let method = Method::MaximumLikelihood(MaximumLikelihood::new());
+    /// let report = NoiseReport::estimate(&problem, &method, ReportOptions::new(), None)?;
+    /// assert_eq!(report.method, MethodKind::Ml);
+    /// assert_eq!(report.parameters[0].name, "q");
+    /// assert!(report.consistency.estimate.as_ref().unwrap().anis.is_some());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// The method's own refusal ([`ReportError::Ml`], [`ReportError::Em`],
+    /// [`ReportError::Als`], [`ReportError::Sweep`]); [`ReportError::TooFewMeasurements`];
+    /// [`ReportError::Start`]; [`ReportError::TruthRuns`], [`ReportError::TruthLength`],
+    /// [`ReportError::TruthValue`] for a truth that does not fit the measurements.
+    pub fn estimate(
+        problem: &NoiseProblem,
+        method: &Method,
+        options: ReportOptions,
+        truth: Option<&[Run]>,
+    ) -> Result<NoiseReport, ReportError> {
+        if let Some(truth) = truth {
+            check_truth(problem, truth)?;
+        }
+        let noise = problem.noise();
+        let scalars = problem.measurement_count() * problem.measurement_dim();
+        if scalars < noise.len() {
+            return Err(ReportError::TooFewMeasurements {
+                measurements: scalars,
+                parameters: noise.len(),
+            });
+        }
+        let start = noise
+            .matrices(noise.start().as_slice())
+            .map_err(ReportError::Start)?;
+        let fit = match method {
+            Method::MaximumLikelihood(ml) => fit_ml(problem, ml)?,
+            Method::Em(em) => fit_em(problem, em)?,
+            Method::Als(als) => fit_als(problem, als)?,
+            Method::J1J2(sweep) => fit_j1j2(problem, sweep, &start)?,
+        };
+        let mut warnings = fit.warnings;
+        let log_likelihood = match log_likelihood_of(problem, &fit.matrices) {
+            Ok(l) => Some(l),
+            Err(e) => {
+                warnings.push(format!("the log-likelihood at the estimate: {e}"));
+                None
+            }
+        };
+        let start_log_likelihood = log_likelihood_of(problem, &start).ok();
+        let params = noise.parameters();
+        let mut parameters: Vec<ReportParameter> = params
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let from_view = fit.view.as_ref().map(|v| &v.parameters[i]);
+                let intervals = fit.intervals;
+                ReportParameter {
+                    name: p.name.clone(),
+                    value: fit.values[i],
+                    stderr: from_view.and_then(|v| v.stderr).filter(|_| intervals),
+                    ci95: from_view.and_then(|v| v.ci95).filter(|_| intervals),
+                    at_bound: from_view.and_then(|v| v.at_bound),
+                    profile: None,
+                }
+            })
+            .collect();
+        if options.profile
+            && fit.intervals
+            && let (Some(view), Some(ll)) = (&fit.view, log_likelihood)
+        {
+            let profiles: Vec<Option<Profile>> = (0..params.len())
+                .into_par_iter()
+                .map(|i| profile(problem, view, &parameters[i], i, ll))
+                .collect();
+            for (p, prof) in parameters.iter_mut().zip(profiles) {
+                p.profile = prof;
+            }
+        }
+        let estimate_check = match check_filter(problem, &fit.matrices, truth) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                warnings.push(format!("the filter with the estimate: {e}"));
+                None
+            }
+        };
+        let start_check = match check_filter(problem, &start, truth) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                warnings.push(format!("the filter with the starting guess: {e}"));
+                None
+            }
+        };
+        Ok(NoiseReport {
+            method: method.kind(),
+            log_likelihood,
+            start_log_likelihood,
+            q: rows_of(&fit.matrices.q),
+            qw: rows_of(&fit.matrices.qw),
+            r: rows_of(&fit.matrices.r),
+            parameters,
+            converged: fit.converged,
+            iterations: fit.iterations,
+            identifiability: fit.identifiability,
+            warnings,
+            consistency: Consistency {
+                estimate: estimate_check,
+                start: start_check,
+            },
+            j1j2: fit.curves,
+        })
+    }
+}
+
+fn check_truth(problem: &NoiseProblem, truth: &[Run]) -> Result<(), ReportError> {
+    let runs = problem.runs();
+    if truth.len() != runs.len() {
+        return Err(ReportError::TruthRuns {
+            expected: runs.len(),
+            found: truth.len(),
+        });
+    }
+    let n = problem.state_dim();
+    for (run, (t, zs)) in truth.iter().zip(runs).enumerate() {
+        if t.len() != zs.len() {
+            return Err(ReportError::TruthLength {
+                run,
+                expected: zs.len(),
+                found: t.len(),
+            });
+        }
+        for (step, x) in t.iter().enumerate() {
+            if let Some(x) = x
+                && (x.len() != n || x.iter().any(|v| !v.is_finite()))
+            {
+                return Err(ReportError::TruthValue {
+                    run,
+                    step,
+                    expected: n,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// An [`MlWarning`] in words.
+pub(crate) fn warning_text(w: &MlWarning) -> String {
+    match w {
+        MlWarning::NotConverged {
+            stop,
+            gradient,
+            iterations,
+        } => format!(
+            "the optimiser did not converge: it stopped after {iterations} iterations ({}) \
+             with a gradient of {gradient:.2e} on -ln L / N; the estimate is where it stopped",
+            match stop {
+                StopReason::Gradient => "gradient tolerance met",
+                StopReason::MaxIterations => "iteration limit",
+                StopReason::LineSearch => "no step along the search direction improved it",
+            }
+        ),
+        MlWarning::AtBound { parameter, bound } => match bound {
+            Bound::Zero => format!(
+                "{parameter} ran to its bound 0: the data are consistent with no such noise \
+                 (its interval starts at 0)"
+            ),
+            Bound::Infinity => format!(
+                "{parameter} ran to its bound infinity: the data put no upper limit on it \
+                 (its interval ends at infinity)"
+            ),
+        },
+        MlWarning::Unidentifiable { message } => message.clone(),
+        MlWarning::NotAMaximum { eigenvalue } => format!(
+            "the estimate is not a maximum of the likelihood: its curvature has the negative \
+             eigenvalue {eigenvalue:.3e} (a saddle, or not converged)"
+        ),
+        MlWarning::LocalMaxima { best, other } => format!(
+            "the starts reached different maxima (ln L = {best:.6} and {other:.6}); the best \
+             is reported"
+        ),
+        MlWarning::NoInformation => "the observed information could not be computed (a \
+             neighbour of the estimate cannot be evaluated): no standard errors"
+            .to_string(),
+        #[allow(unreachable_patterns)]
+        other => format!("{other:?}"),
+    }
+}
+
+fn identifiability_of(view: &MlEstimate) -> Option<ReportIdentifiability> {
+    view.identifiability
+        .as_ref()
+        .map(|id| ReportIdentifiability {
+            source: "observed information".to_string(),
+            parameters: id.parameters,
+            rank: id.rank,
+            condition: id.condition_number,
+            unidentifiable: id.flat_directions.iter().map(|c| c.text.clone()).collect(),
+            message: id.message.clone(),
+        })
+}
+
+fn fit_ml(problem: &NoiseProblem, ml: &MaximumLikelihood) -> Result<Fit, ReportError> {
+    let est = ml.estimate(problem).map_err(ReportError::Ml)?;
+    Ok(Fit {
+        matrices: est.matrices.clone(),
+        values: est.parameters.iter().map(|p| p.value).collect(),
+        converged: est.converged,
+        iterations: est.iterations,
+        identifiability: identifiability_of(&est),
+        warnings: est.warnings.iter().map(warning_text).collect(),
+        intervals: true,
+        view: Some(est),
+        curves: None,
+    })
+}
+
+/// The likelihood's view (information, bounds, identifiability, intervals) at `matrices`,
+/// computed as maximum likelihood computes it, without moving from the point. `None` when
+/// the point has no `theta` (a variance of exactly 0) or cannot be evaluated.
+fn view_at(problem: &NoiseProblem, matrices: &NoiseMatrices) -> Option<MlEstimate> {
+    let theta = problem.noise().theta_of(&matrices.qw, &matrices.r).ok()?;
+    let mut view = MaximumLikelihood::new()
+        .max_iterations(0)
+        .starts(vec![theta])
+        .estimate(problem)
+        .ok()?;
+    // Not an optimiser run: its iteration limit of 0 is no convergence failure.
+    view.warnings
+        .retain(|w| !matches!(w, MlWarning::NotConverged { .. }));
+    Some(view)
+}
+
+fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
+    let est = em.estimate(problem).map_err(ReportError::Em)?;
+    let mut warnings = Vec::new();
+    if !est.converged {
+        warnings.push(format!(
+            "EM did not converge: it stopped after {} iterations, before the log-likelihood's \
+             relative increase fell below its tolerance; no intervals are given (they hold at \
+             a maximum)",
+            est.iterations
+        ));
+    }
+    let view = view_at(problem, &est.matrices);
+    match &view {
+        Some(v) => warnings.extend(v.warnings.iter().map(warning_text)),
+        None => warnings.push(
+            "the observed information at EM's estimate could not be computed (a variance is \
+             0 or the likelihood cannot be evaluated nearby): no intervals"
+                .to_string(),
+        ),
+    }
+    Ok(Fit {
+        values: est.values.clone(),
+        converged: est.converged,
+        iterations: est.iterations,
+        identifiability: view.as_ref().and_then(identifiability_of),
+        intervals: est.converged,
+        view,
+        warnings,
+        matrices: est.matrices,
+        curves: None,
+    })
+}
+
+fn fit_als(problem: &NoiseProblem, als: &Als) -> Result<Fit, ReportError> {
+    let est = als.estimate(problem).map_err(ReportError::Als)?;
+    let mut warnings = Vec::new();
+    if let Some(w) = est.warning() {
+        warnings.push(w);
+    }
+    if est.constrained {
+        warnings.push(
+            "the unconstrained ALS solution was not positive semi-definite: the constrained \
+             least-squares solution is reported"
+                .to_string(),
+        );
+    }
+    for (p, v) in est.parameters.iter().zip(&est.values) {
+        if p.positive() && *v <= 0.0 {
+            warnings.push(format!(
+                "{} = {v:e} is at its bound 0: the autocovariances are fitted best with no \
+                 such noise",
+                p.name
+            ));
+        }
+    }
+    let unidentifiable = est.warning().into_iter().collect();
+    let identifiability = Some(ReportIdentifiability {
+        source: "least-squares matrix".to_string(),
+        parameters: est.free,
+        rank: est.rank,
+        condition: est.condition.is_finite().then_some(est.condition),
+        unidentifiable,
+        message: if est.unique() {
+            format!(
+                "the autocovariances at {} lags determine all {} parameters (rank {}, \
+                 condition number {:.3e})",
+                est.lags, est.free, est.rank, est.condition
+            )
+        } else {
+            est.warning().unwrap_or_default()
+        },
+    });
+    Ok(Fit {
+        values: est.values.clone(),
+        converged: true,
+        iterations: 0,
+        view: None,
+        intervals: false,
+        identifiability,
+        warnings,
+        matrices: est.matrices,
+        curves: None,
+    })
+}
+
+fn fit_j1j2(
+    problem: &NoiseProblem,
+    sweep: &ParameterSweep,
+    start: &NoiseMatrices,
+) -> Result<Fit, ReportError> {
+    let curves = sweep.sweep(problem, start).map_err(ReportError::Sweep)?;
+    let noise = problem.noise();
+    let mut warnings = vec![
+        "J1/J2 moves each parameter to its own crossover with the others at the starting \
+         guess; the crossovers are combined, not found jointly, and carry no interval"
+            .to_string(),
+    ];
+    let (mut qw, mut r) = (start.qw.clone(), start.r.clone());
+    let mut converged = true;
+    for curve in &curves {
+        let p = &curve.parameter;
+        if let Some(reason) = &curve.skipped {
+            warnings.push(format!("{} is not swept: {reason}", p.name));
+            continue;
+        }
+        let Some(c) = &curve.crossover else {
+            converged = false;
+            warnings.push(format!(
+                "{}: J1 and J2 do not cross on the grid; it stays at its starting value",
+                p.name
+            ));
+            continue;
+        };
+        let scale = 10f64.powf(c.p);
+        match p.matrix {
+            NoiseMatrix::Qw => qw = scale_parameter(noise.qw_form().kind(), &qw, p, scale),
+            NoiseMatrix::R => r = scale_parameter(noise.r_form().kind(), &r, p, scale),
+        }
+    }
+    let q = match noise.g() {
+        Some(g) => g * &qw * g.transpose(),
+        None => qw.clone(),
+    };
+    let matrices = NoiseMatrices { qw, r, q };
+    let values = noise
+        .parameters()
+        .iter()
+        .map(|p| {
+            crate::em::natural_value(
+                p,
+                noise.qw_form(),
+                noise.r_form(),
+                &matrices.qw,
+                &matrices.r,
+            )
+        })
+        .collect();
+    let view = view_at(problem, &matrices);
+    Ok(Fit {
+        identifiability: view.as_ref().and_then(identifiability_of),
+        matrices,
+        values,
+        converged,
+        iterations: 0,
+        view,
+        intervals: false,
+        warnings,
+        curves: Some(curves),
+    })
+}
+
+/// Why the filter could not be judged.
+#[derive(Debug, thiserror::Error)]
+enum CheckError {
+    #[error("model: {0}")]
+    Model(#[from] ModelError),
+    #[error("run {run}: {source}")]
+    Filter { run: usize, source: FilterError },
+    #[error("evaluation: {0}")]
+    Eval(#[from] kalibra_eval::EvalError),
+}
+
+/// Runs the filter with `matrices` over every run and judges the log.
+fn check_filter(
+    problem: &NoiseProblem,
+    matrices: &NoiseMatrices,
+    truth: Option<&[Run]>,
+) -> Result<FilterCheck, CheckError> {
+    let (n, m) = (problem.state_dim(), problem.measurement_dim());
+    let dynamics = LinearGaussian::new(problem.f().clone(), matrices.q.clone())?;
+    let sensor = LinearObservation::new(problem.h().clone(), matrices.r.clone())?;
+    let runs = problem.runs();
+    let steps = runs.iter().map(Vec::len).max().unwrap_or(0);
+    let cells = runs.len() * steps;
+    let mut innovation = vec![None; cells];
+    let mut s = vec![None; cells];
+    let mut estimate = vec![None; cells];
+    let mut covariance = vec![None; cells];
+    for (run, zs) in runs.iter().enumerate() {
+        let filter = |source| CheckError::Filter { run, source };
+        let mut kf = Kf::new(
+            &dynamics,
+            &sensor,
+            problem.x0().clone(),
+            problem.p0().clone(),
+        )
+        .map_err(filter)?;
+        let trajectory = kf
+            .run_all(zs.iter().map(Option::as_ref), problem.start())
+            .map_err(filter)?;
+        // Entry 0 is the initial estimate; entry i + 1 belongs to step i of the run.
+        for (step, entry) in trajectory.entries()[1..].iter().enumerate() {
+            let cell = run * steps + step;
+            if let Some(rec) = entry.record() {
+                innovation[cell] = Some(rec.innovation().iter().copied().collect());
+                s[cell] = Some(row_major(rec.s_matrix()));
+            }
+            estimate[cell] = Some(entry.mean().iter().copied().collect());
+            covariance[cell] = Some(row_major(entry.covariance()));
+        }
+    }
+    let mut log = FilterLog::new(runs.len(), steps)?
+        .with_innovation(Vectors::cells(m, innovation))?
+        .with_innovation_cov(Matrices::cells(m, m, s))?;
+    // The evaluation shortens the lags itself on a short log.
+    let mut evaluation = Evaluation::new()
+        .lags(WHITENESS_LAGS)?
+        .group("state", (0..n).collect())?;
+    if let Some(truth) = truth {
+        let mut t = vec![None; cells];
+        for (run, xs) in truth.iter().enumerate() {
+            for (step, x) in xs.iter().enumerate() {
+                t[run * steps + step] = x.as_ref().map(|x| x.iter().copied().collect());
+            }
+        }
+        log = log
+            .with_truth(Vectors::cells(n, t))?
+            .with_estimate(Vectors::cells(n, estimate))?
+            .with_covariance(Matrices::cells(n, n, covariance))?;
+    } else {
+        evaluation = Evaluation::new().lags(WHITENESS_LAGS)?;
+    }
+    let report = evaluation.evaluate(&log)?;
+    let rmse_of = |name: &str| {
+        report
+            .rmse_per_step
+            .iter()
+            .find(|r| r.name == name)
+            .and_then(|r| r.over_time)
+    };
+    Ok(FilterCheck {
+        anis: report.summary.anis_test.clone(),
+        whiteness: report.whiteness.clone(),
+        anees: report.summary.anees_test.clone(),
+        rmse: truth.and_then(|_| rmse_of("state")),
+        rmse_per_component: if truth.is_some() {
+            (0..n).map(|i| rmse_of(&format!("x{i}"))).collect()
+        } else {
+            Vec::new()
+        },
+        verdict: format!(
+            "{}: {}",
+            match report.summary.verdict.kind {
+                kalibra_eval::VerdictKind::Consistent => "consistent",
+                kalibra_eval::VerdictKind::Optimistic => "optimistic",
+                kalibra_eval::VerdictKind::Pessimistic => "pessimistic",
+                kalibra_eval::VerdictKind::Undetermined => "undetermined",
+            },
+            report.summary.verdict.evidence
+        ),
+    })
+}
+
+fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+    (0..m.nrows())
+        .flat_map(|i| m.row(i).iter().copied().collect::<Vec<_>>())
+        .collect()
+}
+
+/// The form of `matrix` with parameter `param` held at `value` and its other free entries
+/// starting at `warm` (the warm start); `None` when no positive-definite starting matrix
+/// holds that value with the form's fixed entries.
+fn held_form(
+    form: &CovarianceForm,
+    param: &Parameter,
+    value: f64,
+    warm: &DMatrix<f64>,
+) -> Option<CovarianceForm> {
+    let d = form.dim();
+    match (form.kind(), param.entry) {
+        (FormKind::Scaled, _) | (_, None) => Some(CovarianceForm::fixed(form.value() * value)),
+        (FormKind::Diagonal, Some((i, _))) => {
+            let mut start = DMatrix::from_diagonal(&warm.diagonal());
+            for k in 0..d {
+                if form.is_fixed(k, k) {
+                    start[(k, k)] = form.value()[(k, k)];
+                }
+            }
+            start[(i, i)] = value;
+            let mut out = CovarianceForm::diagonal(start);
+            for k in 0..d {
+                if form.is_fixed(k, k) {
+                    out = out.fix(k, k);
+                }
+            }
+            Some(out.fix(i, i))
+        }
+        (FormKind::Full, Some((i, j))) => {
+            let mut start = warm.clone();
+            for a in 0..d {
+                for b in 0..=a {
+                    if form.is_fixed(a, b) {
+                        start[(a, b)] = form.value()[(a, b)];
+                        start[(b, a)] = form.value()[(a, b)];
+                    }
+                }
+            }
+            if i == j {
+                // Keep the correlations: D X D with D scaling row and column i.
+                let s = (value / start[(i, i)]).sqrt();
+                if !s.is_finite() || s <= 0.0 {
+                    return None;
+                }
+                for k in 0..d {
+                    if k != i {
+                        start[(i, k)] *= s;
+                        start[(k, i)] *= s;
+                    }
+                }
+                start[(i, i)] = value;
+            } else {
+                start[(i, j)] = value;
+                start[(j, i)] = value;
+                // Grow the free variances of rows i and j until the start is positive
+                // definite (a covariance beyond them needs larger variances).
+                let mut tries = 0;
+                while start.clone().cholesky().is_none() {
+                    tries += 1;
+                    if tries > 60 || (form.is_fixed(i, i) && form.is_fixed(j, j)) {
+                        return None;
+                    }
+                    for k in [i, j] {
+                        if !form.is_fixed(k, k) {
+                            start[(k, k)] *= 2.0;
+                        }
+                    }
+                }
+            }
+            let mut out = CovarianceForm::full(start);
+            for a in 0..d {
+                for b in 0..=a {
+                    if form.is_fixed(a, b) {
+                        out = out.fix(a, b);
+                    }
+                }
+            }
+            Some(out.fix(i, j))
+        }
+        (FormKind::Fixed, _) => None,
+    }
+}
+
+/// The profile log-likelihood at one value of parameter `index`, re-maximised over the
+/// others from the warm start `warm`. Returns the maximum and the matrices there.
+fn profile_point(
+    problem: &NoiseProblem,
+    param: &Parameter,
+    value: f64,
+    warm: &NoiseMatrices,
+) -> Option<(f64, bool, NoiseMatrices)> {
+    let noise = problem.noise();
+    let (qw_form, r_form) = match param.matrix {
+        NoiseMatrix::Qw => (
+            held_form(noise.qw_form(), param, value, &warm.qw)?,
+            noise.r_form().clone(),
+        ),
+        NoiseMatrix::R => (
+            noise.qw_form().clone(),
+            held_form(noise.r_form(), param, value, &warm.r)?,
+        ),
+    };
+    let held = Parametrisation::new(noise.g().cloned(), qw_form, r_form).ok()?;
+    let sub = NoiseProblem::new(
+        problem.f().clone(),
+        problem.h().clone(),
+        problem.x0().clone(),
+        problem.p0().clone(),
+        problem.start(),
+        held,
+        problem.runs().to_vec(),
+    )
+    .ok()?;
+    let held = sub.noise();
+    if held.is_empty() {
+        let m = held.matrices(&[]).ok()?;
+        let ll = log_likelihood_of(&sub, &m).ok()?;
+        return Some((ll, true, m));
+    }
+    // Warm start: the neighbour's other parameters (the held entry is not read, or is set).
+    let theta0 = held
+        .theta_of(&warm.qw, &warm.r)
+        .ok()
+        .filter(|t| log_likelihood(&sub, t.as_slice()).is_ok())
+        .unwrap_or_else(|| held.start());
+    let scale = sub.measurement_count() as f64;
+    let objective = |theta: &[f64]| -> Option<f64> {
+        if theta
+            .iter()
+            .zip(theta0.iter())
+            .any(|(t, w)| (t - w).abs() > PROFILE_WALL)
+        {
+            return None;
+        }
+        log_likelihood(&sub, theta).ok().map(|l| -l / scale)
+    };
+    let out = optim::minimise(
+        &objective,
+        theta0.as_slice(),
+        Settings {
+            gradient_tolerance: PROFILE_TOLERANCE,
+            max_iterations: PROFILE_ITERATIONS,
+        },
+    )?;
+    let m = held.matrices(&out.x).ok()?;
+    Some((-out.f * scale, out.stop == StopReason::Gradient, m))
+}
+
+/// The profile of parameter `index` (see the module docs and [`PROFILE_POINTS`]).
+fn profile(
+    problem: &NoiseProblem,
+    view: &MlEstimate,
+    param: &ReportParameter,
+    index: usize,
+    ll_max: f64,
+) -> Option<Profile> {
+    let meta = &view.parameters[index].parameter;
+    let value = param.value;
+    let side = PROFILE_POINTS / 2;
+    if let Some(bound) = param.at_bound {
+        return bound_profile(problem, view, meta, value, bound, ll_max);
+    }
+    // Grid values at offsets j = -side..=side of the span.
+    let at = |j: isize| -> f64 {
+        let frac = j as f64 / side as f64;
+        if meta.positive() {
+            let se_log = param
+                .stderr
+                .filter(|s| s.is_finite() && *s > 0.0 && value > 0.0)
+                .map_or(PROFILE_SPAN_NO_STDERR, |s| {
+                    (PROFILE_SPAN * s / value).min(PROFILE_SPAN * 4.0)
+                });
+            value * (se_log * frac).exp()
+        } else {
+            let scale = match meta.matrix {
+                NoiseMatrix::Qw => &view.matrices.qw,
+                NoiseMatrix::R => &view.matrices.r,
+            };
+            let (i, j2) = meta.entry.unwrap_or((0, 0));
+            let fallback = 0.5 * (scale[(i, i)] * scale[(j2, j2)]).sqrt();
+            let span = param
+                .stderr
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .map_or(fallback, |s| PROFILE_SPAN * s);
+            value + span * frac
+        }
+    };
+    let walk = |dir: isize| -> Vec<ProfilePoint> {
+        let mut warm = view.matrices.clone();
+        let mut out = Vec::new();
+        for k in 1..=side as isize {
+            let v = at(dir * k);
+            match profile_point(problem, meta, v, &warm) {
+                Some((ll, converged, m)) => {
+                    warm = m;
+                    out.push(ProfilePoint {
+                        value: v,
+                        log_likelihood: Some(ll),
+                        converged,
+                    });
+                }
+                None => out.push(ProfilePoint {
+                    value: v,
+                    log_likelihood: None,
+                    converged: false,
+                }),
+            }
+        }
+        out
+    };
+    let (down, up) = rayon::join(|| walk(-1), || walk(1));
+    let mut points: Vec<ProfilePoint> = down.into_iter().rev().collect();
+    points.push(ProfilePoint {
+        value,
+        log_likelihood: Some(ll_max),
+        converged: true,
+    });
+    points.extend(up);
+    let threshold = ll_max - HALF_CHI2_95;
+    let centre = side;
+    let crossing = |range: Vec<usize>| -> Option<f64> {
+        let mut prev = centre;
+        for k in range {
+            let (a, b) = (&points[prev], &points[k]);
+            let (la, lb) = (a.log_likelihood?, b.log_likelihood?);
+            if lb < threshold {
+                let t = (la - threshold) / (la - lb);
+                return Some(a.value + t * (b.value - a.value));
+            }
+            prev = k;
+        }
+        None
+    };
+    let low = crossing((0..centre).rev().collect());
+    let high = crossing((centre + 1..points.len()).collect());
+    // A profile without a point is nothing to draw.
+    if points.iter().all(|p| p.log_likelihood.is_none()) {
+        return None;
+    }
+    Some(Profile {
+        points,
+        threshold,
+        interval: [low, high],
+    })
+}
+
+/// The profile of a parameter at a bound: the estimate (at the bound's side) and
+/// `PROFILE_POINTS - 1` points log-spaced over five decades from the parameter's starting
+/// value towards the other side (`start 10^-4 .. start 10` for a bound at 0, `start / 10 ..
+/// start 10^4` at infinity), walked from the estimate; the crossing of the threshold is the
+/// one-sided 95% limit the data put on it.
+fn bound_profile(
+    problem: &NoiseProblem,
+    view: &MlEstimate,
+    meta: &Parameter,
+    value: f64,
+    bound: Bound,
+    ll_max: f64,
+) -> Option<Profile> {
+    let noise = problem.noise();
+    let start = noise.natural(noise.start().as_slice()).ok()?;
+    let index = noise.parameters().iter().position(|p| p == meta)?;
+    let reference = start[index];
+    let count = PROFILE_POINTS - 1;
+    let decades = |k: usize| 5.0 * k as f64 / (count - 1) as f64;
+    let grid: Vec<f64> = (0..count)
+        .map(|k| match bound {
+            Bound::Zero => reference * 10f64.powf(decades(k) - 4.0),
+            Bound::Infinity => reference * 10f64.powf(3.0 - decades(k)),
+        })
+        .collect();
+    let threshold = ll_max - HALF_CHI2_95;
+    let mut warm = view.matrices.clone();
+    let mut walked = vec![ProfilePoint {
+        value,
+        log_likelihood: Some(ll_max),
+        converged: true,
+    }];
+    let mut limit = None;
+    for v in grid {
+        let point = profile_point(problem, meta, v, &warm);
+        let ll = point.as_ref().map(|p| p.0);
+        if let (Some(l), Some(prev)) = (ll, walked.last())
+            && limit.is_none()
+            && l < threshold
+            && let Some(lp) = prev.log_likelihood
+        {
+            let t = (lp - threshold) / (lp - l);
+            limit = Some(prev.value + t * (v - prev.value));
+        }
+        walked.push(ProfilePoint {
+            value: v,
+            log_likelihood: ll,
+            converged: point.as_ref().is_some_and(|p| p.1),
+        });
+        if let Some((_, _, m)) = point {
+            warm = m;
+        }
+    }
+    if bound == Bound::Infinity {
+        walked.reverse();
+    }
+    Some(Profile {
+        points: walked,
+        threshold,
+        interval: match bound {
+            Bound::Zero => [Some(0.0), limit],
+            Bound::Infinity => [limit, None],
+        },
+    })
+}
