@@ -28,7 +28,9 @@ use clap::{CommandFactory, Parser, Subcommand};
 use kalibra_eval::{EvalError, Evaluation};
 use kalibra_io::noise_report::NoiseReportFile;
 use kalibra_io::{Error, document, input, output, tune_input};
-use kalibra_tune::{Als, Em, MaximumLikelihood, ParameterSweep, Tuning};
+use kalibra_tune::{
+    Als, Em, MaximumLikelihood, NoiseReport, ParameterSweep, ReportOptions, Tuning,
+};
 
 /// Judge a Kalman-type filter from its logs: is its covariance telling the truth?
 #[derive(Debug, Parser)]
@@ -326,61 +328,31 @@ fn estimate(
     let problem = model
         .noise_problem(&args.model, &args.measurements, vec![measurements])
         .map_err(message)?;
-    let failed = |e: &dyn std::fmt::Display| {
-        format!(
-            "{}: cannot estimate by {}: {e}",
-            args.model.display(),
-            method_name(method)
-        )
-    };
-    let report = match method {
-        Method::Ml => {
-            let est = MaximumLikelihood::new()
-                .estimate(&problem)
-                .map_err(|e| failed(&e))?;
-            NoiseReportFile::from_ml(&problem, &est)
-        }
-        Method::Em => {
-            let em = match args.iterations {
-                Some(n) => Em::new().exact_iterations(n),
-                None => Em::new(),
-            };
-            let est = em.estimate(&problem).map_err(|e| failed(&e))?;
-            NoiseReportFile::from_em(&problem, &est)
-        }
-        Method::Als => {
-            let est = Als::new().estimate(&problem).map_err(|e| failed(&e))?;
-            NoiseReportFile::from_als(&problem, &est)
-        }
+    let method = match method {
+        Method::Ml => kalibra_tune::Method::MaximumLikelihood(MaximumLikelihood::new()),
+        Method::Em => kalibra_tune::Method::Em(match args.iterations {
+            Some(n) => Em::new().exact_iterations(n),
+            None => Em::new(),
+        }),
+        Method::Als => kalibra_tune::Method::Als(Als::new()),
         Method::J1j2 => {
             let mut sweep = ParameterSweep::new();
             if let Some((from, to, step)) = args.grid {
                 let grid = kalibra_tune::grid(from..=to, step).map_err(|e| format!("--p: {e}"))?;
                 sweep = sweep.grid(grid).map_err(|e| format!("--p: {e}"))?;
             }
-            let start = problem
-                .noise()
-                .matrices(problem.noise().start().as_slice())
-                .map_err(|e| failed(&e))?;
-            let curves = sweep.sweep(&problem, &start).map_err(|e| failed(&e))?;
-            NoiseReportFile::from_j1j2(&problem, curves)
+            kalibra_tune::Method::J1J2(sweep)
         }
     };
-    let _ = truth;
+    let truth = truth.map(|t| vec![t]);
+    let estimate = NoiseReport::estimate(&problem, &method, ReportOptions::new(), truth.as_deref())
+        .map_err(|e| format!("{}: cannot estimate Q and R: {e}", args.model.display()))?;
+    let report = NoiseReportFile::new(&problem, &estimate);
     let doc = document::Document::noise(Some((&args.model, &args.measurements)), &report);
     target.write(&report, &doc).map_err(message)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());
     Ok(())
-}
-
-fn method_name(method: Method) -> &'static str {
-    match method {
-        Method::Ml => "maximum likelihood",
-        Method::Em => "EM",
-        Method::Als => "ALS",
-        Method::J1j2 => "the J1/J2 sweep",
-    }
 }
 
 /// The evaluation the options ask for; an error names the option at fault.

@@ -6,11 +6,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use kalibra_io::noise_report::{NoiseMethod, NoiseReportFile};
+use kalibra_io::noise_report::NoiseReportFile;
 use kalibra_linalg::{DMatrix, DVector};
 use kalibra_tune::{
-    Als, CovarianceForm, Em, MaximumLikelihood, NoiseProblem, ParameterSweep, Parametrisation,
-    Start,
+    Als, CovarianceForm, Em, MaximumLikelihood, Method, MethodKind, NoiseProblem, NoiseReport,
+    ParameterSweep, Parametrisation, ReportOptions, Start,
 };
 
 use common::{fixture, kalibra, scratch, text};
@@ -93,26 +93,32 @@ fn check_documents(out: &Path, method: &str) {
     assert!(!html.contains("src=\"http") && !html.contains("href=\"http"));
 }
 
-#[test]
-fn ml_equals_the_library_estimate_at_full_precision() {
-    let (out, report) = run_method("ml", &["--method", "ml"]);
+/// `report.json` of the library's report on the fixtures' problem and truth, in-process.
+fn in_process(method: &Method) -> NoiseReportFile {
     let problem = problem();
-    let est = MaximumLikelihood::new().estimate(&problem).unwrap();
-    assert_eq!(report.method, NoiseMethod::Ml);
-    // serde_json writes the shortest text that reads back to the same bits.
-    assert_eq!(report.log_likelihood, Some(est.log_likelihood));
-    assert_eq!(report.q, rows(&est.matrices.q));
-    assert_eq!(report.qw, rows(&est.matrices.qw));
-    assert_eq!(report.r, rows(&est.matrices.r));
-    assert_eq!(report.converged, est.converged);
-    assert_eq!(report.iterations, est.iterations);
+    let (_, xs) = common::simulate_noise();
+    let truth = vec![
+        xs.iter()
+            .map(|x| Some(DVector::from_column_slice(x)))
+            .collect(),
+    ];
+    let report =
+        NoiseReport::estimate(&problem, method, ReportOptions::new(), Some(&truth)).unwrap();
+    NoiseReportFile::new(&problem, &report)
+}
+
+#[test]
+fn ml_equals_the_library_report_at_full_precision() {
+    let (out, report) = run_method("ml", &["--method", "ml"]);
+    // Every field, bit for bit: serde_json writes the shortest text that reads back to the
+    // same f64.
+    assert_eq!(
+        report,
+        in_process(&Method::MaximumLikelihood(MaximumLikelihood::new()))
+    );
+    assert_eq!(report.method, MethodKind::Ml);
     let names: Vec<_> = report.parameters.iter().map(|p| p.name.as_str()).collect();
     assert_eq!(names, ["q", "R[0,0]"]);
-    for (row, p) in report.parameters.iter().zip(&est.parameters) {
-        assert_eq!(row.value, p.value);
-        assert_eq!(row.stderr, p.stderr);
-        assert_eq!(row.ci95, p.ci95.map(|[a, b]| [Some(a), Some(b)]));
-    }
     // The fixture's truth: q = 0.04 / 0.4 of the nominal, R = 4; both inside their intervals.
     let truth = [
         common::NOISE_QW_TRUE / common::NOISE_QW_NOM,
@@ -121,32 +127,47 @@ fn ml_equals_the_library_estimate_at_full_precision() {
     for (row, t) in report.parameters.iter().zip(truth) {
         let [lo, hi] = row.ci95.unwrap();
         assert!(lo.unwrap() < t && t < hi.unwrap(), "{row:?} misses {t}");
+        assert!(row.stderr.is_some() && row.profile.is_some(), "{row:?}");
     }
     assert_eq!(report.identifiable.identifiable, Some(true));
     assert_eq!(report.identifiable.rank, Some(2));
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    // The tuned filter is consistent on the data; the starting guess (R a quarter of the
+    // truth) is not.
+    let tuned = report.consistency.tuned.as_ref().unwrap();
+    let start = report.consistency.start.as_ref().unwrap();
+    assert_eq!(tuned.anis_consistent, Some(true));
+    assert_eq!(start.anis_consistent, Some(false));
+    assert!(tuned.anees.is_some() && tuned.rmse.is_some());
     check_documents(&out, "ml");
+    // One profile figure per parameter, inline in the HTML.
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert_eq!(html.matches("<svg").count(), 2);
+    assert!(html.contains("Profile log-likelihood of q"));
+    assert!(out.join("profile_q.svg").is_file() && out.join("profile_R_0_0.svg").is_file());
 }
 
 #[test]
 fn em_runs_exactly_the_iterations_asked_for() {
     let (out, report) = run_method("em", &["--method", "em", "--iterations", "10"]);
+    assert_eq!(
+        report,
+        in_process(&Method::Em(Em::new().exact_iterations(10)))
+    );
     let est = Em::new().exact_iterations(10).estimate(&problem()).unwrap();
-    assert_eq!(report.method, NoiseMethod::Em);
+    assert_eq!(report.method, MethodKind::Em);
     assert_eq!(report.iterations, 10);
     assert_eq!(report.q, rows(&est.matrices.q));
     assert_eq!(report.r, rows(&est.matrices.r));
-    assert_eq!(report.log_likelihood, Some(est.final_log_likelihood()));
-    let values: Vec<f64> = report.parameters.iter().map(|p| p.value).collect();
-    assert_eq!(values, est.values);
     check_documents(&out, "em");
 }
 
 #[test]
-fn als_equals_the_library_estimate() {
+fn als_equals_the_library_report() {
     let (out, report) = run_method("als", &["--method", "als"]);
+    assert_eq!(report, in_process(&Method::Als(Als::new())));
     let est = Als::new().estimate(&problem()).unwrap();
-    assert_eq!(report.method, NoiseMethod::Als);
+    assert_eq!(report.method, MethodKind::Als);
     assert_eq!(report.q, rows(&est.matrices.q));
     assert_eq!(report.r, rows(&est.matrices.r));
     assert_eq!(report.identifiable.rank, Some(est.rank));
@@ -156,22 +177,17 @@ fn als_equals_the_library_estimate() {
 #[test]
 fn j1j2_sweeps_every_parameter_around_the_start() {
     let (out, report) = run_method("j1j2", &["--method", "j1j2", "--p", "-3:3:0.5"]);
-    let problem = problem();
-    let start = problem
-        .noise()
-        .matrices(problem.noise().start().as_slice())
-        .unwrap();
     let grid: Vec<f64> = (0..=12).map(|i| -3.0 + 0.5 * f64::from(i)).collect();
-    let curves = ParameterSweep::new()
-        .grid(grid)
-        .unwrap()
-        .sweep(&problem, &start)
-        .unwrap();
-    assert_eq!(report.method, NoiseMethod::J1j2);
-    assert_eq!(report.curves, curves);
-    for (row, c) in report.parameters.iter().zip(&curves) {
-        let crossover = c.crossover.as_ref().expect("J1 and J2 cross on the grid");
-        assert_eq!(row.value, crossover.value, "{}", row.name);
+    let sweep = ParameterSweep::new().grid(grid).unwrap();
+    assert_eq!(report, in_process(&Method::J1J2(sweep)));
+    assert_eq!(report.method, MethodKind::J1j2);
+    assert_eq!(report.curves.len(), 2);
+    for c in &report.curves {
+        assert!(
+            c.crossover.is_some(),
+            "{} crosses on the grid",
+            c.parameter.name
+        );
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(

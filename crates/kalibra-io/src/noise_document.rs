@@ -6,13 +6,10 @@
 use std::path::Path;
 
 use kalibra_plot::{Annotation, Figure, Series};
+use kalibra_tune::MethodKind;
 
 use crate::document::{Block, Document, fmt};
-use crate::noise_report::{FilterConsistency, NoiseReportFile};
-
-/// `chi2_1(0.95) / 2`: the drop of the log-likelihood at the ends of a 95% likelihood-ratio
-/// interval, drawn on the profiles.
-const HALF_CHI2_95: f64 = 1.920_729_410_347_062;
+use crate::noise_report::{FilterConsistency, NoiseReportFile, method_words};
 
 fn file_name(path: &Path) -> String {
     path.file_name().map_or_else(
@@ -42,33 +39,33 @@ fn interval_text(ci: Option<[Option<f64>; 2]>) -> String {
     ci.map_or("-".into(), |[l, h]| {
         format!(
             "[{}, {}]",
-            l.map_or("-inf".into(), |v| fmt(Some(v))),
+            l.map_or("beyond the grid".into(), |v| fmt(Some(v))),
             h.map_or("inf".into(), |v| fmt(Some(v)))
         )
     })
 }
 
-/// "the tuned filter's ANIS 1.02 is inside [0.96, 1.04]", with the start beside it.
-fn anis_words(tuned: &FilterConsistency, start: &FilterConsistency) -> Option<String> {
+/// "the tuned filter's ANIS 1.02 is inside its 95% band [0.96, 1.04]", with the start beside
+/// it.
+fn anis_words(tuned: &FilterConsistency, start: Option<&FilterConsistency>) -> Option<String> {
     let anis = tuned.anis?;
-    let place = |c: &FilterConsistency| match c.anis_inside {
-        Some(true) => "inside",
-        Some(false) => "outside",
-        None => "beside",
+    let place = |c: &FilterConsistency| match (c.anis_band, c.anis_consistent) {
+        (Some(_), Some(true)) => "inside its 95% band",
+        (Some(_), Some(false)) => "outside its 95% band",
+        (None, Some(true)) => "consistent with 1 (t-test over the runs)",
+        (None, Some(false)) => "not consistent with 1 (t-test over the runs)",
+        _ => "beside its band",
     };
     let mut s = format!(
-        "the tuned filter's ANIS {} is {} its 95% band {}",
+        "the tuned filter's ANIS {} is {}{}",
         fmt(Some(anis)),
         place(tuned),
-        band_text(tuned.anis_band)
+        tuned
+            .anis_band
+            .map_or(String::new(), |b| format!(" {}", band_text(Some(b))))
     );
-    if let Some(a0) = start.anis {
-        s.push_str(&format!(
-            " (the starting guess's {} is {} {})",
-            fmt(Some(a0)),
-            place(start),
-            band_text(start.anis_band)
-        ));
+    if let Some(a0) = start.and_then(|c| c.anis) {
+        s.push_str(&format!(" (the starting guess's is {})", fmt(Some(a0))));
     }
     Some(s)
 }
@@ -82,7 +79,14 @@ fn recommendation(r: &NoiseReportFile) -> String {
     )];
     let p = r.parameters.len();
     let id = &r.identifiable;
-    match (id.identifiable, id.rank) {
+    // The J1/J2 point is no likelihood maximum: the information there says nothing of what
+    // the data identify.
+    let measured = if r.method == MethodKind::J1j2 {
+        None
+    } else {
+        id.identifiable
+    };
+    match (measured, id.rank) {
         (Some(true), _) => parts.push(format!(
             "the data identify all {p} free parameter{}",
             if p == 1 { "" } else { "s" }
@@ -97,80 +101,66 @@ fn recommendation(r: &NoiseReportFile) -> String {
         )),
         _ => {}
     }
-    if let Some(c) = &r.consistency
-        && let Some(w) = anis_words(&c.tuned, &c.start)
+    if let Some(t) = &r.consistency.tuned
+        && let Some(w) = anis_words(t, r.consistency.start.as_ref())
     {
         parts.push(w);
     }
     if !r.converged {
         parts.push(format!(
             "caution: {} did not converge in {} iterations",
-            r.method.words(),
+            method_words(r.method),
             r.iterations
         ));
     }
     parts.join("; ")
 }
 
-/// `(value, log-likelihood)` of a profile, on a log10 axis when it spans more than two
-/// decades of a positive parameter.
+/// A parameter's profile log-likelihood with the estimate, its 95% interval and the
+/// likelihood-ratio threshold marked; on a log10 axis when it spans more than two decades of
+/// a positive parameter.
 fn profile_figure(r: &NoiseReportFile, index: usize) -> Option<(String, Figure)> {
     let param = r.parameters.get(index)?;
-    let profile = r.profiles.iter().find(|p| p.name == param.name)?;
-    if profile.points.len() < 2 {
-        return None;
-    }
-    let lo = profile
-        .points
-        .iter()
-        .map(|p| p[0])
-        .fold(f64::INFINITY, f64::min);
-    let hi = profile
-        .points
-        .iter()
-        .map(|p| p[0])
-        .fold(f64::NEG_INFINITY, f64::max);
+    let profile = param.profile.as_ref()?;
+    let values: Vec<f64> = profile.points.iter().map(|p| p.0).collect();
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let log = lo > 0.0 && hi / lo > 100.0;
     let x = |v: f64| if log { v.log10() } else { v };
     let points: Vec<(f64, f64)> = profile
         .points
         .iter()
-        .filter(|p| p[1].is_finite())
-        .map(|p| (x(p[0]), p[1]))
+        .filter_map(|&(v, ll)| ll.map(|ll| (x(v), ll)))
         .collect();
-    let kind = if profile.profile {
-        "profile"
-    } else {
-        "slice of the"
-    };
+    if points.len() < 2 {
+        return None;
+    }
     let x_label = if log {
         format!("log10 {}", param.name)
     } else {
         param.name.clone()
     };
     let mut fig = Figure::new(
-        format!("{} log-likelihood of {}", capitalise(kind), param.name),
+        format!("Profile log-likelihood of {}", param.name),
         x_label,
         "log-likelihood",
     )
-    .series(Series::line_markers(
-        format!("{kind} log-likelihood"),
-        points,
-    ))
-    .annotate(Annotation::VLine {
+    .series(Series::line_markers("profile log-likelihood", points))
+    .annotate(Annotation::HLine {
+        y: profile.threshold,
+        label: "95% level (max - 1.92)".into(),
+    })
+    .annotate(Annotation::Point {
         x: x(param.value),
+        y: r.log_likelihood.unwrap_or(profile.threshold),
         label: format!("estimate {}", fmt(Some(param.value))),
     });
-    if let Some(ll) = r.log_likelihood {
-        fig = fig.annotate(Annotation::HLine {
-            y: ll - HALF_CHI2_95,
-            label: "95% level".into(),
-        });
-    }
     if let Some([l, h]) = param.ci95 {
         for (end, name) in [(l, "low"), (h, "high")] {
             if let Some(v) = end
                 && (!log || v > 0.0)
+                && v >= lo
+                && v <= hi
             {
                 fig = fig.annotate(Annotation::VLine {
                     x: x(v),
@@ -199,13 +189,21 @@ fn slug(name: &str) -> String {
     s.trim_end_matches('_').to_string()
 }
 
-fn consistency_rows(tuned: &FilterConsistency, start: &FilterConsistency) -> Vec<Vec<String>> {
+fn consistency_rows(
+    tuned: Option<&FilterConsistency>,
+    start: Option<&FilterConsistency>,
+) -> Vec<Vec<String>> {
     let yes = |b: Option<bool>, y: &str, n: &str| match b {
         Some(true) => y.to_string(),
         Some(false) => n.to_string(),
         None => "-".to_string(),
     };
-    let both = |f: &dyn Fn(&FilterConsistency) -> String| vec![f(tuned), f(start)];
+    let both = |f: &dyn Fn(&FilterConsistency) -> String| {
+        vec![
+            tuned.map_or("filter failed".into(), f),
+            start.map_or("filter failed".into(), f),
+        ]
+    };
     let mut out = vec![
         [
             vec!["ANIS (mean NIS / m; 1 if consistent)".to_string()],
@@ -213,12 +211,12 @@ fn consistency_rows(tuned: &FilterConsistency, start: &FilterConsistency) -> Vec
         ]
         .concat(),
         [
-            vec!["ANIS 95% band".to_string()],
+            vec!["ANIS test (95% band)".to_string()],
             both(&|c| {
                 format!(
                     "{} ({})",
                     band_text(c.anis_band),
-                    yes(c.anis_inside, "inside", "outside")
+                    yes(c.anis_consistent, "consistent", "not consistent")
                 )
             }),
         ]
@@ -235,7 +233,7 @@ fn consistency_rows(tuned: &FilterConsistency, start: &FilterConsistency) -> Vec
         ]
         .concat(),
     ];
-    if tuned.anees.is_some() || tuned.rmse.is_some() {
+    if tuned.is_some_and(|t| t.anees.is_some() || t.rmse.is_some()) {
         out.push(
             [
                 vec!["ANEES (with the truth)".to_string()],
@@ -244,7 +242,7 @@ fn consistency_rows(tuned: &FilterConsistency, start: &FilterConsistency) -> Vec
                         "{} in {} ({})",
                         fmt(c.anees),
                         band_text(c.anees_band),
-                        yes(c.anees_inside, "inside", "outside")
+                        yes(c.anees_consistent, "consistent", "not consistent")
                     )
                 }),
             ]
@@ -280,7 +278,7 @@ impl Document {
         }
         estimate.push_str(&format!(", R = {}.", matrix_text(&r.r)));
         blocks.push(Block::Paragraph(
-            Some(format!("Estimate ({}):", r.method.words())),
+            Some(format!("Estimate ({}):", method_words(r.method))),
             estimate,
         ));
         blocks.push(Block::Paragraph(
@@ -304,6 +302,9 @@ impl Document {
                     fmt(Some(p.value)),
                     fmt(p.stderr),
                     interval_text(p.ci95),
+                    p.profile
+                        .as_ref()
+                        .map_or("-".into(), |pr| interval_text(Some(pr.interval))),
                     fmt(start_values.get(i).copied().flatten()),
                 ]
             })
@@ -314,6 +315,7 @@ impl Document {
                 "estimate".into(),
                 "std. error".into(),
                 "95% interval".into(),
+                "profile 95% interval".into(),
                 "start".into(),
             ],
             rows,
@@ -329,6 +331,12 @@ impl Document {
                 id.condition.map_or("infinite".into(), |c| fmt(Some(c)))
             );
         }
+        if r.method == MethodKind::J1j2 {
+            id_text = format!(
+                "the J1/J2 crossover is no likelihood maximum, so the observed information at \
+                 its point does not say what the data identify (use --method ml); there: {id_text}"
+            );
+        }
         blocks.push(Block::Paragraph(
             Some("What the data identify:".into()),
             format!(
@@ -341,7 +349,8 @@ impl Document {
             blocks.push(Block::Paragraph(Some("Warning:".into()), format!("{w}.")));
         }
 
-        if let Some(c) = &r.consistency {
+        let c = &r.consistency;
+        if c.tuned.is_some() || c.start.is_some() {
             blocks.push(Block::Heading("The filter on the data".into()));
             blocks.push(Block::Paragraph(
                 None,
@@ -356,7 +365,7 @@ impl Document {
                     "tuned filter".into(),
                     "starting guess".into(),
                 ],
-                consistency_rows(&c.tuned, &c.start),
+                consistency_rows(c.tuned.as_ref(), c.start.as_ref()),
             ));
         }
 
@@ -370,9 +379,9 @@ impl Document {
         if !profiles.is_empty() {
             blocks.push(Block::Paragraph(
                 None,
-                "The log-likelihood of each parameter with the others re-maximised (or, for a \
-                 slice, held at the estimate), the estimate and its 95% interval marked, and \
-                 the level 1.92 below the maximum where a likelihood-ratio interval ends."
+                "The profile log-likelihood of each parameter (the others re-maximised at each \
+                 point), the estimate and its 95% interval marked, and the level 1.92 below \
+                 the maximum where a likelihood-ratio interval ends."
                     .into(),
             ));
             for (name, fig) in profiles {
@@ -412,7 +421,7 @@ impl Document {
                 "{}: log-likelihood {} at the estimate, {} at the starting guess; {}, {} \
                  iteration(s). {} state(s), {} measurement(s), {} noise channel(s); {} run(s), \
                  {} steps, {} with a measurement; x0 {}.",
-                capitalise(r.method.words()),
+                capitalise(method_words(r.method)),
                 fmt(r.log_likelihood),
                 fmt(r.start.log_likelihood),
                 if r.converged {
