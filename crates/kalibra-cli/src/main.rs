@@ -75,7 +75,8 @@ struct TuneArgs {
     /// on the log-likelihood).
     #[arg(long, value_name = "N")]
     iterations: Option<usize>,
-    /// The true states (columns step, x_0, ..., x_{n-1}), for the RMSE at every p.
+    /// The true states (columns step, x_0, ..., x_{n-1}), for the RMSE at every p (the sweep),
+    /// or the tuned filter's ANEES and RMSE (--method).
     #[arg(long, value_parser = non_empty_file)]
     truth: Option<PathBuf>,
     /// Directory the report is written to (replaced if it holds an earlier report).

@@ -18,11 +18,29 @@ fn file_name(path: &Path) -> String {
     )
 }
 
+/// `v` to 4 significant digits without trailing zeros (`0.008978`, `4.089`, `0.1`), in
+/// scientific notation outside
+/// `[1e-3, 1e5)`: estimates span orders of magnitude, so fixed decimals would hide small ones.
+fn sig(v: Option<f64>) -> String {
+    match v {
+        Some(v) if v.is_finite() && v != 0.0 && v.abs() >= 1e-3 && v.abs() < 1e5 => {
+            let decimals = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+            let text = format!("{v:.decimals$}");
+            if text.contains('.') {
+                text.trim_end_matches('0').trim_end_matches('.').to_string()
+            } else {
+                text
+            }
+        }
+        other => fmt(other),
+    }
+}
+
 fn matrix_text(rows: &[Vec<f64>]) -> String {
     let rows: Vec<String> = rows
         .iter()
         .map(|r| {
-            let cells: Vec<String> = r.iter().map(|&v| fmt(Some(v))).collect();
+            let cells: Vec<String> = r.iter().map(|&v| sig(Some(v))).collect();
             format!("[{}]", cells.join(", "))
         })
         .collect();
@@ -31,7 +49,7 @@ fn matrix_text(rows: &[Vec<f64>]) -> String {
 
 fn band_text(b: Option<[f64; 2]>) -> String {
     b.map_or("-".into(), |[l, h]| {
-        format!("[{}, {}]", fmt(Some(l)), fmt(Some(h)))
+        format!("[{}, {}]", sig(Some(l)), sig(Some(h)))
     })
 }
 
@@ -39,8 +57,8 @@ fn interval_text(ci: Option<[Option<f64>; 2]>) -> String {
     ci.map_or("-".into(), |[l, h]| {
         format!(
             "[{}, {}]",
-            l.map_or("beyond the grid".into(), |v| fmt(Some(v))),
-            h.map_or("inf".into(), |v| fmt(Some(v)))
+            l.map_or("beyond the grid".into(), |v| sig(Some(v))),
+            h.map_or("inf".into(), |v| sig(Some(v)))
         )
     })
 }
@@ -58,14 +76,14 @@ fn anis_words(tuned: &FilterConsistency, start: Option<&FilterConsistency>) -> O
     };
     let mut s = format!(
         "the tuned filter's ANIS {} is {}{}",
-        fmt(Some(anis)),
+        sig(Some(anis)),
         place(tuned),
         tuned
             .anis_band
             .map_or(String::new(), |b| format!(" {}", band_text(Some(b))))
     );
     if let Some(a0) = start.and_then(|c| c.anis) {
-        s.push_str(&format!(" (the starting guess's is {})", fmt(Some(a0))));
+        s.push_str(&format!(" (the starting guess's is {})", sig(Some(a0))));
     }
     Some(s)
 }
@@ -153,7 +171,7 @@ fn profile_figure(r: &NoiseReportFile, index: usize) -> Option<(String, Figure)>
     .annotate(Annotation::Point {
         x: x(param.value),
         y: r.log_likelihood.unwrap_or(profile.threshold),
-        label: format!("estimate {}", fmt(Some(param.value))),
+        label: format!("estimate {}", sig(Some(param.value))),
     });
     if let Some([l, h]) = param.ci95 {
         for (end, name) in [(l, "low"), (h, "high")] {
@@ -164,7 +182,7 @@ fn profile_figure(r: &NoiseReportFile, index: usize) -> Option<(String, Figure)>
             {
                 fig = fig.annotate(Annotation::VLine {
                     x: x(v),
-                    label: format!("95% {name} {}", fmt(Some(v))),
+                    label: format!("95% {name} {}", sig(Some(v))),
                 });
             }
         }
@@ -299,13 +317,13 @@ impl Document {
             .map(|(i, p)| {
                 vec![
                     p.name.clone(),
-                    fmt(Some(p.value)),
-                    fmt(p.stderr),
+                    sig(Some(p.value)),
+                    sig(p.stderr),
                     interval_text(p.ci95),
                     p.profile
                         .as_ref()
                         .map_or("-".into(), |pr| interval_text(Some(pr.interval))),
-                    fmt(start_values.get(i).copied().flatten()),
+                    sig(start_values.get(i).copied().flatten()),
                 ]
             })
             .collect();
@@ -340,8 +358,8 @@ impl Document {
         blocks.push(Block::Paragraph(
             Some("What the data identify:".into()),
             format!(
-                "{id_text} (at most n m + m (m + 1) / 2 = {} parameters can be identified from \
-                 innovations).",
+                "{id_text}; at most n m + m (m + 1) / 2 = {} parameters can be identified from \
+                 innovations.",
                 r.problem.identifiable_limit
             ),
         ));

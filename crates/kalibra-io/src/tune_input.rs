@@ -26,7 +26,7 @@ MODEL.toml (n states, m measurements; matrices are arrays of rows):
                                  (default), or \"update_first\": at it
   position = [0]                 optional: state components of the position RMSE
   G = [[0.5], [1.0]]             optional: n x g, noise entering through g channels,
-                                 Q = G Qw G^T (then Q below is the g x g Qw)
+                                 Q = G Qw G^T (then the Q given is the g x g Qw)
   Any other key is an error.
   For --method ml, em, als or j1j2, Q and R may each be a table (after the keys above):
     [Q]
