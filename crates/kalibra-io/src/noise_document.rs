@@ -124,6 +124,17 @@ fn recommendation(r: &NoiseReportFile) -> String {
     {
         parts.push(w);
     }
+    if r.consistency
+        .tuned
+        .as_ref()
+        .is_some_and(|t| t.anis_consistent == Some(false))
+    {
+        parts.push(
+            "caution: the filter with this estimate fails its own consistency test on these \
+             data"
+                .to_string(),
+        );
+    }
     if !r.converged {
         parts.push(format!(
             "caution: {} did not converge in {} iterations",
