@@ -562,8 +562,6 @@ pub(crate) fn warning_text(w: &MlWarning) -> String {
         MlWarning::NoInformation => "the observed information could not be computed (a \
              neighbour of the estimate cannot be evaluated): no standard errors"
             .to_string(),
-        #[allow(unreachable_patterns)]
-        other => format!("{other:?}"),
     }
 }
 
@@ -1169,9 +1167,7 @@ fn bound_profile(
             warm = m;
         }
     }
-    if bound == Bound::Infinity {
-        walked.reverse();
-    }
+    walked.sort_by(|a, b| a.value.total_cmp(&b.value));
     Some(Profile {
         points: walked,
         threshold,

@@ -386,3 +386,76 @@ fn nan_and_missing_measurements() {
         "{err}"
     );
 }
+
+/// The profile of every entry of a full `R`, its covariance among them: the entry is held by
+/// fixing it in the form, the others re-maximised; the profile peaks at the estimate and its
+/// likelihood-ratio interval is close to the Wald one.
+#[test]
+fn a_full_form_is_profiled_entry_by_entry() {
+    let sys = System {
+        f: DMatrix::identity(2, 2),
+        g: DMatrix::identity(2, 2),
+        qw: DMatrix::identity(2, 2) * 0.3,
+        h: DMatrix::identity(2, 2),
+        r: DMatrix::from_row_slice(2, 2, &[1.0, 0.6, 0.6, 2.0]),
+        x0: DVector::zeros(2),
+    };
+    let (zs, _) = sys.simulate(300, 4);
+    let noise = Parametrisation::new(
+        None,
+        CovarianceForm::fixed(DMatrix::identity(2, 2) * 0.3),
+        CovarianceForm::full(DMatrix::identity(2, 2)),
+    )
+    .unwrap();
+    let problem = NoiseProblem::new(
+        DMatrix::identity(2, 2),
+        DMatrix::identity(2, 2),
+        DVector::zeros(2),
+        DMatrix::zeros(2, 2),
+        Start::PredictFirst,
+        noise,
+        vec![zs],
+    )
+    .unwrap();
+    let report = NoiseReport::estimate(&problem, &ml(), ReportOptions::new(), None).unwrap();
+    let ll = report.log_likelihood.unwrap();
+    let names: Vec<&str> = report.parameters.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["R[0,0]", "R[1,0]", "R[1,1]"]);
+    for p in &report.parameters {
+        let prof = p.profile.as_ref().unwrap();
+        assert!(prof.points.windows(2).all(|w| w[0].value < w[1].value));
+        let lls: Vec<f64> = prof
+            .points
+            .iter()
+            .map(|q| q.log_likelihood.unwrap())
+            .collect();
+        let best = lls.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            best - ll < 1e-4,
+            "{}: profile {best} above ln L {ll}",
+            p.name
+        );
+        // Rising to the estimate and falling after it.
+        let centre = kalibra_tune::PROFILE_POINTS / 2;
+        assert!(
+            lls[..centre].windows(2).all(|w| w[0] < w[1] + 1e-6),
+            "{}",
+            p.name
+        );
+        assert!(
+            lls[centre..].windows(2).all(|w| w[0] + 1e-6 > w[1]),
+            "{}",
+            p.name
+        );
+        let [lo, hi] = p.ci95.unwrap();
+        let [Some(llo), Some(lhi)] = prof.interval else {
+            panic!("{}: no crossing: {prof:?}", p.name)
+        };
+        let width = hi - lo;
+        assert!(
+            (llo - lo).abs() < 0.2 * width && (lhi - hi).abs() < 0.2 * width,
+            "{}: LR [{llo}, {lhi}] vs Wald [{lo}, {hi}]",
+            p.name
+        );
+    }
+}
