@@ -492,6 +492,109 @@ impl NoiseReport {
     }
 }
 
+impl NoiseReport {
+    /// The recommendation in words, for the top of a report: the method, every parameter
+    /// with its interval, whether it converged, what the data identify, the warnings, and
+    /// what the estimate changed in the filter's consistency on the data.
+    ///
+    /// ```
+    /// # use kalibra_tune::{CovarianceForm, DMatrix, DVector, MaximumLikelihood, Method,
+    /// #     NoiseProblem, NoiseReport, Parametrisation, ReportOptions, Start};
+    /// # let one = |v: f64| DMatrix::from_element(1, 1, v);
+    /// # let zs = [0.1, 0.5, 0.2, 1.1, 1.6, 1.2, 2.3, 2.0, 2.9, 3.4, 2.8, 3.9, 4.4, 4.1, 5.2];
+    /// # let run = zs.iter().map(|&z| Some(DVector::from_element(1, z))).collect();
+    /// # let noise = Parametrisation::new(None, CovarianceForm::scaled(one(1.0)),
+    /// #     CovarianceForm::scaled(one(1.0)))?;
+    /// # let problem = NoiseProblem::new(one(1.0), one(1.0), DVector::zeros(1), one(1.0),
+    /// #     Start::PredictFirst, noise, vec![run])?;
+    /// let method = Method::MaximumLikelihood(MaximumLikelihood::new());
+    /// let report = NoiseReport::estimate(&problem, &method, ReportOptions::new(), None)?;
+    /// assert!(report.summary().starts_with("Maximum likelihood recommends q = "));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn summary(&self) -> String {
+        let method = match self.method {
+            MethodKind::Ml => "Maximum likelihood",
+            MethodKind::Em => "EM",
+            MethodKind::Als => "ALS",
+            MethodKind::J1j2 => "The J1/J2 crossover",
+        };
+        let params: Vec<String> = self
+            .parameters
+            .iter()
+            .map(|p| match p.ci95 {
+                Some([lo, hi]) => format!(
+                    "{} = {} (95% interval {} to {})",
+                    p.name,
+                    significant(p.value),
+                    significant(lo),
+                    if hi.is_finite() {
+                        significant(hi)
+                    } else {
+                        "infinity".to_string()
+                    }
+                ),
+                None => format!("{} = {}", p.name, significant(p.value)),
+            })
+            .collect();
+        let mut out = format!("{method} recommends {}", params.join(", "));
+        out.push_str(&match (self.converged, self.iterations) {
+            (true, 0) => ".".to_string(),
+            (true, i) => format!(", converged in {i} iterations."),
+            (false, i) => format!(", but did not converge ({i} iterations)."),
+        });
+        if let (Some(l), Some(s)) = (self.log_likelihood, self.start_log_likelihood) {
+            out.push_str(&format!(
+                " The log-likelihood is {l:.3} against {s:.3} at the starting guess."
+            ));
+        }
+        if let Some(id) = &self.identifiability {
+            out.push_str(&format!(" Identifiability: {}.", id.message));
+        }
+        let anis = |c: &Option<FilterCheck>| {
+            c.as_ref()
+                .and_then(|c| c.anis.as_ref())
+                .map(|a| (a.value, a.outcome))
+        };
+        if let (Some((e, eo)), Some((s, so))) = (
+            anis(&self.consistency.estimate),
+            anis(&self.consistency.start),
+        ) {
+            out.push_str(&format!(
+                " On the data the tuned filter's ANIS is {e:.3} ({}), the starting guess's \
+                 {s:.3} ({}).",
+                outcome(eo),
+                outcome(so)
+            ));
+        }
+        for w in &self.warnings {
+            out.push_str(&format!(" Warning: {w}."));
+        }
+        out
+    }
+}
+
+fn outcome(kind: kalibra_eval::VerdictKind) -> &'static str {
+    match kind {
+        kalibra_eval::VerdictKind::Consistent => "consistent",
+        kalibra_eval::VerdictKind::Optimistic => "optimistic: its covariance is too small",
+        kalibra_eval::VerdictKind::Pessimistic => "pessimistic: its covariance is too large",
+        kalibra_eval::VerdictKind::Undetermined => "undetermined",
+    }
+}
+
+/// Four significant digits.
+fn significant(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 15) as usize;
+    if !(1e-4..1e6).contains(&v.abs()) {
+        return format!("{v:.3e}");
+    }
+    format!("{v:.digits$}")
+}
+
 fn check_truth(problem: &NoiseProblem, truth: &[Run]) -> Result<(), ReportError> {
     let runs = problem.runs();
     if truth.len() != runs.len() {
@@ -851,12 +954,7 @@ fn check_filter(
         },
         verdict: format!(
             "{}: {}",
-            match report.summary.verdict.kind {
-                kalibra_eval::VerdictKind::Consistent => "consistent",
-                kalibra_eval::VerdictKind::Optimistic => "optimistic",
-                kalibra_eval::VerdictKind::Pessimistic => "pessimistic",
-                kalibra_eval::VerdictKind::Undetermined => "undetermined",
-            },
+            outcome(report.summary.verdict.kind),
             report.summary.verdict.evidence
         ),
     })

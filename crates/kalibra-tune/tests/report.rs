@@ -123,6 +123,13 @@ fn every_method_reports_in_one_schema() {
         assert!(json.get(key).is_some(), "report.json lacks {key}");
     }
     assert_eq!(json["method"], "ml");
+    let words = ml.summary();
+    assert!(
+        words.starts_with("Maximum likelihood recommends q = ")
+            && words.contains("95% interval")
+            && words.contains("the starting guess's 0."),
+        "{words}"
+    );
     assert!(json["parameters"][0]["ci95"].is_array());
 
     let em = NoiseReport::estimate(
