@@ -13,7 +13,8 @@
 //!   intervals are those of the observed information at EM's estimate, computed as maximum
 //!   likelihood computes them (the information, bounds and identifiability of
 //!   [`MaximumLikelihood`] evaluated at EM's point, with no optimiser step). EM stopped before
-//!   its tolerance gets none, with a warning.
+//!   its tolerance gets none, with a warning, and so does EM whose point is more than 0.1
+//!   standard errors from the maximum by a Newton step (exact iterations stop anywhere).
 //! * ALS and J1/J2 are not likelihood maxima: no intervals. ALS's identifiability is that of
 //!   its least-squares matrix; J1/J2's is the observed information at its point.
 //!
@@ -38,7 +39,7 @@
 
 use kalibra_eval::{ConsistencyTest, Evaluation, FilterLog, Matrices, Vectors, WhitenessReport};
 use kalibra_filters::{Filter, FilterError, Kf};
-use kalibra_linalg::DMatrix;
+use kalibra_linalg::{DMatrix, DVector};
 use kalibra_models::{LinearGaussian, LinearObservation, ModelError};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -712,6 +713,26 @@ fn view_at(problem: &NoiseProblem, matrices: &NoiseMatrices) -> Option<MlEstimat
     Some(view)
 }
 
+/// The largest offset from the likelihood's maximum, in standard errors, that still counts
+/// as at it: it moves an interval's centre by a tenth of its half-width's 1.96 standard
+/// errors at most.
+const NEWTON_OFFSET_LIMIT: f64 = 0.1;
+
+/// The Newton step `I^-1 d ln L / d theta` from the view's point, each component over its
+/// standard error `sqrt((I^-1)_ii)`, largest in magnitude; `None` without an invertible
+/// information or a gradient.
+fn newton_offset(problem: &NoiseProblem, view: &MlEstimate) -> Option<f64> {
+    let info = view.information.as_ref()?;
+    let cov = info.clone().try_inverse()?;
+    let theta = view.theta.as_slice();
+    let ll = |t: &[f64]| log_likelihood(problem, t).ok();
+    let score = DVector::from_vec(optim::gradient(&ll, theta, view.log_likelihood)?);
+    let step = &cov * score;
+    (0..step.len())
+        .map(|i| (cov[(i, i)] > 0.0).then(|| step[i].abs() / cov[(i, i)].sqrt()))
+        .try_fold(0.0f64, |m, r| r.map(|r| m.max(r)))
+}
+
 fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
     let est = em.estimate(problem).map_err(ReportError::Em)?;
     let mut warnings = Vec::new();
@@ -724,6 +745,18 @@ fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
         ));
     }
     let view = view_at(problem, &est.matrices);
+    // EM's stopping rule (or an exact number of iterations) need not put it at the maximum
+    // the intervals are centred on: a Newton step from its point, in standard errors, says
+    // how far off it is.
+    let offset = view.as_ref().and_then(|v| newton_offset(problem, v));
+    let at_maximum = est.converged && offset.is_none_or(|o| o <= NEWTON_OFFSET_LIMIT);
+    if est.converged && !at_maximum {
+        warnings.push(format!(
+            "EM's estimate is {:.2} standard errors from the likelihood's maximum (a Newton \
+             step from it): no intervals are given; run more iterations",
+            offset.unwrap_or(f64::NAN)
+        ));
+    }
     match &view {
         Some(v) => warnings.extend(v.warnings.iter().map(warning_text)),
         None => warnings.push(
@@ -737,7 +770,7 @@ fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
         converged: est.converged,
         iterations: est.iterations,
         identifiability: view.as_ref().and_then(identifiability_of),
-        intervals: est.converged,
+        intervals: at_maximum,
         view,
         warnings,
         matrices: est.matrices,

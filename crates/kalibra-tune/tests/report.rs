@@ -224,6 +224,19 @@ fn non_convergence_is_a_warning() {
         "{:?}",
         report.warnings
     );
+    // Exactly 2 iterations count as converged for EM, but its point is not the maximum the
+    // intervals are centred on: none are given, and the warning says how far off it is.
+    let exact = Method::Em(Em::new().exact_iterations(2));
+    let report = NoiseReport::estimate(&problem, &exact, ReportOptions::new(), None).unwrap();
+    assert!(report.converged && report.parameters.iter().all(|p| p.ci95.is_none()));
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.contains("standard errors from the likelihood's maximum")),
+        "{:?}",
+        report.warnings
+    );
     let em = Method::Em(Em::new().max_iterations(2));
     let report = NoiseReport::estimate(&problem, &em, ReportOptions::new(), None).unwrap();
     assert!(!report.converged && report.iterations == 2);
