@@ -15,8 +15,10 @@
 //!   [`MaximumLikelihood`] evaluated at EM's point, with no optimiser step). EM stopped before
 //!   its tolerance gets none, with a warning, and so does EM whose point is more than 0.1
 //!   standard errors from the maximum by a Newton step (exact iterations stop anywhere).
-//! * ALS and J1/J2 are not likelihood maxima: no intervals. ALS's identifiability is that of
-//!   its least-squares matrix; J1/J2's is the observed information at its point.
+//! * ALS and J1/J2 are not likelihood maxima: no intervals, and no bounds read off the
+//!   likelihood (which is not flat around a point that is not its maximum). ALS's
+//!   identifiability is that of its least-squares matrix; J1/J2 has none (it measures no
+//!   likelihood: maximum likelihood on the same problem says what the data identify).
 //!
 //! # Consistency on the data
 //! The filter (the library's [`kalibra_filters::Kf`]) runs over every run with the estimate
@@ -334,7 +336,8 @@ pub struct NoiseReport {
     pub converged: bool,
     /// Iterations (ML: of the best start; EM: M-steps; ALS and J1/J2: 0, not iterative).
     pub iterations: usize,
-    /// What the data identify.
+    /// What the data identify (`None` for J1/J2, and where the information cannot be
+    /// computed).
     pub identifiability: Option<ReportIdentifiability>,
     /// What the user must know, in words: non-convergence, bounds, unidentified
     /// combinations, a filter that failed.
@@ -357,7 +360,7 @@ struct Fit {
     values: Vec<f64>,
     converged: bool,
     iterations: usize,
-    /// The likelihood's view at the estimate (ML: its own; EM and J1/J2: evaluated there).
+    /// The likelihood's view at the estimate (ML: its own; EM: evaluated there).
     view: Option<MlEstimate>,
     /// Whether the view's intervals apply (a likelihood maximum).
     intervals: bool,
@@ -441,7 +444,7 @@ impl NoiseReport {
                     value: fit.values[i],
                     stderr: from_view.and_then(|v| v.stderr).filter(|_| intervals),
                     ci95: from_view.and_then(|v| v.ci95).filter(|_| intervals),
-                    at_bound: from_view.and_then(|v| v.at_bound),
+                    at_bound: from_view.and_then(|v| v.at_bound).filter(|_| intervals),
                     profile: None,
                 }
             })
@@ -882,14 +885,13 @@ fn fit_j1j2(
             )
         })
         .collect();
-    let view = view_at(problem, &matrices);
     Ok(Fit {
-        identifiability: view.as_ref().and_then(identifiability_of),
+        identifiability: None,
         matrices,
         values,
         converged,
         iterations: 0,
-        view,
+        view: None,
         intervals: false,
         warnings,
         curves: Some(curves),

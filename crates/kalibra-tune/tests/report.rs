@@ -172,6 +172,13 @@ fn every_method_reports_in_one_schema() {
     assert_eq!(j.method, MethodKind::J1j2);
     assert_eq!(j.j1j2.as_ref().unwrap().len(), 2);
     assert!(j.warnings.iter().any(|w| w.contains("not found jointly")));
+    assert!(j.identifiability.is_none());
+    assert!(
+        j.parameters
+            .iter()
+            .all(|p| p.ci95.is_none() && p.at_bound.is_none())
+    );
+    assert!(j.log_likelihood.unwrap() <= ll + 1e-6);
 }
 
 /// More parameters than innovations can identify are refused with the reason.
