@@ -7,6 +7,10 @@
 //! * `kalibra tune MODEL.toml MEASUREMENTS.csv [--p FROM:TO:STEP] [--truth TRUTH.csv]
 //!   [--out DIR] [--threads N]` sweeps `Q = 10^p Q_nom` with `kalibra_tune::Tuning` and writes
 //!   the crossover, the recommended `Q` and the sweep's figures the same way.
+//! * `kalibra tune MODEL.toml MEASUREMENTS.csv --method ml|em|als|j1j2 [--truth TRUTH.csv]
+//!   [--out DIR] [--iterations N] [--p FROM:TO:STEP]` estimates the free parameters of `Q` and
+//!   `R` (the forms of MODEL.toml's `[Q]` and `[R]` tables) and writes the estimate, its
+//!   intervals, identifiability and consistency (`kalibra_io::noise_report`).
 //!
 //! This binary is a thin layer: it parses arguments, reads the files and writes the report
 //! through `kalibra_io`, and evaluates with `kalibra_eval` and tunes with `kalibra_tune`. Exit codes: 0 success, 1
@@ -20,10 +24,13 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use kalibra_eval::{EvalError, Evaluation};
+use kalibra_io::noise_report::NoiseReportFile;
 use kalibra_io::{Error, document, input, output, tune_input};
-use kalibra_tune::Tuning;
+use kalibra_tune::{
+    Als, Em, MaximumLikelihood, NoiseReport, ParameterSweep, ReportOptions, Tuning,
+};
 
 /// Judge a Kalman-type filter from its logs: is its covariance telling the truth?
 #[derive(Debug, Parser)]
@@ -37,7 +44,7 @@ struct Cli {
 enum Command {
     /// Evaluate a filter log: ANEES, ANIS, NCI, RMSE, whiteness, J1/J2 and a verdict.
     Eval(EvalArgs),
-    /// Tune the process noise Q of a linear model from recorded measurements (J1/J2 crossover).
+    /// Choose Q and R of a linear model from recorded measurements (J1/J2 sweep, or --method).
     Tune(TuneArgs),
 }
 
@@ -51,16 +58,25 @@ struct TuneArgs {
     /// The measurements: columns step, z_0, ..., z_{m-1} (see below).
     #[arg(value_parser = non_empty_file)]
     measurements: PathBuf,
-    /// The grid of exponents p of Q = 10^p Q_nom, as FROM:TO:STEP (TO included).
+    /// The grid of exponents p of Q = 10^p Q_nom, as FROM:TO:STEP (TO included); with
+    /// --method j1j2, of each parameter times 10^p [default: -6:6:0.5, with --method j1j2
+    /// -3:3:0.25].
     #[arg(
         long = "p",
         value_name = "FROM:TO:STEP",
-        default_value = "-6:6:0.5",
         allow_hyphen_values = true,
         value_parser = parse_grid
     )]
-    grid: (f64, f64, f64),
-    /// The true states (columns step, x_0, ..., x_{n-1}), for the RMSE at every p.
+    grid: Option<(f64, f64, f64)>,
+    /// The estimator of the free parameters of Q and R (see METHODS below).
+    #[arg(long, value_enum)]
+    method: Option<Method>,
+    /// With --method em: run exactly N iterations (otherwise to a relative tolerance of 1e-8
+    /// on the log-likelihood).
+    #[arg(long, value_name = "N")]
+    iterations: Option<usize>,
+    /// The true states (columns step, x_0, ..., x_{n-1}), for the RMSE at every p (the sweep),
+    /// or the tuned filter's ANEES and RMSE (--method).
     #[arg(long, value_parser = non_empty_file)]
     truth: Option<PathBuf>,
     /// Directory the report is written to (replaced if it holds an earlier report).
@@ -69,6 +85,19 @@ struct TuneArgs {
     /// Threads for the sweep (0: one per core). The results do not depend on it.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
+}
+
+/// The estimators of `--method`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Method {
+    /// Maximum likelihood, with standard errors, 95% intervals and identifiability.
+    Ml,
+    /// Expectation-maximisation.
+    Em,
+    /// Autocovariance least squares.
+    Als,
+    /// The J1/J2 crossover of every free parameter.
+    J1j2,
 }
 
 /// A directory that is not an empty path: an empty `--out` would write into the current
@@ -165,7 +194,19 @@ fn main() -> ExitCode {
     std::panic::set_hook(Box::new(|info| {
         eprintln!("kalibra: internal error (please report it): {info}");
     }));
-    let result = match Cli::parse().command {
+    let cli = Cli::parse();
+    if let Command::Tune(a) = &cli.command
+        && a.iterations.is_some()
+        && a.method != Some(Method::Em)
+    {
+        Cli::command()
+            .error(
+                clap::error::ErrorKind::ArgumentConflict,
+                "--iterations applies to --method em only",
+            )
+            .exit();
+    }
+    let result = match cli.command {
         Command::Eval(args) => eval(&args),
         Command::Tune(args) => tune(&args),
     };
@@ -209,11 +250,19 @@ fn eval(args: &EvalArgs) -> Result<(), String> {
     Ok(())
 }
 
-/// `kalibra tune`: read the model and the sequences, sweep, write.
+/// `kalibra tune`: read the model and the sequences, sweep or estimate, write.
 fn tune(args: &TuneArgs) -> Result<(), String> {
     // The output first: an unwritable --out fails before any work.
     let target = output::Target::prepare(&args.out).map_err(message)?;
     let model = tune_input::read_model(&args.model).map_err(message)?;
+    let method = match args.method {
+        Some(Method::J1j2) | None if model.is_plain() => None,
+        Some(m) => Some(m),
+        None => Some(Method::Ml),
+    };
+    if let Some(method) = method {
+        return estimate(args, target, &model, method);
+    }
     let m = model.meas_dim();
     let measurements =
         tune_input::read_series(&args.measurements, "z", m, &format!("H has {m} row(s)"))
@@ -230,7 +279,7 @@ fn tune(args: &TuneArgs) -> Result<(), String> {
     let problem = model
         .problem(&args.model, measurements, truth)
         .map_err(message)?;
-    let (from, to, step) = args.grid;
+    let (from, to, step) = args.grid.unwrap_or((-6.0, 6.0, 0.5));
     let mut tuning = Tuning::new()
         .exponents(from, to, step)
         .map_err(|e| format!("--p: {e}"))?
@@ -242,6 +291,65 @@ fn tune(args: &TuneArgs) -> Result<(), String> {
         .tune(&problem)
         .map_err(|e| format!("{}: cannot tune: {e}", args.model.display()))?;
     let doc = document::Document::tune(&args.model, &args.measurements, &report);
+    target.write(&report, &doc).map_err(message)?;
+    println!("{}", doc.headline());
+    println!("report written to {}", args.out.display());
+    Ok(())
+}
+
+/// `kalibra tune --method`: read the measurements (and truth), estimate, write.
+fn estimate(
+    args: &TuneArgs,
+    target: output::Target,
+    model: &tune_input::Model,
+    method: Method,
+) -> Result<(), String> {
+    let m = model.meas_dim();
+    let measurements =
+        tune_input::read_series(&args.measurements, "z", m, &format!("H has {m} row(s)"))
+            .map_err(message)?;
+    let truth = match &args.truth {
+        Some(path) => {
+            let n = model.state_dim();
+            let t = tune_input::read_series(path, "x", n, &format!("F has {n} row(s)"))
+                .map_err(message)?;
+            if t.len() != measurements.len() {
+                return Err(format!(
+                    "{}: {} steps, but {} has {}; the truth covers the same steps",
+                    path.display(),
+                    t.len(),
+                    args.measurements.display(),
+                    measurements.len()
+                ));
+            }
+            Some(t)
+        }
+        None => None,
+    };
+    let problem = model
+        .noise_problem(&args.model, &args.measurements, vec![measurements])
+        .map_err(message)?;
+    let method = match method {
+        Method::Ml => kalibra_tune::Method::MaximumLikelihood(MaximumLikelihood::new()),
+        Method::Em => kalibra_tune::Method::Em(match args.iterations {
+            Some(n) => Em::new().exact_iterations(n),
+            None => Em::new(),
+        }),
+        Method::Als => kalibra_tune::Method::Als(Als::new()),
+        Method::J1j2 => {
+            let mut sweep = ParameterSweep::new();
+            if let Some((from, to, step)) = args.grid {
+                let grid = kalibra_tune::grid(from..=to, step).map_err(|e| format!("--p: {e}"))?;
+                sweep = sweep.grid(grid).map_err(|e| format!("--p: {e}"))?;
+            }
+            kalibra_tune::Method::J1J2(sweep)
+        }
+    };
+    let truth = truth.map(|t| vec![t]);
+    let estimate = NoiseReport::estimate(&problem, &method, ReportOptions::new(), truth.as_deref())
+        .map_err(|e| format!("{}: cannot estimate Q and R: {e}", args.model.display()))?;
+    let report = NoiseReportFile::new(&problem, &estimate);
+    let doc = document::Document::noise(Some((&args.model, &args.measurements)), &report);
     target.write(&report, &doc).map_err(message)?;
     println!("{}", doc.headline());
     println!("report written to {}", args.out.display());

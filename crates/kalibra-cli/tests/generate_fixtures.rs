@@ -1,5 +1,6 @@
 //! The committed fixtures `tests/fixtures/kf.json`, `kf.csv` and the tuning fixtures
-//! `tune_model.toml`, `tune_measurements.csv`, `tune_truth.csv` are exactly what the seeded
+//! `tune_model.toml`, `tune_measurements.csv`, `tune_truth.csv` and the noise-estimation
+//! fixtures `noise_model.toml`, `noise_measurements.csv`, `noise_truth.csv` are exactly what the seeded
 //! simulation in `common` writes, so the end-to-end tests' inputs cannot drift from the code
 //! that describes them. After a deliberate change of the fixture format, rewrite them with
 //! `KALIBRA_BLESS=1 cargo test -p kalibra-cli --test generate_fixtures`.
@@ -10,6 +11,8 @@ mod common;
 fn committed_fixtures_are_the_seeded_simulation() {
     let (runs, model) = common::simulate();
     let (zs, xs) = common::simulate_tune();
+    let (noise_zs, noise_xs) = common::simulate_noise();
+    let noise_zs: Vec<Option<f64>> = noise_zs.into_iter().map(Some).collect();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
     let expected = [
         ("kf.json", common::to_json(&runs, &model)),
@@ -17,6 +20,12 @@ fn committed_fixtures_are_the_seeded_simulation() {
         ("tune_model.toml", common::tune_model_toml()),
         ("tune_measurements.csv", common::tune_measurements_csv(&zs)),
         ("tune_truth.csv", common::tune_truth_csv(&xs)),
+        ("noise_model.toml", common::noise_model_toml()),
+        (
+            "noise_measurements.csv",
+            common::tune_measurements_csv(&noise_zs),
+        ),
+        ("noise_truth.csv", common::tune_truth_csv(&noise_xs)),
     ];
     let bless = std::env::var_os("KALIBRA_BLESS").is_some();
     for (name, text) in expected {

@@ -31,8 +31,9 @@
 //!   (streamed), `csv_log` (streamed), and [`tune_input`] (MODEL.toml and the measurement
 //!   and truth CSVs of `kalibra tune`).
 //! * [`input`]: the format by extension, dispatching to the readers.
-//! * [`document`] (with `tune_document`): the human-readable report as blocks and figures;
-//!   [`output`]: the writer of a report directory.
+//! * [`document`] (with `tune_document` and `noise_document`): the human-readable report as
+//!   blocks and figures; [`noise_report`]: `report.json` of a noise estimate
+//!   (`kalibra tune --method`) and its writer; [`output`]: the writer of a report directory.
 //!
 //! Every reader error is an [`Error`]; nothing panics on data and nothing prints (a CSV log
 //! larger than 64 MiB draws a progress bar on stderr when stderr is a terminal).
@@ -51,6 +52,8 @@ pub mod fuzzing;
 pub mod input;
 mod json_log;
 mod json_stream;
+mod noise_document;
+pub mod noise_report;
 mod npz_log;
 pub mod output;
 mod raw;

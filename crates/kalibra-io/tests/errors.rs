@@ -154,3 +154,79 @@ fn a_series_names_the_row() {
         "{e:?}"
     );
 }
+
+/// A model of `kalibra tune --method`: `R` 2x2 given inline as a full form with its
+/// correlation fixed, `Q` as a table after the top-level keys.
+const FORMS: &str = "F = [[1.0]]\nH = [[1.0], [1.0]]\nx0 = [0.0]\nP0 = [[1.0]]\n\
+                     R = { form = \"full\", value = [[1.0, 0.0], [0.0, 2.0]], fixed = [[1, 0]] }\n\
+                     \n[Q]\nform = \"diagonal\"\nvalue = [[0.5]]\n";
+
+fn runs() -> Vec<kalibra_tune::Run> {
+    vec![vec![Some(kalibra_tune::DVector::from_element(2, 0.5)); 4]]
+}
+
+#[test]
+fn model_forms_give_the_parametrisation() {
+    let path = Path::new("model.toml");
+    let model = parse_model(path, FORMS).unwrap();
+    assert!(!model.is_plain());
+    let problem = model
+        .noise_problem(path, Path::new("z.csv"), runs())
+        .unwrap();
+    let names: Vec<String> = problem
+        .noise()
+        .parameters()
+        .into_iter()
+        .map(|p| p.name)
+        .collect();
+    // R's correlation is fixed: its two variances are free, and Q's one.
+    assert_eq!(names, ["Qw[0,0]", "R[0,0]", "R[1,1]"]);
+
+    // Today's plain matrices: Q scaled (its multiplier q), R fixed.
+    let plain = "F = [[1.0]]\nH = [[1.0]]\nQ = [[0.5]]\nR = [[1.0]]\nx0 = [0.0]\nP0 = [[1.0]]\n";
+    let model = parse_model(path, plain).unwrap();
+    assert!(model.is_plain());
+    let runs = vec![vec![Some(kalibra_tune::DVector::from_element(1, 0.5)); 4]];
+    let problem = model.noise_problem(path, Path::new("z.csv"), runs).unwrap();
+    let names: Vec<String> = problem
+        .noise()
+        .parameters()
+        .into_iter()
+        .map(|p| p.name)
+        .collect();
+    assert_eq!(names, ["q"]);
+}
+
+#[test]
+fn model_form_errors_name_the_key_and_line() {
+    let path = Path::new("model.toml");
+    let outside = FORMS.replace("fixed = [[1, 0]]", "fixed = [[2, 0]]");
+    let Err(e) = parse_model(path, &outside) else {
+        panic!("accepted")
+    };
+    assert_eq!(
+        e.to_string(),
+        "model.toml: key R, line 5, column 1: fixed entry [2, 0] is outside the 2x2 value \
+         (entries count from 0)"
+    );
+    let late = format!("{FORMS}position = [0]\n");
+    let Err(e) = parse_model(path, &late) else {
+        panic!("accepted")
+    };
+    let message = e.to_string();
+    assert!(message.contains("key Q.position"), "{message}");
+    assert!(
+        message.contains("write the top-level keys before the first table"),
+        "{message}"
+    );
+    // A form's value the estimators refuse names its key and line.
+    let indefinite = FORMS.replace("[[1.0, 0.0], [0.0, 2.0]]", "[[1.0, 0.0], [0.0, -2.0]]");
+    let model = parse_model(path, &indefinite).unwrap();
+    let Err(e) = model.noise_problem(path, Path::new("z.csv"), runs()) else {
+        panic!("accepted")
+    };
+    assert!(
+        matches!(&e, Error::Model { key: Some(k), line: Some(5), .. } if k == "R"),
+        "{e:?}"
+    );
+}

@@ -611,6 +611,10 @@ fn noise_is_log(noise: &crate::Parametrisation, param: &Parameter) -> bool {
 /// tolerance, and the eigenvectors below it (the flat directions).
 fn pseudo_inverse(info: &DMatrix<f64>) -> (DMatrix<f64>, Vec<DVector<f64>>) {
     let p = info.nrows();
+    // nalgebra's eigen-decomposition panics on an empty matrix (every parameter at a bound).
+    if p == 0 {
+        return (info.clone(), Vec::new());
+    }
     let eig = info.clone().symmetric_eigen();
     let max = eig.eigenvalues.iter().fold(0.0f64, |m, v| m.max(*v));
     let mut inv = DMatrix::zeros(p, p);
@@ -732,6 +736,20 @@ fn identifiability(
             flat_directions,
             identified: inner.identified,
             identifiable: false,
+        };
+    }
+    if p == 0 {
+        // Every parameter at a bound: nothing left to analyse (and nalgebra's
+        // eigen-decomposition panics on an empty matrix).
+        return Identifiability {
+            parameters: 0,
+            rank: 0,
+            condition_number: None,
+            eigenvalues: Vec::new(),
+            flat_directions: Vec::new(),
+            identified: Vec::new(),
+            identifiable: true,
+            message: String::new(),
         };
     }
     let eig = info.clone().symmetric_eigen();

@@ -13,9 +13,12 @@
 //!   intervals are those of the observed information at EM's estimate, computed as maximum
 //!   likelihood computes them (the information, bounds and identifiability of
 //!   [`MaximumLikelihood`] evaluated at EM's point, with no optimiser step). EM stopped before
-//!   its tolerance gets none, with a warning.
-//! * ALS and J1/J2 are not likelihood maxima: no intervals. ALS's identifiability is that of
-//!   its least-squares matrix; J1/J2's is the observed information at its point.
+//!   its tolerance gets none, with a warning, and so does EM whose point is more than 0.1
+//!   standard errors from the maximum by a Newton step (exact iterations stop anywhere).
+//! * ALS and J1/J2 are not likelihood maxima: no intervals, and no bounds read off the
+//!   likelihood (which is not flat around a point that is not its maximum). ALS's
+//!   identifiability is that of its least-squares matrix; J1/J2 has none (it measures no
+//!   likelihood: maximum likelihood on the same problem says what the data identify).
 //!
 //! # Consistency on the data
 //! The filter (the library's [`kalibra_filters::Kf`]) runs over every run with the estimate
@@ -38,7 +41,7 @@
 
 use kalibra_eval::{ConsistencyTest, Evaluation, FilterLog, Matrices, Vectors, WhitenessReport};
 use kalibra_filters::{Filter, FilterError, Kf};
-use kalibra_linalg::DMatrix;
+use kalibra_linalg::{DMatrix, DVector};
 use kalibra_models::{LinearGaussian, LinearObservation, ModelError};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -333,7 +336,8 @@ pub struct NoiseReport {
     pub converged: bool,
     /// Iterations (ML: of the best start; EM: M-steps; ALS and J1/J2: 0, not iterative).
     pub iterations: usize,
-    /// What the data identify.
+    /// What the data identify (`None` for J1/J2, and where the information cannot be
+    /// computed).
     pub identifiability: Option<ReportIdentifiability>,
     /// What the user must know, in words: non-convergence, bounds, unidentified
     /// combinations, a filter that failed.
@@ -356,7 +360,7 @@ struct Fit {
     values: Vec<f64>,
     converged: bool,
     iterations: usize,
-    /// The likelihood's view at the estimate (ML: its own; EM and J1/J2: evaluated there).
+    /// The likelihood's view at the estimate (ML: its own; EM: evaluated there).
     view: Option<MlEstimate>,
     /// Whether the view's intervals apply (a likelihood maximum).
     intervals: bool,
@@ -440,7 +444,7 @@ impl NoiseReport {
                     value: fit.values[i],
                     stderr: from_view.and_then(|v| v.stderr).filter(|_| intervals),
                     ci95: from_view.and_then(|v| v.ci95).filter(|_| intervals),
-                    at_bound: from_view.and_then(|v| v.at_bound),
+                    at_bound: from_view.and_then(|v| v.at_bound).filter(|_| intervals),
                     profile: None,
                 }
             })
@@ -490,6 +494,109 @@ impl NoiseReport {
             j1j2: fit.curves,
         })
     }
+}
+
+impl NoiseReport {
+    /// The recommendation in words, for the top of a report: the method, every parameter
+    /// with its interval, whether it converged, what the data identify, the warnings, and
+    /// what the estimate changed in the filter's consistency on the data.
+    ///
+    /// ```
+    /// # use kalibra_tune::{CovarianceForm, DMatrix, DVector, MaximumLikelihood, Method,
+    /// #     NoiseProblem, NoiseReport, Parametrisation, ReportOptions, Start};
+    /// # let one = |v: f64| DMatrix::from_element(1, 1, v);
+    /// # let zs = [0.1, 0.5, 0.2, 1.1, 1.6, 1.2, 2.3, 2.0, 2.9, 3.4, 2.8, 3.9, 4.4, 4.1, 5.2];
+    /// # let run = zs.iter().map(|&z| Some(DVector::from_element(1, z))).collect();
+    /// # let noise = Parametrisation::new(None, CovarianceForm::scaled(one(1.0)),
+    /// #     CovarianceForm::scaled(one(1.0)))?;
+    /// # let problem = NoiseProblem::new(one(1.0), one(1.0), DVector::zeros(1), one(1.0),
+    /// #     Start::PredictFirst, noise, vec![run])?;
+    /// let method = Method::MaximumLikelihood(MaximumLikelihood::new());
+    /// let report = NoiseReport::estimate(&problem, &method, ReportOptions::new(), None)?;
+    /// assert!(report.summary().starts_with("Maximum likelihood recommends q = "));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn summary(&self) -> String {
+        let method = match self.method {
+            MethodKind::Ml => "Maximum likelihood",
+            MethodKind::Em => "EM",
+            MethodKind::Als => "ALS",
+            MethodKind::J1j2 => "The J1/J2 crossover",
+        };
+        let params: Vec<String> = self
+            .parameters
+            .iter()
+            .map(|p| match p.ci95 {
+                Some([lo, hi]) => format!(
+                    "{} = {} (95% interval {} to {})",
+                    p.name,
+                    significant(p.value),
+                    significant(lo),
+                    if hi.is_finite() {
+                        significant(hi)
+                    } else {
+                        "infinity".to_string()
+                    }
+                ),
+                None => format!("{} = {}", p.name, significant(p.value)),
+            })
+            .collect();
+        let mut out = format!("{method} recommends {}", params.join(", "));
+        out.push_str(&match (self.converged, self.iterations) {
+            (true, 0) => ".".to_string(),
+            (true, i) => format!(", converged in {i} iterations."),
+            (false, i) => format!(", but did not converge ({i} iterations)."),
+        });
+        if let (Some(l), Some(s)) = (self.log_likelihood, self.start_log_likelihood) {
+            out.push_str(&format!(
+                " The log-likelihood is {l:.3} against {s:.3} at the starting guess."
+            ));
+        }
+        if let Some(id) = &self.identifiability {
+            out.push_str(&format!(" Identifiability: {}.", id.message));
+        }
+        let anis = |c: &Option<FilterCheck>| {
+            c.as_ref()
+                .and_then(|c| c.anis.as_ref())
+                .map(|a| (a.value, a.outcome))
+        };
+        if let (Some((e, eo)), Some((s, so))) = (
+            anis(&self.consistency.estimate),
+            anis(&self.consistency.start),
+        ) {
+            out.push_str(&format!(
+                " On the data the tuned filter's ANIS is {e:.3} ({}), the starting guess's \
+                 {s:.3} ({}).",
+                outcome(eo),
+                outcome(so)
+            ));
+        }
+        for w in &self.warnings {
+            out.push_str(&format!(" Warning: {w}."));
+        }
+        out
+    }
+}
+
+fn outcome(kind: kalibra_eval::VerdictKind) -> &'static str {
+    match kind {
+        kalibra_eval::VerdictKind::Consistent => "consistent",
+        kalibra_eval::VerdictKind::Optimistic => "optimistic: its covariance is too small",
+        kalibra_eval::VerdictKind::Pessimistic => "pessimistic: its covariance is too large",
+        kalibra_eval::VerdictKind::Undetermined => "undetermined",
+    }
+}
+
+/// Four significant digits.
+fn significant(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 15) as usize;
+    if !(1e-4..1e6).contains(&v.abs()) {
+        return format!("{v:.3e}");
+    }
+    format!("{v:.digits$}")
 }
 
 fn check_truth(problem: &NoiseProblem, truth: &[Run]) -> Result<(), ReportError> {
@@ -562,8 +669,6 @@ pub(crate) fn warning_text(w: &MlWarning) -> String {
         MlWarning::NoInformation => "the observed information could not be computed (a \
              neighbour of the estimate cannot be evaluated): no standard errors"
             .to_string(),
-        #[allow(unreachable_patterns)]
-        other => format!("{other:?}"),
     }
 }
 
@@ -611,6 +716,26 @@ fn view_at(problem: &NoiseProblem, matrices: &NoiseMatrices) -> Option<MlEstimat
     Some(view)
 }
 
+/// The largest offset from the likelihood's maximum, in standard errors, that still counts
+/// as at it: it moves an interval's centre by a tenth of its half-width's 1.96 standard
+/// errors at most.
+const NEWTON_OFFSET_LIMIT: f64 = 0.1;
+
+/// The Newton step `I^-1 d ln L / d theta` from the view's point, each component over its
+/// standard error `sqrt((I^-1)_ii)`, largest in magnitude; `None` without an invertible
+/// information or a gradient.
+fn newton_offset(problem: &NoiseProblem, view: &MlEstimate) -> Option<f64> {
+    let info = view.information.as_ref()?;
+    let cov = info.clone().try_inverse()?;
+    let theta = view.theta.as_slice();
+    let ll = |t: &[f64]| log_likelihood(problem, t).ok();
+    let score = DVector::from_vec(optim::gradient(&ll, theta, view.log_likelihood)?);
+    let step = &cov * score;
+    (0..step.len())
+        .map(|i| (cov[(i, i)] > 0.0).then(|| step[i].abs() / cov[(i, i)].sqrt()))
+        .try_fold(0.0f64, |m, r| r.map(|r| m.max(r)))
+}
+
 fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
     let est = em.estimate(problem).map_err(ReportError::Em)?;
     let mut warnings = Vec::new();
@@ -623,6 +748,18 @@ fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
         ));
     }
     let view = view_at(problem, &est.matrices);
+    // EM's stopping rule (or an exact number of iterations) need not put it at the maximum
+    // the intervals are centred on: a Newton step from its point, in standard errors, says
+    // how far off it is.
+    let offset = view.as_ref().and_then(|v| newton_offset(problem, v));
+    let at_maximum = est.converged && offset.is_none_or(|o| o <= NEWTON_OFFSET_LIMIT);
+    if est.converged && !at_maximum {
+        warnings.push(format!(
+            "EM's estimate is {:.2} standard errors from the likelihood's maximum (a Newton \
+             step from it): no intervals are given; run more iterations",
+            offset.unwrap_or(f64::NAN)
+        ));
+    }
     match &view {
         Some(v) => warnings.extend(v.warnings.iter().map(warning_text)),
         None => warnings.push(
@@ -636,7 +773,7 @@ fn fit_em(problem: &NoiseProblem, em: &Em) -> Result<Fit, ReportError> {
         converged: est.converged,
         iterations: est.iterations,
         identifiability: view.as_ref().and_then(identifiability_of),
-        intervals: est.converged,
+        intervals: at_maximum,
         view,
         warnings,
         matrices: est.matrices,
@@ -748,14 +885,13 @@ fn fit_j1j2(
             )
         })
         .collect();
-    let view = view_at(problem, &matrices);
     Ok(Fit {
-        identifiability: view.as_ref().and_then(identifiability_of),
+        identifiability: None,
         matrices,
         values,
         converged,
         iterations: 0,
-        view,
+        view: None,
         intervals: false,
         warnings,
         curves: Some(curves),
@@ -853,12 +989,7 @@ fn check_filter(
         },
         verdict: format!(
             "{}: {}",
-            match report.summary.verdict.kind {
-                kalibra_eval::VerdictKind::Consistent => "consistent",
-                kalibra_eval::VerdictKind::Optimistic => "optimistic",
-                kalibra_eval::VerdictKind::Pessimistic => "pessimistic",
-                kalibra_eval::VerdictKind::Undetermined => "undetermined",
-            },
+            outcome(report.summary.verdict.kind),
             report.summary.verdict.evidence
         ),
     })
@@ -1169,9 +1300,7 @@ fn bound_profile(
             warm = m;
         }
     }
-    if bound == Bound::Infinity {
-        walked.reverse();
-    }
+    walked.sort_by(|a, b| a.value.total_cmp(&b.value));
     Some(Profile {
         points: walked,
         threshold,

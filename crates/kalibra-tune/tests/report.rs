@@ -123,6 +123,13 @@ fn every_method_reports_in_one_schema() {
         assert!(json.get(key).is_some(), "report.json lacks {key}");
     }
     assert_eq!(json["method"], "ml");
+    let words = ml.summary();
+    assert!(
+        words.starts_with("Maximum likelihood recommends q = ")
+            && words.contains("95% interval")
+            && words.contains("the starting guess's 0."),
+        "{words}"
+    );
     assert!(json["parameters"][0]["ci95"].is_array());
 
     let em = NoiseReport::estimate(
@@ -165,6 +172,13 @@ fn every_method_reports_in_one_schema() {
     assert_eq!(j.method, MethodKind::J1j2);
     assert_eq!(j.j1j2.as_ref().unwrap().len(), 2);
     assert!(j.warnings.iter().any(|w| w.contains("not found jointly")));
+    assert!(j.identifiability.is_none());
+    assert!(
+        j.parameters
+            .iter()
+            .all(|p| p.ci95.is_none() && p.at_bound.is_none())
+    );
+    assert!(j.log_likelihood.unwrap() <= ll + 1e-6);
 }
 
 /// More parameters than innovations can identify are refused with the reason.
@@ -214,6 +228,19 @@ fn non_convergence_is_a_warning() {
             .warnings
             .iter()
             .any(|w| w.contains("did not converge") && w.contains("iteration limit")),
+        "{:?}",
+        report.warnings
+    );
+    // Exactly 2 iterations count as converged for EM, but its point is not the maximum the
+    // intervals are centred on: none are given, and the warning says how far off it is.
+    let exact = Method::Em(Em::new().exact_iterations(2));
+    let report = NoiseReport::estimate(&problem, &exact, ReportOptions::new(), None).unwrap();
+    assert!(report.converged && report.parameters.iter().all(|p| p.ci95.is_none()));
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.contains("standard errors from the likelihood's maximum")),
         "{:?}",
         report.warnings
     );
@@ -385,4 +412,77 @@ fn nan_and_missing_measurements() {
         ),
         "{err}"
     );
+}
+
+/// The profile of every entry of a full `R`, its covariance among them: the entry is held by
+/// fixing it in the form, the others re-maximised; the profile peaks at the estimate and its
+/// likelihood-ratio interval is close to the Wald one.
+#[test]
+fn a_full_form_is_profiled_entry_by_entry() {
+    let sys = System {
+        f: DMatrix::identity(2, 2),
+        g: DMatrix::identity(2, 2),
+        qw: DMatrix::identity(2, 2) * 0.3,
+        h: DMatrix::identity(2, 2),
+        r: DMatrix::from_row_slice(2, 2, &[1.0, 0.6, 0.6, 2.0]),
+        x0: DVector::zeros(2),
+    };
+    let (zs, _) = sys.simulate(300, 4);
+    let noise = Parametrisation::new(
+        None,
+        CovarianceForm::fixed(DMatrix::identity(2, 2) * 0.3),
+        CovarianceForm::full(DMatrix::identity(2, 2)),
+    )
+    .unwrap();
+    let problem = NoiseProblem::new(
+        DMatrix::identity(2, 2),
+        DMatrix::identity(2, 2),
+        DVector::zeros(2),
+        DMatrix::zeros(2, 2),
+        Start::PredictFirst,
+        noise,
+        vec![zs],
+    )
+    .unwrap();
+    let report = NoiseReport::estimate(&problem, &ml(), ReportOptions::new(), None).unwrap();
+    let ll = report.log_likelihood.unwrap();
+    let names: Vec<&str> = report.parameters.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["R[0,0]", "R[1,0]", "R[1,1]"]);
+    for p in &report.parameters {
+        let prof = p.profile.as_ref().unwrap();
+        assert!(prof.points.windows(2).all(|w| w[0].value < w[1].value));
+        let lls: Vec<f64> = prof
+            .points
+            .iter()
+            .map(|q| q.log_likelihood.unwrap())
+            .collect();
+        let best = lls.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            best - ll < 1e-4,
+            "{}: profile {best} above ln L {ll}",
+            p.name
+        );
+        // Rising to the estimate and falling after it.
+        let centre = kalibra_tune::PROFILE_POINTS / 2;
+        assert!(
+            lls[..centre].windows(2).all(|w| w[0] < w[1] + 1e-6),
+            "{}",
+            p.name
+        );
+        assert!(
+            lls[centre..].windows(2).all(|w| w[0] + 1e-6 > w[1]),
+            "{}",
+            p.name
+        );
+        let [lo, hi] = p.ci95.unwrap();
+        let [Some(llo), Some(lhi)] = prof.interval else {
+            panic!("{}: no crossing: {prof:?}", p.name)
+        };
+        let width = hi - lo;
+        assert!(
+            (llo - lo).abs() < 0.2 * width && (lhi - hi).abs() < 0.2 * width,
+            "{}: LR [{llo}, {lhi}] vs Wald [{lo}, {hi}]",
+            p.name
+        );
+    }
 }

@@ -265,6 +265,69 @@ pub fn tune_truth_csv(xs: &[[f64; 2]]) -> String {
     out
 }
 
+/// The noise-estimation fixtures (`kalibra tune --method`): a seeded constant-velocity
+/// target (n = 2, m = 1) driven by one noise channel through `G` (a white acceleration),
+/// every step measured, for `NOISE_STEPS` steps. MODEL.toml states `Qw` scaled from a nominal
+/// ten times the truth and `R` diagonal from a start a quarter of the truth, so the estimate
+/// must move both.
+pub const NOISE_STEPS: usize = 200;
+pub const NOISE_G: [[f64; 1]; 2] = [[0.5], [1.0]];
+pub const NOISE_QW_TRUE: f64 = 0.04;
+pub const NOISE_QW_NOM: f64 = 0.4;
+pub const NOISE_R_TRUE: f64 = 4.0;
+pub const NOISE_R_START: f64 = 1.0;
+pub const NOISE_SEED: u64 = 31;
+
+/// `(measurements, truth)` of the noise fixtures (predict first from `TUNE_X0`).
+pub fn simulate_noise() -> (Vec<f64>, Vec<[f64; 2]>) {
+    use kalibra_linalg::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector2};
+    use kalibra_models::{LinearGaussian, LinearObservation};
+    let m2 = |a: [[f64; 2]; 2]| Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1]);
+    let g = Vector2::new(NOISE_G[0][0], NOISE_G[1][0]);
+    let q = g * g.transpose() * NOISE_QW_TRUE;
+    let f = LinearGaussian::new(m2(TUNE_F), q).unwrap();
+    let h = LinearObservation::new(
+        Matrix1x2::new(TUNE_H[0][0], TUNE_H[0][1]),
+        Matrix1::new(NOISE_R_TRUE),
+    )
+    .unwrap();
+    let l0 = m2(TUNE_P0).map(f64::sqrt);
+    let runs = MonteCarlo::new(1, NOISE_SEED)
+        .map(|_, rng| {
+            let x0 = Vector2::new(TUNE_X0[0], TUNE_X0[1]) + sample_with_factor(&l0, rng);
+            let mut sim = Simulator::new(&f, &h, x0, 0).unwrap();
+            sim.step(rng).unwrap();
+            let mut zs = Vec::new();
+            let mut xs = Vec::new();
+            for _ in 0..NOISE_STEPS {
+                let (x, z) = sim.step(rng).unwrap();
+                zs.push(z[0]);
+                xs.push([x[0], x[1]]);
+            }
+            Ok::<_, std::fmt::Error>((zs, xs))
+        })
+        .unwrap();
+    runs.into_iter().next().unwrap()
+}
+
+/// `noise_model.toml`: the model with `G` and the `[Q]` and `[R]` tables.
+pub fn noise_model_toml() -> String {
+    format!(
+        "# The model of the noise-estimation fixtures (tests/common/mod.rs writes it).\n\
+         F = {}\nH = {}\nG = {}\nx0 = [{:?}, {:?}]\nP0 = {}\n\n\
+         [Q]\nform = \"scaled\"\nvalue = [[{:?}]]\n\n\
+         [R]\nform = \"diagonal\"\nvalue = [[{:?}]]\n",
+        toml_matrix(&TUNE_F),
+        toml_matrix(&TUNE_H),
+        toml_matrix(&NOISE_G),
+        TUNE_X0[0],
+        TUNE_X0[1],
+        toml_matrix(&TUNE_P0),
+        NOISE_QW_NOM,
+        NOISE_R_START
+    )
+}
+
 /// A committed fixture's path.
 pub fn fixture(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
