@@ -2,7 +2,9 @@
 //! likelihood, EM, ALS or J1/J2 on every parameter (`kalibra_tune`'s estimators), on numpy
 //! arrays.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+use kalibra_io::noise_report::NoiseReportFile;
 
 use kalibra_tune::{
     Als, Consistency, CovarianceForm, DMatrix, DVector, Em, LikelihoodFilter, MaximumLikelihood,
@@ -82,6 +84,12 @@ impl<'a> JsonView<'a> {
 #[pyclass(module = "kalibra", frozen)]
 pub struct NoiseEstimate {
     report: NoiseReport,
+    /// `report.json` as `kalibra tune --method` writes it (`None` for a model given as
+    /// callables, which has no linear problem to describe: `report.json` is then
+    /// [`JsonView`] alone).
+    file: Option<NoiseReportFile>,
+    /// The (model, measurements) names of the report's title.
+    names: (String, String),
 }
 
 fn matrix_array<'py>(py: Python<'py>, rows: &[Vec<f64>]) -> Bound<'py, PyArrayDyn<f64>> {
@@ -210,27 +218,43 @@ impl NoiseEstimate {
 
     /// Every field as a dict with the keys of `report.json`.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_value(py, &JsonView::of(&self.report))
+        match &self.file {
+            Some(file) => json_value(py, file),
+            None => json_value(py, &JsonView::of(&self.report)),
+        }
     }
 
     /// The report as JSON text: `report.json` without its final newline.
     fn to_json(&self) -> PyResult<String> {
-        serde_json::to_string_pretty(&JsonView::of(&self.report))
-            .map_err(|e| error(format!("cannot serialise the report: {e}")))
+        match &self.file {
+            Some(file) => serde_json::to_string_pretty(file),
+            None => serde_json::to_string_pretty(&JsonView::of(&self.report)),
+        }
+        .map_err(|e| error(format!("cannot serialise the report: {e}")))
     }
 
-    /// Writes `report.json` into `dir` (created if missing; an earlier `report.json` there is
-    /// replaced).
+    /// Writes `report.json`, `report.md`, `report.html` and the profile figures into `dir`,
+    /// as `kalibra tune --method` does and through its writer (the same bytes on the same
+    /// model and data); a model given as callables writes `report.json` alone.
     ///
     /// Raises:
-    ///     OSError: `dir` cannot be created or written.
+    ///     OSError: `dir` holds something other than a report, or cannot be written.
     fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
-        let json = self.to_json()? + "\n";
-        py.detach(|| {
-            std::fs::create_dir_all(&dir)?;
-            std::fs::write(dir.join("report.json"), json)
-        })
-        .map_err(|e| PyOSError::new_err(format!("write {}: {e}", dir.display())))
+        match &self.file {
+            Some(file) => {
+                let names = (Path::new(&self.names.0), Path::new(&self.names.1));
+                py.detach(|| kalibra_io::noise_report::write_noise_report(&dir, file, Some(names)))
+                    .map_err(|e| PyOSError::new_err(e.to_string()))
+            }
+            None => {
+                let json = self.to_json()? + "\n";
+                py.detach(|| {
+                    std::fs::create_dir_all(&dir)?;
+                    std::fs::write(dir.join("report.json"), json)
+                })
+                .map_err(|e| PyOSError::new_err(format!("write {}: {e}", dir.display())))
+            }
+        }
     }
 
     fn __repr__(&self) -> String {
@@ -743,6 +767,8 @@ fn estimate_nonlinear(
         result.map_err(|e| error(format!("estimate the noise by ml through the {kind}: {e}")))?;
     Ok(NoiseEstimate {
         report: nonlinear_report(&est, kind),
+        file: None,
+        names: ("model".into(), "measurements".into()),
     })
 }
 
@@ -793,6 +819,7 @@ fn estimate_nonlinear(
 ///         (m, n) (the EKF).
 ///     residual: for callables, residual(z, zhat) -> (m,) (angles); default z - zhat.
 ///     kind: for callables, "ekf" (default) or "ukf".
+///     names: the (model, measurements) names in the saved report's title.
 ///     profile: compute the profile likelihood of every parameter (ML and converged EM; 10
 ///         re-maximisations per parameter, the costliest part); default True.
 ///
@@ -827,7 +854,7 @@ fn estimate_nonlinear(
 #[pyo3(signature = (
     F, H, measurements, *, Q, R, x0, P0, G=None, method="ml", start="predict_first",
     truth=None, iterations=None, tolerance=None, lags=None, p=None, profile=true,
-    F_jacobian=None, H_jacobian=None, residual=None, kind="ekf"
+    F_jacobian=None, H_jacobian=None, residual=None, kind="ekf", names=None
 ))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 fn estimate_noise(
@@ -852,6 +879,7 @@ fn estimate_noise(
     H_jacobian: Option<&Bound<'_, PyAny>>,
     residual: Option<&Bound<'_, PyAny>>,
     kind: &str,
+    names: Option<(String, String)>,
 ) -> PyResult<NoiseEstimate> {
     let chosen = estimator(method, iterations, tolerance, lags, p)?;
     let start = match start {
@@ -932,7 +960,12 @@ fn estimate_noise(
     let report = py
         .detach(|| NoiseReport::estimate(&problem, &chosen, options, truth.as_deref()))
         .map_err(|e| report_error(&e, method))?;
-    Ok(NoiseEstimate { report })
+    let file = Some(NoiseReportFile::new(&problem, &report));
+    Ok(NoiseEstimate {
+        report,
+        file,
+        names: names.unwrap_or_else(|| ("model".into(), "measurements".into())),
+    })
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -8,7 +8,7 @@ import pytest
 
 import kalibra
 
-from conftest import REPO
+from conftest import FIXTURES, REPO
 
 TUNE_FIXTURES = REPO / "crates" / "kalibra-tune" / "tests" / "fixtures"
 
@@ -126,7 +126,7 @@ def test_every_method_on_runs_of_a_random_walk():
             anis = est.consistency[which]["anis"]
             assert anis["statistic"] == "anis" and anis["samples"] == z.shape[0] * z.shape[1]
     sweep = kalibra.estimate_noise([[1.0]], [[1.0]], z, method="j1j2", p=(-2, 2, 0.5), **args)
-    curves = sweep.to_dict()["j1j2"]
+    curves = sweep.to_dict()["curves"]
     assert [len(c["points"]) for c in curves] == [9, 9]
     # At p = 0 both curves pass through the starting point.
     assert curves[0]["points"][4]["j1"] == curves[1]["points"][4]["j1"]
@@ -317,3 +317,31 @@ def test_callables_through_the_ekf_and_the_ukf_equal_the_linear_estimate():
 
     with pytest.raises(kalibra.KalibraError, match="model failed"):
         kalibra.estimate_noise(broken, f, z, kind="ukf", **args)
+
+
+def test_save_is_kalibra_tune_s_report_file_for_file(kalibra_cli, tmp_path):
+    """save(dir) on the CLI's noise fixture writes what `kalibra tune --method ml --out` does,
+    byte for byte (the same estimator, report and writer)."""
+    import subprocess
+
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+    model = tomllib.loads((FIXTURES / "noise_model.toml").read_text())
+    z = np.genfromtxt(FIXTURES / "noise_measurements.csv", delimiter=",", skip_header=1)[:, 1:]
+    done = subprocess.run(
+        [kalibra_cli, "tune", str(FIXTURES / "noise_model.toml"),
+         str(FIXTURES / "noise_measurements.csv"), "--method", "ml", "--out", str(tmp_path / "cli")],
+        capture_output=True, text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    est = kalibra.estimate_noise(
+        model["F"], model["H"], z, G=model["G"], x0=model["x0"], P0=model["P0"],
+        Q=(model["Q"]["form"], model["Q"]["value"]), R=(model["R"]["form"], model["R"]["value"]),
+        names=("noise_model.toml", "noise_measurements.csv"),
+    )
+    est.save(tmp_path / "py")
+    cli_files = sorted(p.name for p in (tmp_path / "cli").iterdir())
+    assert cli_files == sorted(p.name for p in (tmp_path / "py").iterdir())
+    assert {"report.json", "report.md", "report.html"} <= set(cli_files)
+    for name in cli_files:
+        assert (tmp_path / "py" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes(), name
+    assert est.to_dict() == json.loads((tmp_path / "cli" / "report.json").read_text())

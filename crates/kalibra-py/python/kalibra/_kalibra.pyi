@@ -298,6 +298,7 @@ def estimate_noise(
     H_jacobian: Optional[_StateFn] = None,
     residual: Optional[_ResidualFn] = None,
     kind: Literal["ekf", "ukf"] = "ekf",
+    names: Optional[Tuple[str, str]] = None,
 ) -> NoiseEstimate: ...
 
 # The return type follows `shard` and `return_log`: a shard's partial, the report with the
