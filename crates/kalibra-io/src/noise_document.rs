@@ -361,10 +361,9 @@ impl Document {
             );
         }
         if r.method == MethodKind::J1j2 {
-            id_text = format!(
-                "the J1/J2 crossover is no likelihood maximum, so the observed information at \
-                 its point does not say what the data identify (use --method ml); there: {id_text}"
-            );
+            id_text = "the J1/J2 crossover is no likelihood maximum, so it does not say what \
+                       the data identify (use --method ml)"
+                .to_string();
         }
         blocks.push(Block::Paragraph(
             Some("What the data identify:".into()),

@@ -215,6 +215,8 @@ pub struct NoiseReportFile {
     pub r: Vec<Vec<f64>>,
     /// Every free parameter.
     pub parameters: Vec<ParameterRow>,
+    /// The estimate in words ([`NoiseReport::summary`]).
+    pub summary: String,
     /// Whether the estimator met its stopping rule.
     pub converged: bool,
     /// Its iterations.
@@ -300,6 +302,7 @@ impl NoiseReportFile {
             qw: report.qw.clone(),
             r: report.r.clone(),
             parameters: report.parameters.iter().map(parameter_row).collect(),
+            summary: report.summary(),
             converged: report.converged,
             iterations: report.iterations,
             identifiable,
