@@ -82,6 +82,7 @@ mod als;
 mod em;
 mod error;
 mod j1j2;
+mod kernel;
 mod likelihood;
 mod ml;
 mod noise;
