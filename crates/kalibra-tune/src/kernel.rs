@@ -12,7 +12,7 @@
 //! # The steady state
 //! The covariance recursion does not depend on the measurements. Once the prior covariance at
 //! an update equals the prior at the previous update (one prediction apart, no missing
-//! measurement between) to a few units of rounding, three updates in a row, the recursion has
+//! measurement between) to eight units of rounding of every entry's scale, three updates in a row, the recursion has
 //! reached its fixed point as closely as its own rounding lets it (it wanders there by a few
 //! units of the last place, and seldom repeats to the bit): from there on the loop updates only
 //! the mean with the stored gain and factor of `S`, and returns to the full recursion at the
@@ -42,19 +42,26 @@ pub(crate) const MAX_STATE: usize = 32;
 /// evaluation to the filter, so that the filter decides (and names) a nearly singular `S`.
 const PIVOT_FLOOR: f64 = 1e-10;
 
-/// Two consecutive priors count as equal when no entry differs by more than this many units
-/// of rounding of the largest entry: the recursion's own rounding keeps it wandering by a few
-/// units of the last place about its fixed point, so equality to the bit is seldom reached.
-const STEADY_ULPS: f64 = 16.0;
+/// Two consecutive priors count as equal when no entry `(i, j)` differs by more than this many
+/// units of rounding of `sqrt(P_ii P_jj)`, its natural scale: the recursion's own rounding
+/// keeps it wandering by a few units of the last place about its fixed point, so equality to
+/// the bit is seldom reached. A scale common to all entries (the largest) would let a small
+/// variance settle off by many of its own units, which shifts every later step the same way
+/// and the finite-difference gradient of the sum with it.
+const STEADY_ULPS: f64 = 8.0;
 
 /// Consecutive updates whose priors must count as equal before the steady state is taken.
 const STEADY_HITS: usize = 3;
 
-/// Whether the prior `p` equals `prev` to [`STEADY_ULPS`].
-fn settled(p: &[f64], prev: &[f64]) -> bool {
-    let scale = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let tol = STEADY_ULPS * f64::EPSILON * scale;
-    p.iter().zip(prev).all(|(a, b)| (a - b).abs() <= tol)
+/// Whether the `n x n` prior `p` equals `prev` to [`STEADY_ULPS`] entry by entry.
+fn settled(p: &[f64], prev: &[f64], n: usize) -> bool {
+    let tol = STEADY_ULPS * f64::EPSILON;
+    (0..n).all(|j| {
+        (0..n).all(|i| {
+            let scale = (p[i + i * n] * p[j + j * n]).abs().sqrt();
+            (p[i + j * n] - prev[i + j * n]).abs() <= tol * scale
+        })
+    })
 }
 
 /// Column-major matrices of the loop, allocated once per evaluation.
@@ -96,33 +103,29 @@ impl Buffers {
     }
 }
 
-/// `c = a b` for column-major `a` (`r x k`) and `b` (`k x c`).
+/// `c = a b` for column-major `a` (`r x k`) and `b` (`k x c`), summing over `k` in order.
+/// Written over exact chunks, so that the short loops carry no bounds checks.
 #[inline]
-fn mul(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize, cols: usize) {
-    for j in 0..cols {
-        let cj = &mut c[j * r..(j + 1) * r];
+fn mul(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize) {
+    for (cj, bj) in c.chunks_exact_mut(r).zip(b.chunks_exact(k)) {
         cj.fill(0.0);
-        for l in 0..k {
-            let blj = b[l + j * k];
-            let al = &a[l * r..(l + 1) * r];
-            for i in 0..r {
-                cj[i] += al[i] * blj;
+        for (al, &blj) in a.chunks_exact(r).zip(bj) {
+            for (ci, &ai) in cj.iter_mut().zip(al) {
+                *ci += ai * blj;
             }
         }
     }
 }
 
-/// `c = a b^T` for column-major `a` (`r x k`) and `b` (`c x k`).
+/// `c = a b^T` for column-major `a` (`r x k`) and `b` (`cols x k`), summing over `k` in order.
 #[inline]
-fn mul_t(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize, cols: usize) {
-    for j in 0..cols {
-        let cj = &mut c[j * r..(j + 1) * r];
+fn mul_t(a: &[f64], b: &[f64], c: &mut [f64], r: usize, cols: usize) {
+    for (j, cj) in c.chunks_exact_mut(r).enumerate() {
         cj.fill(0.0);
-        for l in 0..k {
-            let bjl = b[j + l * cols];
-            let al = &a[l * r..(l + 1) * r];
-            for i in 0..r {
-                cj[i] += al[i] * bjl;
+        for (al, bl) in a.chunks_exact(r).zip(b.chunks_exact(cols)) {
+            let bjl = bl[j];
+            for (ci, &ai) in cj.iter_mut().zip(al) {
+                *ci += ai * bjl;
             }
         }
     }
@@ -243,7 +246,7 @@ pub(crate) fn counted(
             let predict = i > 0 || predict_first;
             if predict && let Some(st) = steady.take() {
                 // x = F x; the covariance is the steady prior.
-                mul(f, &b.x, &mut b.xt, n, n, 1);
+                mul(f, &b.x, &mut b.xt, n, n);
                 std::mem::swap(&mut b.x, &mut b.xt);
                 if let Some(z) = z {
                     steady_updates += 1;
@@ -259,10 +262,10 @@ pub(crate) fn counted(
                 continue;
             }
             if predict {
-                mul(f, &b.x, &mut b.xt, n, n, 1);
+                mul(f, &b.x, &mut b.xt, n, n);
                 std::mem::swap(&mut b.x, &mut b.xt);
-                mul(f, &b.p, &mut b.fp, n, n, n);
-                mul_t(&b.fp, f, &mut b.p, n, n, n);
+                mul(f, &b.p, &mut b.fp, n, n);
+                mul_t(&b.fp, f, &mut b.p, n, n);
                 for (pij, qij) in b.p.iter_mut().zip(q) {
                     *pij += qij;
                 }
@@ -275,7 +278,7 @@ pub(crate) fn counted(
                 hits = 0;
                 continue;
             };
-            if chained && settled(&b.p, &b.prev_prior) {
+            if chained && settled(&b.p, &b.prev_prior, n) {
                 hits += 1;
             } else {
                 hits = 0;
@@ -284,8 +287,8 @@ pub(crate) fn counted(
             b.prev_prior.copy_from_slice(&b.p);
             chained = true;
             // P H^T, S = H P H^T + R.
-            mul_t(&b.p, h, &mut b.pht, n, n, m);
-            mul(h, &b.pht, &mut b.s, m, n, m);
+            mul_t(&b.p, h, &mut b.pht, n, m);
+            mul(h, &b.pht, &mut b.s, m, n);
             for (sij, rij) in b.s.iter_mut().zip(r) {
                 *sij += rij;
             }
@@ -308,17 +311,17 @@ pub(crate) fn counted(
             total += mean_update(&mut b, &gain, &l, log_det, h, z.as_slice(), ln_2pi);
             (b.gain, b.l) = (gain, l);
             // Joseph: (I - K H) P (I - K H)^T + K R K^T, symmetrised.
-            mul(&b.gain, h, &mut b.ikh, n, m, n);
+            mul(&b.gain, h, &mut b.ikh, n, m);
             for v in b.ikh.iter_mut() {
                 *v = -*v;
             }
             for d in 0..n {
                 b.ikh[d + d * n] += 1.0;
             }
-            mul(&b.ikh, &b.p, &mut b.ap, n, n, n);
-            mul_t(&b.ap, &b.ikh, &mut b.fp, n, n, n);
-            mul(&b.gain, r, &mut b.kr, n, m, m);
-            mul_t(&b.kr, &b.gain, &mut b.ap, n, m, n);
+            mul(&b.ikh, &b.p, &mut b.ap, n, n);
+            mul_t(&b.ap, &b.ikh, &mut b.fp, n, n);
+            mul(&b.gain, r, &mut b.kr, n, m);
+            mul_t(&b.kr, &b.gain, &mut b.ap, n, n);
             for (pij, (a, k)) in b.p.iter_mut().zip(b.fp.iter().zip(&b.ap)) {
                 *pij = a + k;
             }
@@ -352,7 +355,7 @@ fn mean_update(
     ln_2pi: f64,
 ) -> f64 {
     let (n, m) = (b.x.len(), b.nu.len());
-    mul(h, &b.x, &mut b.nu, m, n, 1);
+    mul(h, &b.x, &mut b.nu, m, n);
     for (v, zi) in b.nu.iter_mut().zip(z) {
         *v = zi - *v;
     }
