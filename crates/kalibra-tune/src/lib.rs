@@ -96,6 +96,7 @@ mod als;
 mod em;
 mod error;
 mod j1j2;
+mod kernel;
 mod likelihood;
 mod ml;
 mod ml_nonlinear;

@@ -78,15 +78,25 @@ pub fn log_likelihood_of(
         .map_err(LikelihoodError::Model)?;
     let sensor = LinearObservation::new(problem.h().clone(), matrices.r.clone())
         .map_err(LikelihoodError::Model)?;
+    // The allocation-free loop; where it cannot vouch for its answer the filter runs and
+    // names the failure.
+    if let Some(total) = crate::kernel::log_likelihood(problem, &matrices.q, &matrices.r) {
+        return Ok(total);
+    }
+    filter_log_likelihood(problem, &dynamics, &sensor)
+}
+
+/// The log-likelihood through [`Kf`]: the reference the fast loop is tested against, and the
+/// path that names a failure.
+pub(crate) fn filter_log_likelihood(
+    problem: &NoiseProblem,
+    dynamics: &LinearGaussian<kalibra_linalg::Dyn>,
+    sensor: &LinearObservation<kalibra_linalg::Dyn, kalibra_linalg::Dyn>,
+) -> Result<f64, LikelihoodError> {
     let mut total = 0.0;
     for (run, zs) in problem.runs().iter().enumerate() {
-        let mut kf = Kf::new(
-            &dynamics,
-            &sensor,
-            problem.x0().clone(),
-            problem.p0().clone(),
-        )
-        .map_err(|source| LikelihoodError::Filter { run, source })?;
+        let mut kf = Kf::new(dynamics, sensor, problem.x0().clone(), problem.p0().clone())
+            .map_err(|source| LikelihoodError::Filter { run, source })?;
         let mut update = 0;
         let mut bad = None;
         kf.run(zs.iter().map(Option::as_ref), problem.start(), |rec| {

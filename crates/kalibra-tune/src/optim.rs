@@ -123,6 +123,11 @@ pub(crate) fn hessian(obj: &dyn Objective, x: &[f64], fx: f64, h: f64) -> Option
     Some(out)
 }
 
+/// A decrease of the objective below this fraction of its magnitude is rounding.
+const STALL: f64 = 1e-15;
+/// Consecutive iterations with such decreases that stop the minimiser.
+const MAX_STALLS: usize = 5;
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -142,6 +147,7 @@ pub(crate) fn minimise(obj: &dyn Objective, x0: &[f64], settings: Settings) -> O
     }
     let mut first = true;
     let mut iterations = 0;
+    let mut stalls = 0;
     let stop = loop {
         if g.iter().fold(0.0f64, |m, v| m.max(v.abs())) <= settings.gradient_tolerance {
             break StopReason::Gradient;
@@ -183,6 +189,19 @@ pub(crate) fn minimise(obj: &dyn Objective, x0: &[f64], settings: Settings) -> O
         let Some((xn, fnew)) = accepted else {
             break StopReason::LineSearch;
         };
+        // Steps that lower the objective by no more than its rounding: the gradient is at the
+        // level of its finite-difference error; without this a start can wander there until
+        // the iteration limit, each iteration a full gradient.
+        if f - fnew <= STALL * f.abs() {
+            stalls += 1;
+            if stalls >= MAX_STALLS {
+                x = xn;
+                f = fnew;
+                break StopReason::LineSearch;
+            }
+        } else {
+            stalls = 0;
+        }
         let Some(gn) = gradient(obj, &xn, fnew) else {
             break StopReason::LineSearch;
         };

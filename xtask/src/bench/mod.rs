@@ -1,7 +1,7 @@
 //! `cargo xtask bench`: the library against hand-written nalgebra loops, in one process, with
 //! the figures written as data.
 //!
-//! `cargo xtask bench [w1|w2|w3|w4|eval|shards|smooth|all] [--out DIR] [--runs N] [--steps N]
+//! `cargo xtask bench [w1|w2|w3|w4|eval|shards|smooth|tune|all] [--out DIR] [--runs N] [--steps N]
 //! [--threads N] [--repeats N] [--seed N] [--sizes N,N,...] [--kernels] [--ukf] [--no-python]
 //! [--shard-runs N]`; one module per workload:
 //!
@@ -16,6 +16,8 @@
 //! * [`shards`]: W1 as 1, 2 and 4 shards against one process (`--shard-runs` runs).
 //! * [`smooth`]: the KF's RTS smoother on W1's model against a hand-written loop and FilterPy
 //!   (Python and PyPI unless `--no-python`), and the square-root KF's cost; not part of `all`.
+//! * [`tune`]: noise estimation, maximum likelihood against statsmodels' `fit()` and EM against
+//!   pykalman (Python and PyPI unless `--no-python`); not part of `all`.
 //!
 //! `all` runs W1, W2 and W3. Each workload prints its figures and collects them
 //! ([`figures::Figures`]); after it, they are written with their provenance to
@@ -27,6 +29,7 @@ mod figures;
 mod shards;
 mod smooth;
 mod timing;
+mod tune;
 mod w1;
 mod w2;
 mod w3;
@@ -66,6 +69,9 @@ enum Workloads {
     Shards,
     /// The KF's RTS smoother on W1's model: library, hand-written loop and FilterPy.
     Smooth,
+    /// Noise estimation: maximum likelihood against statsmodels' fit() and EM against
+    /// pykalman, 10^4 steps of a 4-state model.
+    Tune,
     /// Measures nothing: regenerates `README.md` in the output directory from its JSON files
     /// (after a merge of branches that each ran a workload).
     Table,
@@ -161,6 +167,7 @@ pub fn main(args: &Args) -> Result<()> {
             Workloads::Eval => eval::run(args)?,
             Workloads::Shards => shards::run(args)?,
             Workloads::Smooth => smooth::run(args)?,
+            Workloads::Tune => tune::run(args)?,
             Workloads::All | Workloads::Table => {
                 anyhow::bail!("`all` and `table` are handled above")
             }
