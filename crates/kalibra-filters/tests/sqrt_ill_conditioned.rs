@@ -22,7 +22,11 @@
 //! `x3 = x1 + (c (3 + d^2) - z1 (1 - d)) / (2 (4 + d + d^2))`; the second innovation variance is
 //! `d^2 (8 + 2 d + 2 d^2) / (3 + d^2)`; and the direction `(1, -1, 0)`, which neither
 //! measurement sees, keeps its prior variance 1.
+//!
+//! Smoothing the run: the covariance form's backward pass fails in both filters, the
+//! square-root backward pass of the `SqrtKf` carries on (the last test).
 
+use kalibra_filters::smooth::{Smoothable, Smoothed};
 use kalibra_filters::{Filter, FilterError, Kf, SigmaSet, SqrtKf, SqrtUkf, Start, StepRecord, Ukf};
 use kalibra_linalg::{Matrix1, Matrix3, OMatrix, OVector, U1, U3, Vector1, Vector3};
 use kalibra_models::{LinearGaussian, LinearMeasurement, Measurement};
@@ -186,4 +190,72 @@ fn the_ukf_loses_the_second_measurement_where_the_square_root_ukf_carries_on() {
         sqrt.mean()
     );
     assert!((unseen_variance(sqrt.factor()) - 1.0).abs() < 1e-12);
+}
+
+/// A smoothed run that failed: a typed error, or a step whose covariance is clearly
+/// indefinite or whose mean lost the second measurement.
+fn smoothing_failed(result: &Result<Smoothed<U3>, FilterError>, exact: &Vector3<f64>) -> bool {
+    match result {
+        Err(e) => matches!(
+            e,
+            FilterError::NotPositiveDefinite { .. } | FilterError::NonFinite { .. }
+        ),
+        Ok(smoothed) => smoothed.steps().iter().any(|s| {
+            let p = s.covariance();
+            p.symmetric_eigenvalues().min() < -1e-12 * p.amax()
+                || relative_error(s.mean(), exact) > 1e-2
+        }),
+    }
+}
+
+/// Smoothing the same two steps (`F = I`, `Q = 0`: the state is constant, so the exact
+/// smoothed estimate of both steps is the final posterior). The covariance form's backward
+/// pass solves with `P-_1 = P+_0`, whose smallest eigenvalue (3e-19) lies below its
+/// rounding: over the `Kf`'s run and over the covariances of the `SqrtKf`'s run alike it fails.
+/// The square-root backward pass never forms `P-_1` (its gain, the identity here, comes from
+/// a triangular solve with the predicted factor), and every step is finite, positive
+/// semi-definite and the exact posterior.
+#[test]
+fn the_square_root_smoother_carries_on_where_the_covariance_form_fails() {
+    let still = LinearGaussian::new(Matrix3::identity(), Matrix3::zeros()).unwrap();
+    let (truth, z) = measurements();
+    let exact = exact_mean(&truth);
+    let (x0, p0) = (Vector3::zeros(), Matrix3::identity());
+    let zs = || z.iter().map(Some);
+
+    let standard = Kf::new(&still, NearlyCollinear, x0, p0)
+        .unwrap()
+        .smooth(zs(), Start::UpdateFirst);
+    assert!(smoothing_failed(&standard, &exact), "Kf: {standard:?}");
+    let covariance_form = SqrtKf::new(&still, NearlyCollinear, x0, p0)
+        .unwrap()
+        .forward(zs(), Start::UpdateFirst)
+        .unwrap()
+        .smooth();
+    assert!(
+        smoothing_failed(&covariance_form, &exact),
+        "SqrtKf, covariance form: {covariance_form:?}"
+    );
+
+    let mut sqrt = SqrtKf::new(&still, NearlyCollinear, x0, p0).unwrap();
+    let smoothed = sqrt.smooth(zs(), Start::UpdateFirst).unwrap();
+    assert!(!smoothing_failed(&Ok(smoothed.clone()), &exact));
+    assert_eq!(smoothed.steps().len(), 2);
+    let last = sqrt.covariance();
+    for s in smoothed.steps() {
+        let p = s.covariance();
+        assert!(p.iter().all(|v| v.is_finite()));
+        assert_eq!(*p, p.transpose());
+        assert!(p.symmetric_eigenvalues().min() >= -1e-15 * p.amax(), "{p}");
+        assert!(relative_error(s.mean(), &exact) < 1e-6, "{}", s.mean());
+        assert!((p - last).amax() < 1e-12, "{p}");
+        let v = Vector3::new(1.0, -1.0, 0.0) / 2f64.sqrt();
+        assert!(((v.transpose() * p * v)[0] - 1.0).abs() < 1e-12);
+    }
+    // The lag-one covariance P_{1|n} G^T with G = I.
+    let lag_one = smoothed.steps()[1].lag_one().unwrap();
+    assert!(
+        (lag_one - smoothed.steps()[1].covariance()).amax() < 1e-12,
+        "{lag_one}"
+    );
 }

@@ -1,6 +1,7 @@
 //! The square-root KF: equal to the Joseph-form `Kf` where both work (a property test over
 //! random stable models, `Const` and `Dyn` sizes), its record's invariants, and typed errors.
 
+use kalibra_filters::smooth::Smoothable;
 use kalibra_filters::{
     Filter, FilterError, FilterOptions, InitialCheck, Kf, SqrtKf, Start, UpdateForm,
 };
@@ -106,6 +107,43 @@ where
     worst_difference(&kf, &records)
 }
 
+/// The square-root smoother and the covariance-form one (the `Kf`'s) on one random problem
+/// (every third measurement missing), from `start`: the worst relative difference of the
+/// smoothed means, covariances and lag-one covariances.
+fn smoothers<N: Dim, M: Dim>(seed: u64, n: N, m: M, start: Start) -> f64
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let (f, h, x0, p0, zs) = random_problem(seed, n, m, 30);
+    let zs: Vec<Option<&OVector<f64, M>>> = zs
+        .iter()
+        .enumerate()
+        .map(|(i, z)| (i % 3 != 2).then_some(z))
+        .collect();
+    let standard = Kf::new(&f, &h, x0.clone(), p0.clone())
+        .unwrap()
+        .smooth(zs.iter().copied(), start)
+        .unwrap();
+    let mut sqrt = SqrtKf::new(&f, &h, x0, p0).unwrap();
+    let factors = sqrt.smooth(zs.iter().copied(), start).unwrap();
+    assert_eq!(standard.steps().len(), factors.steps().len());
+    let mut worst = 0.0f64;
+    for (a, b) in standard.steps().iter().zip(factors.steps()) {
+        assert_eq!((a.step(), a.updated()), (b.step(), b.updated()));
+        worst = worst.max(rel(a.mean(), b.mean()));
+        worst = worst.max(rel(a.covariance(), b.covariance()));
+        match (a.lag_one(), b.lag_one()) {
+            (Some(x), Some(y)) => worst = worst.max(rel(x, y)),
+            (None, None) => {}
+            _ => panic!("lag-one covariances at different steps"),
+        }
+    }
+    // The last step is the filter's.
+    let last = factors.steps().last().unwrap();
+    assert_eq!(last.mean(), sqrt.mean());
+    worst
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
     /// Equal to the Joseph-form KF to 1e-10 (relative) on random stable models, fixed sizes.
@@ -124,6 +162,20 @@ proptest! {
     ) {
         let worst = kf_vs_sqrt(seed, Dyn(n), Dyn(m));
         prop_assert!(worst < 1e-10, "{n}x{m}: {worst:e}");
+    }
+
+    /// The square-root smoother equals the covariance-form smoother to 1e-10 (relative),
+    /// lag-one covariances included, from either start, fixed and run-time sizes.
+    #[test]
+    fn the_square_root_smoother_equals_the_kf_smoother(
+        seed in 0u64..1_000_000, n in 1usize..6, m in 1usize..4,
+    ) {
+        for start in [Start::PredictFirst, Start::UpdateFirst] {
+            let worst = smoothers(seed, Const::<4>, Const::<2>, start);
+            prop_assert!(worst < 1e-10, "4x2 {start:?}: {worst:e}");
+            let worst = smoothers(seed, Dyn(n), Dyn(m), start);
+            prop_assert!(worst < 1e-10, "{n}x{m} {start:?}: {worst:e}");
+        }
     }
 }
 

@@ -2,7 +2,8 @@
 //! hooks, a bearings run), and typed errors.
 
 use kalibra_filters::{
-    AngleComponents, Filter, FilterError, SigmaSet, SqrtUkf, Start, Ukf, UkfPrediction,
+    AngleComponents, Filter, FilterError, KappaCriterion, KappaGrid, SigmaSet, SqrtUkf, Start, Ukf,
+    UkfPrediction,
 };
 use kalibra_linalg::{Matrix1, Matrix2, Matrix4, OMatrix, U1, U2, U4, Vector1, Vector2, Vector4};
 use kalibra_models::{Bearing, BearingReference, Kinematic, Stationary, simulate, wrap_angle};
@@ -115,6 +116,64 @@ fn equals_the_ukf_on_bearings_across_pi() {
     );
     let worst = worst_difference(&ukf, &sqrt);
     assert!(worst < 1e-10, "{worst:e}");
+}
+
+/// With an adaptive kappa (both criteria, paper 001's) on a bearings-only run the square-root
+/// UKF chooses the Ukf's kappa at every update and keeps its records: one criterion
+/// definition serves both.
+#[test]
+fn an_adaptive_kappa_chooses_as_the_ukf_does() {
+    let bearing = Bearing::new(
+        U4,
+        [0, 1],
+        BearingReference::XAxis,
+        1e-3,
+        Stationary(Vector2::zeros()),
+    )
+    .unwrap();
+    let cv = Kinematic::constant_velocity(2, 1.0)
+        .unwrap()
+        .dynamics(U4)
+        .unwrap();
+    let x0 = Vector4::new(30.0, 20.0, -1.0, 0.5);
+    let t = simulate(&cv, &bearing, x0, 40, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
+    let p = Matrix4::from_diagonal(&Vector4::new(100.0, 100.0, 4.0, 4.0));
+    let set = SigmaSet::recommended(4);
+    let grid = KappaGrid::equidistant(-2.0, 6.0, 9).unwrap();
+    for criterion in [
+        KappaCriterion::MaximumLikelihood,
+        KappaCriterion::MaximumPosterior,
+    ] {
+        let mut ukf = Ukf::new(&cv, &bearing, x0, p, set)
+            .unwrap()
+            .with_adaptive_kappa(criterion, grid.clone())
+            .unwrap();
+        let mut sqrt = SqrtUkf::new(&cv, &bearing, x0, p, set)
+            .unwrap()
+            .with_adaptive_kappa(criterion, grid.clone())
+            .unwrap();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let mut kappas = Vec::new();
+        for (i, z) in t.measurements.iter().enumerate() {
+            if i > 0 {
+                ukf.predict().unwrap();
+                sqrt.predict().unwrap();
+            }
+            a.push(ukf.update(z).unwrap().clone());
+            b.push(sqrt.update(z).unwrap().clone());
+            assert_eq!(
+                ukf.last_kappa(),
+                sqrt.last_kappa(),
+                "{criterion:?}, step {i}"
+            );
+            kappas.push(ukf.last_kappa().unwrap());
+        }
+        // The grid matters here: more than one kappa is chosen over the run.
+        kappas.dedup();
+        assert!(kappas.len() > 1, "{criterion:?}: always {kappas:?}");
+        let worst = worst_difference(&a, &b);
+        assert!(worst < 1e-10, "{criterion:?}: {worst:e}");
+    }
 }
 
 /// A heading turning through +-pi, measured by a compass whose residual does not wrap: the

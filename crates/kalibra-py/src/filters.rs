@@ -2,7 +2,7 @@
 //! `ExtendedKalmanFilter` and `UnscentedKalmanFilter` (kalibra's `Ekf` and `Ukf` on models
 //! whose functions are Python callables, see `callbacks`).
 
-use kalibra_filters::smooth::Smoothable;
+use kalibra_filters::smooth::{Smoothable, Smoothed};
 use kalibra_filters::{
     Ekf, Filter, FilterError, KappaCriterion, KappaGrid, Kf, SigmaSet, SigmaSpace, SqrtKf, SqrtUkf,
     Start, StepRecord, Ukf,
@@ -277,6 +277,16 @@ impl<A: Smoothable<Dyn, Dyn>, B: Smoothable<Dyn, Dyn>> Smoothable<Dyn, Dyn> for 
             Self::SquareRoot(f) => f.smoother_space(),
         }
     }
+    // Each form's own smoother: the square-root KF's backward pass runs on its factors.
+    fn smooth<'z, I>(&mut self, measurements: I, start: Start) -> Result<Smoothed<Dyn>, FilterError>
+    where
+        I: IntoIterator<Item = Option<&'z DVector<f64>>>,
+    {
+        match self {
+            Self::Standard(f) => f.smooth(measurements, start),
+            Self::SquareRoot(f) => f.smooth(measurements, start),
+        }
+    }
 }
 
 /// The linear Kalman filter `x_k = F x_{k-1} + w`, `z_k = H x_k + v`, `w ~ N(0, Q)`,
@@ -297,7 +307,8 @@ impl<A: Smoothable<Dyn, Dyn>, B: Smoothable<Dyn, Dyn>> Smoothable<Dyn, Dyn> for 
 ///         Cholesky factor of the covariance (QR prediction, array-form update) and stays
 ///         positive definite where the standard form's covariance stops being so (a
 ///         near-perfect measurement against a large prior). The same outputs; `smooth` runs
-///         the RTS smoother over the covariances the factors stand for.
+///         the square-root RTS smoother (its backward pass on the factors too), which
+///         carries on where the standard smoother fails.
 ///
 /// Raises:
 ///     KalibraError: a wrong shape (naming the argument), a non-finite matrix, a Q, R or P0 that
@@ -813,7 +824,7 @@ impl ExtendedKalmanFilter {
 ///     residual: residual(z, zhat) -> (m,) for angles; start: as for KalmanFilter.
 ///     form: "standard" (default) or "square_root" (kalibra's `SqrtUkf`: the same points from
 ///         a Cholesky factor carried by QR factorisations, positive definite where the
-///         standard form's covariance stops being so); "square_root" has no adaptive kappa.
+///         standard form's covariance stops being so), with or without adaptive_kappa.
 ///
 /// Returns of run: the arrays of `KalmanFilter.run`, and "kappa" (K,): the kappa of each
 /// update (NaN without a measurement).
@@ -843,11 +854,11 @@ type AnyUkf<'a> = EitherForm<
 >;
 
 impl AnyUkf<'_> {
-    /// The kappa of the last update (the square-root UKF's is its set's).
+    /// The kappa of the last update (the chosen one when adapting).
     fn last_kappa(&self) -> Option<f64> {
         match self {
             Self::Standard(ukf) => ukf.last_kappa(),
-            Self::SquareRoot(ukf) => Some(ukf.sigma_set().kappa()),
+            Self::SquareRoot(ukf) => ukf.last_kappa(),
         }
     }
 }
@@ -861,13 +872,11 @@ impl UnscentedKalmanFilter {
         let (dynamics, measurement) = (model.dynamics(failure), model.measurement(failure));
         let (x0, p0) = (model.x0.clone(), model.p0.clone());
         if self.form == Form::SquareRoot {
-            return Ok(EitherForm::SquareRoot(SqrtUkf::new(
-                dynamics,
-                measurement,
-                x0,
-                p0,
-                self.set,
-            )?));
+            let ukf = SqrtUkf::new(dynamics, measurement, x0, p0, self.set)?;
+            return Ok(EitherForm::SquareRoot(match &self.adaptive {
+                Some((criterion, grid)) => ukf.with_adaptive_kappa(*criterion, grid.clone())?,
+                None => ukf,
+            }));
         }
         let ukf = Ukf::new(dynamics, measurement, x0, p0, self.set)?;
         Ok(EitherForm::Standard(match &self.adaptive {
@@ -963,12 +972,6 @@ impl UnscentedKalmanFilter {
                 Some((criterion, KappaGrid::new(grid).map_err(invalid)?))
             }
         };
-        if form == Form::SquareRoot && adaptive.is_some() {
-            return Err(error(
-                "argument form \"square_root\" has no adaptive kappa (adaptive_kappa must be \
-                 None with it)",
-            ));
-        }
         let filter = Self {
             model,
             set,

@@ -6,7 +6,10 @@
 //!   [`Ekf`](crate::Ekf) and [`Ukf`](crate::Ukf), with provided methods that run and smooth in
 //!   one call ([`Smoothable::smooth`], [`Smoothable::smooth_fixed_lag`]); the square-root
 //!   filters ([`SqrtKf`](crate::SqrtKf), [`SqrtUkf`](crate::SqrtUkf)) as the KF and the UKF,
-//!   over the covariances their factors stand for (the backward pass is the covariance form).
+//!   over the covariances their factors stand for, except that the `SqrtKf`'s
+//!   [`Smoothable::smooth`] runs the square-root backward pass on its factors (one QR
+//!   triangularisation per step, `sqrt/smooth.rs`), which carries on where the covariance
+//!   form's solve with `P-_{k+1}` fails (`tests/sqrt_ill_conditioned.rs`).
 //! * [`ForwardPass`]: a run stored for smoothing ([`Smoothable::forward`]), smoothed later
 //!   without the filter ([`ForwardPass::smooth`]) into [`Smoothed`] steps.
 //! * [`FixedLagSmoother`]: one measurement at a time, memory for `lag + 2` steps.

@@ -4,6 +4,8 @@ use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, OMatrix, OVector, check_finite, propagate, symmetrize,
 };
 
+use std::borrow::Borrow;
+
 use super::forward::{FilteredStep, Prediction};
 use crate::{Estimate, FilterError, SigmaSpace};
 
@@ -74,45 +76,81 @@ where
     }
 }
 
-/// One backward step: the smoothed estimate at `k` from the filtered one, the prediction to
-/// `k + 1` and the smoothed step `k + 1`, whose lag-one covariance it sets.
+/// A backward step's smoothed estimate and the lag-one covariance of the step after it.
+type Backward<N> = (Estimate<N>, OMatrix<f64, N, N>);
+
+/// One backward step: the smoothed estimate at `k` from the filtered one, the prior of the
+/// prediction to `k + 1` with its cross-covariance `C_k`, and the smoothed estimate of
+/// `k + 1`; returned with the lag-one covariance of step `k + 1`.
 ///
 /// `G = C P-^-1` is a Cholesky solve with `P-_{k+1}`; `x = x_k + G (x_{k+1|n} - x-_{k+1})`
 /// (the difference through the state space's residual, the result normalised);
 /// `P = P_k + G (P_{k+1|n} - P-_{k+1}) G^T`, symmetrised; `P_{k+1,k|n} = P_{k+1|n} G^T`.
-fn backward_step<N: Dim>(
-    filtered: &FilteredStep<N>,
-    prediction: &Prediction<N>,
-    next: &mut SmoothedStep<N>,
+/// Every filter symmetrises its predicted covariance, so `P-` is factored as it stands, with
+/// no symmetry check.
+pub(crate) fn backward_step<N: Dim>(
+    k: usize,
+    filtered: &Estimate<N>,
+    prior: &Estimate<N>,
+    cross: &OMatrix<f64, N, N>,
+    next: &Estimate<N>,
     space: Option<&dyn SigmaSpace<N>>,
-) -> Result<Estimate<N>, FilterError>
+) -> Result<Backward<N>, FilterError>
 where
     DefaultAllocator: Alloc<N>,
 {
-    let k = filtered.step;
-    let next_estimate = &next.estimate;
-    let prior = &prediction.prior;
-    let predicted = Covariance::named(prior.cov.clone(), "predicted covariance P- (smoother)")
-        .map_err(|e| FilterError::at(k + 1, e))?;
+    let predicted =
+        Covariance::from_symmetric(prior.cov.clone(), "predicted covariance P- (smoother)")
+            .map_err(|e| FilterError::at(k + 1, e))?;
     let gain = predicted
-        .solve_right(&prediction.cross)
+        .solve_right(cross)
         .map_err(|e| FilterError::at(k, e))?;
     let dx = match space {
-        None => &next_estimate.mean - &prior.mean,
-        Some(space) => space.residual(&next_estimate.mean, &prior.mean),
+        None => &next.mean - &prior.mean,
+        Some(space) => space.residual(&next.mean, &prior.mean),
     };
-    let mut mean = &filtered.estimate.mean + &gain * dx;
+    let mut mean = &filtered.mean + &gain * dx;
     if let Some(space) = space {
         space.normalize(&mut mean);
     }
-    let mut cov = &filtered.estimate.cov + propagate(&gain, &(&next_estimate.cov - &prior.cov));
+    let mut cov = &filtered.cov + propagate(&gain, &(&next.cov - &prior.cov));
     symmetrize(&mut cov);
-    let lag_one = &next_estimate.cov * gain.transpose();
+    let lag_one = &next.cov * gain.transpose();
     let at = |e| FilterError::at(k, e);
     check_finite(&mean, "smoothed mean").map_err(at)?;
     check_finite(&cov, "smoothed covariance").map_err(at)?;
-    next.lag_one = Some(lag_one);
-    Ok(Estimate { mean, cov })
+    Ok((Estimate { mean, cov }, lag_one))
+}
+
+/// The backward pass in place over `steps`, which hold the filtered estimates on entry and
+/// the smoothed ones on return: `links(i)` gives the prior of the prediction from `steps[i]`
+/// and its cross-covariance, for `i < links_len` (`links_len + 1 == steps.len()`, or both
+/// zero). No step allocates: each smoothed estimate replaces its filtered one.
+pub(crate) fn smooth_in_place<'p, N: Dim, C: Borrow<OMatrix<f64, N, N>>>(
+    steps: &mut [SmoothedStep<N>],
+    links_len: usize,
+    mut links: impl FnMut(usize, &SmoothedStep<N>) -> (C, &'p Estimate<N>),
+    space: Option<&dyn SigmaSpace<N>>,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    for i in (0..links_len).rev() {
+        let (head, tail) = steps.split_at_mut(i + 1);
+        let (current, next) = (&mut head[i], &mut tail[0]);
+        let (cross, prior) = links(i, current);
+        let (estimate, lag_one) = backward_step(
+            current.step,
+            &current.estimate,
+            prior,
+            cross.borrow(),
+            &next.estimate,
+            space,
+        )?;
+        next.lag_one = Some(lag_one);
+        current.estimate = estimate;
+    }
+    Ok(())
 }
 
 /// The smoother over a chain of filtered steps and the predictions between them
@@ -125,29 +163,21 @@ pub(crate) fn smooth_chain<N: Dim>(
 where
     DefaultAllocator: Alloc<N>,
 {
-    let Some(last) = filtered.last() else {
-        return Ok(Vec::new());
-    };
-    let mut reversed = Vec::with_capacity(filtered.len());
-    let mut next = SmoothedStep {
-        step: last.step,
-        updated: last.updated,
-        estimate: last.estimate.clone(),
-        lag_one: None,
-    };
-    for (step, prediction) in filtered.iter().zip(predictions).rev() {
-        let estimate = backward_step(step, prediction, &mut next, space)?;
-        reversed.push(std::mem::replace(
-            &mut next,
-            SmoothedStep {
-                step: step.step,
-                updated: step.updated,
-                estimate,
-                lag_one: None,
-            },
-        ));
-    }
-    reversed.push(next);
-    reversed.reverse();
-    Ok(reversed)
+    let mut steps: Vec<SmoothedStep<N>> = filtered
+        .iter()
+        .map(|f| SmoothedStep {
+            step: f.step,
+            updated: f.updated,
+            estimate: f.estimate.clone(),
+            lag_one: None,
+        })
+        .collect();
+    let links = predictions.len().min(steps.len().saturating_sub(1));
+    smooth_in_place(
+        &mut steps,
+        links,
+        |i, _| (&predictions[i].cross, &predictions[i].prior),
+        space,
+    )?;
+    Ok(steps)
 }

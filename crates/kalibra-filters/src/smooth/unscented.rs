@@ -6,9 +6,11 @@ use std::sync::Arc;
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, sigma_sqrt};
 use kalibra_models::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
 
-use super::Smoothable;
 use super::smoothable::linearised_cross;
-use crate::{Filter, FilterError, SigmaSpace, SigmaWeights, SqrtKf, SqrtUkf, Ukf, UkfPrediction};
+use super::{Smoothable, Smoothed};
+use crate::{
+    Filter, FilterError, SigmaSpace, SigmaWeights, SqrtKf, SqrtUkf, Start, Ukf, UkfPrediction,
+};
 
 impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> Smoothable<N, M> for Ukf<N, M, D, H>
 where
@@ -76,6 +78,20 @@ where
     /// `P_k F_k^T`, with `P_k` the covariance the factor stands for (the record's).
     fn predict_with_cross(&mut self) -> Result<OMatrix<f64, N, N>, FilterError> {
         linearised_cross(self, |kf, k, _| kf.dynamics().matrix(k))
+    }
+
+    /// The square-root smoother: the backward pass on the filter's Cholesky factors (one QR
+    /// triangularisation per step, no predicted covariance factored), so that it carries on
+    /// where the covariance form's Cholesky solve with `P-_{k+1}` fails (the test
+    /// `tests/sqrt_ill_conditioned.rs`); equal to it where both work (`tests/sqrt_kf.rs`).
+    /// [`Smoothable::forward`] and the fixed-lag smoother keep the covariance form.
+    fn smooth<'z, I>(&mut self, measurements: I, start: Start) -> Result<Smoothed<N>, FilterError>
+    where
+        Self: Sized,
+        I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
+        OVector<f64, M>: 'z,
+    {
+        self.smooth_factors(measurements, start)
     }
 }
 

@@ -8,9 +8,11 @@ use kalibra_models::{LinearDynamics, LinearMeasurement};
 
 use crate::core::{KalmanCore, UpdateParts, check_model_output};
 use crate::kalman::{checked_core, core_accessors};
+use crate::smooth::Smoothed;
 use crate::sqrt::noise_root::NoiseRoot;
 use crate::sqrt::qr::{Array, lower_root, lower_root_of_sum};
-use crate::{Filter, FilterError, FilterOptions, StepRecord, UpdateForm};
+use crate::sqrt::smooth::{FactorLink, FactorStep, smooth_factors};
+use crate::{Estimate, Filter, FilterError, FilterOptions, Start, StepRecord, UpdateForm};
 
 /// The square-root Kalman filter on linear models: the [`Kf`](crate::Kf)'s estimate, computed
 /// from a lower-triangular Cholesky factor `S` of the covariance (`P = S S^T`) that only
@@ -141,6 +143,65 @@ where
     /// The measurement model.
     pub fn measurement(&self) -> &H {
         &self.measurement
+    }
+}
+
+impl<N: Dim, M: Dim, D: LinearDynamics<N>, H: LinearMeasurement<N, M>> SqrtKf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The square-root Rauch-Tung-Striebel smoother ([`Smoothable::smooth`] for this filter):
+    /// the forward pass as [`Smoothable::forward`] steps it, keeping every step's factor, the
+    /// predictions' `F_k` and noise roots, then the backward pass on factors
+    /// (`sqrt/smooth.rs`).
+    ///
+    /// [`Smoothable::smooth`]: crate::smooth::Smoothable::smooth
+    /// [`Smoothable::forward`]: crate::smooth::Smoothable::forward
+    pub(crate) fn smooth_factors<'z, I>(
+        &mut self,
+        measurements: I,
+        start: Start,
+    ) -> Result<Smoothed<N>, FilterError>
+    where
+        I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
+        OVector<f64, M>: 'z,
+    {
+        let measurements = measurements.into_iter();
+        let capacity = 1 + measurements.size_hint().0;
+        let (mut steps, mut links) = (Vec::with_capacity(capacity), Vec::with_capacity(capacity));
+        let here = |kf: &Self, updated| FactorStep {
+            step: kf.core.step(),
+            updated,
+            estimate: Estimate {
+                mean: kf.core.mean().clone(),
+                cov: kf.core.cov().clone(),
+            },
+            factor: kf.factor.clone(),
+        };
+        if start == Start::PredictFirst {
+            steps.push(here(self, false));
+        }
+        let mut started = false;
+        for z in measurements {
+            if started || start == Start::PredictFirst {
+                let k = self.core.step();
+                self.predict()?;
+                links.push(FactorLink {
+                    f: self.dynamics.matrix(k),
+                    q_root: self.q_root.last().clone(),
+                    prior_mean: self.core.mean().clone(),
+                });
+            }
+            started = true;
+            if let Some(z) = z {
+                self.update(z)?;
+            }
+            steps.push(here(self, z.is_some()));
+        }
+        if steps.is_empty() {
+            steps.push(here(self, false));
+        }
+        smooth_factors(&steps, &links, &mut self.scratch)
     }
 }
 

@@ -51,6 +51,7 @@ mod cholupdate;
 mod kf;
 mod noise_root;
 mod qr;
+mod smooth;
 mod ukf;
 
 pub use kf::SqrtKf;

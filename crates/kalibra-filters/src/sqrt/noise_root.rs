@@ -50,6 +50,11 @@ where
         }
         Ok(&self.root)
     }
+
+    /// The root of the last covariance [`NoiseRoot::root`] accepted.
+    pub(crate) fn last(&self) -> &OMatrix<f64, D, D> {
+        &self.root
+    }
 }
 
 #[cfg(test)]

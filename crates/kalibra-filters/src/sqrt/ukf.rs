@@ -17,10 +17,10 @@ use crate::sqrt::qr::Array;
 use crate::ukf::points::{
     cross_covariance, measure, plain_mean, residual, space_deviations, transform,
 };
-use crate::ukf::{Unscented, unscented_builders};
+use crate::ukf::{CandidateParts, Unscented, choose_kappa, criterion_value, unscented_builders};
 use crate::{
-    Filter, FilterError, FilterOptions, SigmaSet, SigmaSpace, SigmaWeights, StepRecord,
-    UkfPrediction,
+    Filter, FilterError, FilterOptions, KappaCriterion, KappaGrid, SigmaSet, SigmaSpace,
+    SigmaWeights, StepRecord, UkfPrediction,
 };
 
 /// The square-root UKF: the [`Ukf`](crate::Ukf)'s estimate, computed from a lower-triangular
@@ -42,8 +42,8 @@ use crate::{
 /// square-root KF's QR step) and angle hooks ([`SqrtUkf::with_state_space`],
 /// [`SqrtUkf::with_measurement_mean`]) as the [`Ukf`](crate::Ukf), and its [`StepRecord`], with
 /// the covariances formed from the factors; where both work they agree (tested to 1e-10,
-/// relative). The adaptive choice of kappa ([`Ukf::with_adaptive_kappa`](crate::Ukf)) has no
-/// square-root form here.
+/// relative), and with an adaptive kappa ([`SqrtUkf::with_adaptive_kappa`]) they choose the
+/// same kappa.
 ///
 /// ```
 /// use kalibra_filters::{Filter, SigmaSet, SqrtUkf, Ukf};
@@ -77,6 +77,8 @@ where
     r_root: NoiseRoot<M>,
     /// The QR work array, sized at construction for the largest array, `(2n + n) x n`.
     scratch: Vec<f64>,
+    adaptive: Option<(KappaCriterion, KappaGrid)>,
+    last_kappa: Option<f64>,
 }
 
 impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> SqrtUkf<N, M, D, H>
@@ -130,10 +132,39 @@ where
             q_root: NoiseRoot::new(n),
             r_root: NoiseRoot::new(m),
             scratch,
+            adaptive: None,
+            last_kappa: None,
         })
     }
 
     unscented_builders!();
+
+    /// The same filter choosing kappa at every update as
+    /// [`Ukf::with_adaptive_kappa`](crate::Ukf::with_adaptive_kappa) does: the square-root
+    /// update at every value of `grid`, keeping the one minimising `criterion`, evaluated by
+    /// the same definition as the [`Ukf`](crate::Ukf)'s (with the carried factor as the
+    /// prior's Cholesky factor), so where both filters work they choose the same kappa. The
+    /// prediction keeps the set's own kappa.
+    ///
+    /// # Errors
+    /// [`FilterError::InvalidParameter`] if a grid value gives an invalid sigma set.
+    pub fn with_adaptive_kappa(
+        mut self,
+        criterion: KappaCriterion,
+        grid: KappaGrid,
+    ) -> Result<Self, FilterError> {
+        let n = self.dynamics.state_dim().value();
+        for &kappa in grid.values() {
+            self.sigma.set.with_kappa(kappa).weights(n)?;
+        }
+        self.adaptive = Some((criterion, grid));
+        Ok(self)
+    }
+
+    /// The kappa of the last update (the chosen one when adapting); `None` before the first.
+    pub fn last_kappa(&self) -> Option<f64> {
+        self.last_kappa
+    }
 
     /// The lower-triangular factor `S` of the current covariance (`P = S S^T`).
     pub fn factor(&self) -> &OMatrix<f64, N, N> {
@@ -198,7 +229,6 @@ where
         self.core.check_measurement(m, z)?;
         let x = self.core.update_prior().mean.clone();
         let n = x.nrows();
-        let w = self.sigma.set.weights(n)?;
         let l = &self.factor;
         let r = self.measurement.noise_cov(k, &x);
         check_model_output("measurement noise covariance R", &r, (m, m), k)?;
@@ -209,94 +239,171 @@ where
             .map_err(at)?;
         let z0 = self.measurement.measure(k, &x);
         check_model_output("predicted measurement h(x)", &z0, (m, 1), k)?;
-        let measurement = &self.measurement;
-        let mean_space = self.sigma.measurement_mean.as_deref();
-        let scratch = &mut self.sigma.scratch_z;
-        // The sigma measurements' deviations, then the cross covariance, in which the mean
-        // cancels between each pair.
-        let (mut zhat, e0) = measure(measurement, k, &x, l, &w, &z0, mean_space, scratch)?;
-        let pxz = cross_covariance(l, scratch, z0.shape_generic().0, &w);
-        if mean_space.is_none() {
-            // Deviations from zhat: the residuals were taken from the central measurement.
-            for d in scratch.iter_mut() {
-                *d += &e0;
-            }
-            measurement.normalize(&mut zhat);
-            check_model_output("normalized measurement", &zhat, (m, 1), k)?;
-        }
-        let not_pd = FilterError::NotPositiveDefinite {
-            what: "innovation covariance Pz",
-            step: k,
+        let r_chol = self
+            .adaptive
+            .as_ref()
+            .and_then(|_| Covariance::from_symmetric(r.clone(), "R").ok());
+        let (measurement, set) = (&self.measurement, self.sigma.set);
+        let (sigma, scratch) = (&mut self.sigma, &mut self.scratch);
+        let at_weights = |w| {
+            let prior = Prior { x: &x, l, z0: &z0 };
+            candidate(measurement, sigma, scratch, k, prior, lr, z, w)
         };
-        let sz = weighted_factor(&mut self.scratch, scratch, lr, &e0, &w).ok_or(not_pd.clone())?;
-        let nu = residual(measurement, k, z, &zhat)?;
-        let mut s = &sz * sz.transpose();
-        symmetrize(&mut s);
-        let s = Covariance::from_symmetric(s, "innovation covariance Pz").map_err(|e| {
-            let e = if all_finite(&zhat) {
-                e
-            } else {
-                LinalgError::NonFinite {
-                    what: "sigma-point measurements",
-                }
+        // The factor is the Cholesky factor of the prior covariance it stands for.
+        let value = |criterion, c: &Candidate<N, M>| {
+            let parts = CandidateParts {
+                s: &c.s,
+                nu: &c.nu,
+                gain: &c.gain,
+                mean: &c.mean,
             };
-            at(e)
-        })?;
-        // K = Pxz S_z^-T S_z^-1, as the transpose of S_z^-T (S_z^-1 Pxz^T).
-        let gain = sz
-            .solve_lower_triangular(&pxz.transpose())
-            .and_then(|y| sz.tr_solve_lower_triangular(&y))
-            .ok_or(not_pd)?
-            .transpose();
-        let mut mean = &x + &gain * &nu;
-        if let Some(space) = &self.sigma.state_space {
-            space.normalize(&mut mean);
-            check_model_output("state space's normalized mean", &mean, (n, 1), k)?;
-        }
-        // S+ S+^T = sum_i W_i (dx_i - K dz_i)(dx_i - K dz_i)^T + (K sqrt(R))(K sqrt(R))^T, which
-        // equals P- - K Pz K^T for the optimal gain: an orthogonal triangularisation, where
-        // downdating S- by the columns of K S_z subtracts nearly equal numbers whenever the
-        // measurement is much better than the prior (and fails on the test
-        // `sqrt_ill_conditioned`'s first update).
-        let errors = &mut self.sigma.scratch_x;
-        for j in 0..n {
-            let d = l.column(j) * w.spread;
-            errors[j] = &d - &gain * &scratch[j];
-            errors[n + j] = -d - &gain * &scratch[n + j];
-        }
-        let posterior = weighted_factor(
-            &mut self.scratch,
-            errors,
-            &(&gain * lr),
-            &(-(&gain * &e0)),
-            &w,
-        )
-        .ok_or(FilterError::NotPositiveDefinite {
-            what: "posterior covariance factor (central point's downdate)",
-            step: k,
-        })?;
+            criterion_value(
+                criterion,
+                measurement,
+                k,
+                z,
+                parts,
+                Some(l),
+                r_chol.as_ref(),
+            )
+        };
+        let (kappa, c) = choose_kappa(self.adaptive.as_ref(), set, n, k, at_weights, value)?;
         // The statistical linearisation H = Pxz^T P-^-1, through the factor; the model's
         // Jacobian where the factor is singular (as the Ukf).
         let h = l
-            .solve_lower_triangular(&pxz)
+            .solve_lower_triangular(&c.pxz)
             .and_then(|y| l.tr_solve_lower_triangular(&y))
             .map(|ht| ht.transpose())
             .unwrap_or_else(|| self.measurement.jacobian(k, &x));
         check_model_output("measurement Jacobian H", &h, (m, n), k)?;
-        let cov = &posterior * posterior.transpose();
+        let cov = &c.posterior * c.posterior.transpose();
         let record = self.core.commit_update(UpdateParts {
-            zhat,
-            innovation: nu,
+            zhat: c.zhat,
+            innovation: c.nu,
             h,
             r,
-            s,
-            gain,
-            mean,
+            s: c.s,
+            gain: c.gain,
+            mean: c.mean,
             cov,
         })?;
-        self.factor = posterior;
+        self.factor = c.posterior;
+        self.last_kappa = Some(kappa);
         Ok(record)
     }
+}
+
+/// The prior of an update: its mean, factor and central measurement `h(x-)`.
+struct Prior<'a, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    x: &'a OVector<f64, N>,
+    l: &'a OMatrix<f64, N, N>,
+    z0: &'a OVector<f64, M>,
+}
+
+/// The update at one kappa, with its posterior factor.
+struct Candidate<N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    zhat: OVector<f64, M>,
+    nu: OVector<f64, M>,
+    s: Covariance<M>,
+    pxz: OMatrix<f64, N, M>,
+    gain: OMatrix<f64, N, M>,
+    mean: OVector<f64, N>,
+    posterior: OMatrix<f64, N, N>,
+}
+
+/// The square-root unscented update with weights `w`: the measurement's factor `S_z` and the
+/// gain from the sigma measurements, the posterior factor from the sigma points' errors.
+#[allow(clippy::too_many_arguments)]
+fn candidate<N: Dim, M: Dim, H: Measurement<N, M>>(
+    measurement: &H,
+    sigma: &mut Unscented<N, M>,
+    qr_scratch: &mut Vec<f64>,
+    k: usize,
+    prior: Prior<'_, N, M>,
+    lr: &OMatrix<f64, M, M>,
+    z: &OVector<f64, M>,
+    w: SigmaWeights,
+) -> Result<Candidate<N, M>, FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let Prior { x, l, z0 } = prior;
+    let at = |e| FilterError::at(k, e);
+    let (n, m) = (x.nrows(), z0.nrows());
+    let mean_space = sigma.measurement_mean.as_deref();
+    let scratch = &mut sigma.scratch_z;
+    // The sigma measurements' deviations, then the cross covariance, in which the mean
+    // cancels between each pair.
+    let (mut zhat, e0) = measure(measurement, k, x, l, &w, z0, mean_space, scratch)?;
+    let pxz = cross_covariance(l, scratch, z0.shape_generic().0, &w);
+    if mean_space.is_none() {
+        // Deviations from zhat: the residuals were taken from the central measurement.
+        for d in scratch.iter_mut() {
+            *d += &e0;
+        }
+        measurement.normalize(&mut zhat);
+        check_model_output("normalized measurement", &zhat, (m, 1), k)?;
+    }
+    let not_pd = FilterError::NotPositiveDefinite {
+        what: "innovation covariance Pz",
+        step: k,
+    };
+    let sz = weighted_factor(qr_scratch, scratch, lr, &e0, &w).ok_or(not_pd.clone())?;
+    let nu = residual(measurement, k, z, &zhat)?;
+    let mut s = &sz * sz.transpose();
+    symmetrize(&mut s);
+    let s = Covariance::from_symmetric(s, "innovation covariance Pz").map_err(|e| {
+        let e = if all_finite(&zhat) {
+            e
+        } else {
+            LinalgError::NonFinite {
+                what: "sigma-point measurements",
+            }
+        };
+        at(e)
+    })?;
+    // K = Pxz S_z^-T S_z^-1, as the transpose of S_z^-T (S_z^-1 Pxz^T).
+    let gain = sz
+        .solve_lower_triangular(&pxz.transpose())
+        .and_then(|y| sz.tr_solve_lower_triangular(&y))
+        .ok_or(not_pd)?
+        .transpose();
+    let mut mean = x + &gain * &nu;
+    if let Some(space) = &sigma.state_space {
+        space.normalize(&mut mean);
+        check_model_output("state space's normalized mean", &mean, (n, 1), k)?;
+    }
+    // S+ S+^T = sum_i W_i (dx_i - K dz_i)(dx_i - K dz_i)^T + (K sqrt(R))(K sqrt(R))^T, which
+    // equals P- - K Pz K^T for the optimal gain: an orthogonal triangularisation, where
+    // downdating S- by the columns of K S_z subtracts nearly equal numbers whenever the
+    // measurement is much better than the prior (and fails on the test
+    // `sqrt_ill_conditioned`'s first update).
+    let errors = &mut sigma.scratch_x;
+    for j in 0..n {
+        let d = l.column(j) * w.spread;
+        errors[j] = &d - &gain * &scratch[j];
+        errors[n + j] = -d - &gain * &scratch[n + j];
+    }
+    let posterior = weighted_factor(qr_scratch, errors, &(&gain * lr), &(-(&gain * &e0)), &w)
+        .ok_or(FilterError::NotPositiveDefinite {
+            what: "posterior covariance factor (central point's downdate)",
+            step: k,
+        })?;
+    Ok(Candidate {
+        zhat,
+        nu,
+        s,
+        pxz,
+        gain,
+        mean,
+        posterior,
+    })
 }
 
 /// The lower-triangular factor of `W_c0 d0 d0^T + W sum_i d_i d_i^T + L L^T` (the unscented

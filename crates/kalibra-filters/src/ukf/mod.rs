@@ -10,7 +10,8 @@
 //! * `ukf/points.rs`: the sigma points' placement, images, means and cross covariance, shared
 //!   with the square-root UKF ([`SqrtUkf`](crate::SqrtUkf)).
 //! * `ukf/filter.rs`: the filter ([`Ukf`], [`UkfPrediction`]); `ukf/predict.rs` its unscented
-//!   prediction; `ukf/update.rs` its update at one kappa and the choice among a grid's.
+//!   prediction; `ukf/update.rs` its update at one kappa and the choice among a grid's
+//!   (shared with the square-root UKF).
 
 mod filter;
 mod kappa;
@@ -25,3 +26,4 @@ pub(crate) use filter::{Unscented, unscented_builders};
 pub use kappa::{KAPPA_GRID_MAX, KappaCriterion, KappaGrid};
 pub use sigma::{SigmaSet, SigmaWeights};
 pub use space::{AngleComponents, SigmaSpace};
+pub(crate) use update::{CandidateParts, choose_kappa, criterion_value};

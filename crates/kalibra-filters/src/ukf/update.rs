@@ -8,7 +8,7 @@ use kalibra_linalg::{
 use kalibra_models::{Dynamics, Measurement};
 
 use super::points::{cross_covariance, measure, residual};
-use super::{KappaCriterion, SigmaSpace, SigmaWeights, Ukf};
+use super::{KappaCriterion, KappaGrid, SigmaSet, SigmaSpace, SigmaWeights, Ukf};
 use crate::core::{UpdateParts, check_model_output};
 use crate::{Estimate, FilterError, StepRecord};
 
@@ -38,73 +38,31 @@ where
             measurement_mean: self.sigma.measurement_mean.as_deref(),
         };
 
-        let best = match &self.adaptive {
-            None => {
-                let kappa = self.sigma.set.kappa();
-                let w = self.sigma.set.weights(n)?;
-                let c = candidate(
-                    &self.measurement,
-                    &mut self.sigma.scratch_z,
-                    k,
-                    &prior,
-                    &l,
-                    &z0,
-                    &r,
-                    z,
-                    w,
-                    spaces,
-                )?;
-                (kappa, c)
-            }
-            Some((criterion, grid)) => {
-                let r_chol = Covariance::from_symmetric(r.clone(), "R").ok();
-                let mut best: Option<(f64, f64, Candidate<N, M>)> = None;
-                let mut first_error = None;
-                for &kappa in grid.values() {
-                    let w = self.sigma.set.with_kappa(kappa).weights(n)?;
-                    let c = match candidate(
-                        &self.measurement,
-                        &mut self.sigma.scratch_z,
-                        k,
-                        &prior,
-                        &l,
-                        &z0,
-                        &r,
-                        z,
-                        w,
-                        spaces,
-                    ) {
-                        Ok(c) => c,
-                        Err(e) => {
-                            first_error.get_or_insert(e);
-                            continue;
-                        }
-                    };
-                    let value = criterion_value(
-                        *criterion,
-                        &self.measurement,
-                        k,
-                        z,
-                        &c,
-                        &l,
-                        method,
-                        r_chol.as_ref(),
-                    );
-                    if KappaCriterion::improves(value, best.as_ref().map(|(b, _, _)| *b)) {
-                        best = Some((value, kappa, c));
-                    }
-                }
-                match best {
-                    Some((_, kappa, c)) => (kappa, c),
-                    None => {
-                        return Err(first_error.unwrap_or(FilterError::NonFinite {
-                            what: "adaptive kappa criterion (every grid value)",
-                            step: k,
-                        }));
-                    }
-                }
-            }
+        let r_chol = self
+            .adaptive
+            .as_ref()
+            .and_then(|_| Covariance::from_symmetric(r.clone(), "R").ok());
+        let measurement = &self.measurement;
+        let scratch = &mut self.sigma.scratch_z;
+        let at_weights = |w| candidate(measurement, scratch, k, &prior, &l, &z0, &r, z, w, spaces);
+        let l_chol = (method == SqrtMethod::Cholesky).then_some(&l);
+        let value = |criterion, c: &Candidate<N, M>| {
+            let parts = CandidateParts {
+                s: &c.s,
+                nu: &c.nu,
+                gain: &c.gain,
+                mean: &c.mean,
+            };
+            criterion_value(criterion, measurement, k, z, parts, l_chol, r_chol.as_ref())
         };
+        let best = choose_kappa(
+            self.adaptive.as_ref(),
+            self.sigma.set,
+            n,
+            k,
+            at_weights,
+            value,
+        )?;
         let (kappa, c) = best;
         // The statistical linearisation H = Pxz^T P-^-1, through the Cholesky factor.
         let h = match method {
@@ -267,36 +225,87 @@ where
     })
 }
 
+/// What the criteria read of one candidate update: the innovation covariance and the
+/// innovation, the gain and the updated mean.
+pub(crate) struct CandidateParts<'a, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    pub(crate) s: &'a Covariance<M>,
+    pub(crate) nu: &'a OVector<f64, M>,
+    pub(crate) gain: &'a OMatrix<f64, N, M>,
+    pub(crate) mean: &'a OVector<f64, N>,
+}
+
+/// The update at the set's own kappa, or with `adaptive` the grid's candidate whose
+/// `value` is smallest ([`KappaCriterion::improves`]), with its kappa: `candidate` computes
+/// the update at given weights. The scalar [`Ukf`] and the [`SqrtUkf`](crate::SqrtUkf) both
+/// choose here, so they choose alike (`tests/sqrt_ukf.rs`).
+///
+/// # Errors
+/// The candidate's error without `adaptive`; with it, the first candidate's error when no
+/// kappa gave a finite criterion, or [`FilterError::NonFinite`] when every candidate
+/// succeeded but none had a finite criterion.
+pub(crate) fn choose_kappa<C>(
+    adaptive: Option<&(KappaCriterion, KappaGrid)>,
+    set: SigmaSet,
+    n: usize,
+    k: usize,
+    mut candidate: impl FnMut(SigmaWeights) -> Result<C, FilterError>,
+    value: impl Fn(KappaCriterion, &C) -> f64,
+) -> Result<(f64, C), FilterError> {
+    let Some((criterion, grid)) = adaptive else {
+        return Ok((set.kappa(), candidate(set.weights(n)?)?));
+    };
+    let mut best: Option<(f64, f64, C)> = None;
+    let mut first_error = None;
+    for &kappa in grid.values() {
+        let c = match candidate(set.with_kappa(kappa).weights(n)?) {
+            Ok(c) => c,
+            Err(e) => {
+                first_error.get_or_insert(e);
+                continue;
+            }
+        };
+        let v = value(*criterion, &c);
+        if KappaCriterion::improves(v, best.as_ref().map(|(b, _, _)| *b)) {
+            best = Some((v, kappa, c));
+        }
+    }
+    match best {
+        Some((_, kappa, c)) => Ok((kappa, c)),
+        None => Err(first_error.unwrap_or(FilterError::NonFinite {
+            what: "adaptive kappa criterion (every grid value)",
+            step: k,
+        })),
+    }
+}
+
 /// The value of `criterion` for one candidate (smaller is better); NaN when it cannot be
-/// evaluated (a singular `P-` or `R` for the posterior criteria).
-#[allow(clippy::too_many_arguments)]
-fn criterion_value<N: Dim, M: Dim, H: Measurement<N, M>>(
+/// evaluated (no Cholesky factor `l` of `P-`, or a singular `R`, for the posterior criteria).
+pub(crate) fn criterion_value<N: Dim, M: Dim, H: Measurement<N, M>>(
     criterion: KappaCriterion,
     measurement: &H,
     k: usize,
     z: &OVector<f64, M>,
-    c: &Candidate<N, M>,
-    l: &OMatrix<f64, N, N>,
-    method: SqrtMethod,
+    c: CandidateParts<'_, N, M>,
+    l: Option<&OMatrix<f64, N, N>>,
     r: Option<&Covariance<M>>,
 ) -> f64
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    let nis = quad_or_non_finite(&c.s, &c.nu);
+    let nis = quad_or_non_finite(c.s, c.nu);
     criterion.value(c.s.log_det(), nis, || {
         // nu^T U nu = (K nu)^T P-^-1 (K nu) = |L^-1 K nu|^2: the prior's density at x+.
-        let step = &c.gain * &c.nu;
-        let prior_term = match method {
-            SqrtMethod::Cholesky => l
-                .solve_lower_triangular(&step)
-                .map_or(f64::NAN, |y| y.norm_squared()),
-            _ => f64::NAN,
-        };
+        let step = c.gain * c.nu;
+        let prior_term = l
+            .and_then(|l| l.solve_lower_triangular(&step))
+            .map_or(f64::NAN, |y| y.norm_squared());
         // A model answering with the wrong length here makes the criterion NaN (this kappa
         // never wins), as a failed factorisation does; the update's own checks caught the
         // others.
-        let zc = measurement.measure(k, &c.mean);
+        let zc = measurement.measure(k, c.mean);
         if zc.nrows() != z.nrows() {
             return (f64::NAN, f64::NAN);
         }
