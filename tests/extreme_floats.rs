@@ -691,8 +691,8 @@ proptest! {
 proptest! {
     #![proptest_config(config())]
 
-    /// The estimators on a walk at scale `2^k` (a finite answer exists; EM's multipliers are
-    /// those of the unscaled walk) and on measurements anywhere in f64's range, with extreme
+    /// The estimators on a walk at scale `2^k` (a finite answer exists; EM's and maximum
+    /// likelihood's multipliers are those of the unscaled walk) and on measurements anywhere in f64's range, with extreme
     /// tolerances, starts, gains and grids: every `Ok` holds finite numbers (but the
     /// documented infinite interval ends of maximum likelihood), or a typed error.
     #[test]
@@ -717,6 +717,23 @@ proptest! {
         let ek = ek.unwrap();
         for (a, b) in e0.values.iter().zip(&ek.values) {
             prop_assert!((a - b).abs() <= 1e-9 * a.abs(), "EM at 2^{k}: {b} vs {a}");
+        }
+        // So is maximum likelihood, to the optimiser's tolerance: the objectives differ by a
+        // constant, which changes the finite differences' rounding only.
+        let ml = MaximumLikelihood::new();
+        static PLAIN_ML: std::sync::OnceLock<kalibra::tune::MlEstimate> = std::sync::OnceLock::new();
+        let m0 = PLAIN_ML.get_or_init(|| ml.estimate(&plain).unwrap());
+        let mk = ml.estimate(&scaled);
+        prop_assert!(mk.as_ref().is_ok_and(ml_finite), "{mk:?}");
+        let mk = mk.unwrap();
+        let shift = 16.0 * f64::from(k) * std::f64::consts::LN_2;
+        let want = m0.log_likelihood - shift;
+        prop_assert!((mk.log_likelihood - want).abs() <= 1e-6 * (want.abs() + 1.0), "ML at 2^{k}: {} vs {want}", mk.log_likelihood);
+        for (i, (a, b)) in m0.parameters.iter().zip(&mk.parameters).enumerate() {
+            // A parameter run to a bound sits anywhere on its flat likelihood.
+            if a.at_bound.is_none() && b.at_bound.is_none() {
+                prop_assert!((m0.theta[i] - mk.theta[i]).abs() < 1e-3, "ML at 2^{k}: {} vs {}", mk.theta, m0.theta);
+            }
         }
         for problem in std::iter::once(&scaled).chain(wild.as_ref()) {
             if let Ok(em) = Em::new().tolerance(tolerance.abs()).map(|e| e.max_iterations(20)) {
