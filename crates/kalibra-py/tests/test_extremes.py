@@ -1,7 +1,6 @@
 """Extreme but finite inputs come back promptly, as an answer or as the library's typed error
 in a KalibraError with a clear message: values of opposite signs near the float64 limit (in a
-log and in the measurements of a Q sweep), and
-counts at 2**64 - 1."""
+log and in the measurements of a Q sweep), and counts at 2**64 - 1."""
 
 import time
 
