@@ -10,7 +10,7 @@
 //! `every_size_function_is_listed` checks [`SIZE_FUNCTIONS`] against the public functions the
 //! source scan (`extreme/mod.rs`) finds taking a `usize`.
 //!
-//! Size: the four extremes in every position of all 90 driven functions (16 calls each),
+//! Size: the four extremes in every position of all 97 driven functions (16 calls each),
 //! and `CASES` (64) cases of the mixed property; `PROPTEST_CASES` overrides the count.
 
 mod extreme;
@@ -38,7 +38,10 @@ use kalibra::models::{
     check_dynamics_jacobian, check_measurement_jacobian, simulate, simulate_until,
 };
 use kalibra::sim::{MonteCarlo, Shard};
-use kalibra::tune::{Tuning, p_ad, sweep, two_point_init};
+use kalibra::tune::{
+    Als, CovarianceForm, Em, MaximumLikelihood, NoiseProblem, Parametrisation, Tuning, p_ad, sweep,
+    two_point_init,
+};
 use proptest::prelude::*;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
@@ -815,7 +818,90 @@ fn calls() -> Vec<(&'static str, Option<&'static str>, Call)> {
                 text(p_ad(&f, &h, &states, a))
             }),
         ),
+        // kalibra-tune's noise estimation, on a scalar random walk of 16 steps.
+        (
+            "Als::lags",
+            None,
+            c(move |a, _| text(Als::new().lags(a).and_then(|als| als.estimate(&walk())))),
+        ),
+        (
+            "Als::skip",
+            None,
+            c(move |a, _| text(Als::new().skip(a).estimate(&walk()))),
+        ),
+        (
+            "CovarianceForm::fix",
+            None,
+            c(|a, b| {
+                let form = CovarianceForm::full(DMatrix::identity(2, 2)).fix(a, b);
+                text(Parametrisation::new(
+                    None,
+                    form,
+                    CovarianceForm::fixed(DMatrix::identity(2, 2)),
+                ))
+            }),
+        ),
+        (
+            "CovarianceForm::is_fixed",
+            None,
+            c(|a, b| {
+                text(
+                    CovarianceForm::diagonal(DMatrix::identity(2, 2))
+                        .fix(a, a)
+                        .is_fixed(a, b),
+                )
+            }),
+        ),
+        (
+            "Em::exact_iterations",
+            None,
+            c(move |a, _| text(Em::new().exact_iterations(a).estimate(&walk()))),
+        ),
+        (
+            "Em::max_iterations",
+            None,
+            c(move |a, _| text(Em::new().max_iterations(a).estimate(&walk()))),
+        ),
+        (
+            "MaximumLikelihood::max_iterations",
+            None,
+            c(move |a, _| {
+                text(
+                    MaximumLikelihood::new()
+                        .max_iterations(a)
+                        .estimate(&walk())
+                        .map(|e| e.theta),
+                )
+            }),
+        ),
     ]
+}
+
+/// A scalar random walk seen directly, 16 steps, both noise multipliers free.
+fn walk() -> NoiseProblem {
+    let one = |v: f64| DMatrix::from_element(1, 1, v);
+    let noise = Parametrisation::new(
+        None,
+        CovarianceForm::scaled(one(0.2)),
+        CovarianceForm::scaled(one(0.5)),
+    )
+    .unwrap();
+    let run = (0..16)
+        .map(|k| {
+            let k = k as f64;
+            Some(DVector::from_element(1, 0.1 * k + (0.7 * k).sin()))
+        })
+        .collect();
+    NoiseProblem::new(
+        one(1.0),
+        one(1.0),
+        DVector::zeros(1),
+        one(1.0),
+        Start::PredictFirst,
+        noise,
+        vec![run],
+    )
+    .unwrap()
 }
 
 /// Silences the default panic message of the calls' own threads (named `call ...`): their
@@ -936,10 +1022,6 @@ const STUDY: &str = "a published study's scenario, run with the paper's fixed va
 const IO: &str = "kalibra-io reader plumbing (shapes and columns from files): \
     crates/kalibra-io/tests/readers_fuzz.rs and errors.rs feed it hostile files, and \
     log_from_arrays checks its shape product with checked_mul before anything is allocated";
-
-const TUNE_PENDING: &str = "kalibra-tune's noise estimation (parametrisation, ML, EM, ALS, the \
-    per-parameter sweep): not yet driven with extreme values, a known gap; its own tests cover \
-    ordinary values";
 
 /// Every public function of the library crates that takes a `usize`, with how it is covered.
 pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
@@ -1117,16 +1199,13 @@ pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
     ("replay", Cover::Reason(STUDY)),
     ("table_p", Cover::Reason(STUDY)),
     ("kappa_grid", Cover::Reason(STUDY)),
-    ("Als::lags", Cover::Reason(TUNE_PENDING)),
-    ("Als::skip", Cover::Reason(TUNE_PENDING)),
-    ("CovarianceForm::fix", Cover::Reason(TUNE_PENDING)),
-    ("CovarianceForm::is_fixed", Cover::Reason(TUNE_PENDING)),
-    ("Em::exact_iterations", Cover::Reason(TUNE_PENDING)),
-    ("Em::max_iterations", Cover::Reason(TUNE_PENDING)),
-    (
-        "MaximumLikelihood::max_iterations",
-        Cover::Reason(TUNE_PENDING),
-    ),
+    ("Als::lags", Cover::Driven),
+    ("Als::skip", Cover::Driven),
+    ("CovarianceForm::fix", Cover::Driven),
+    ("CovarianceForm::is_fixed", Cover::Driven),
+    ("Em::exact_iterations", Cover::Driven),
+    ("Em::max_iterations", Cover::Driven),
+    ("MaximumLikelihood::max_iterations", Cover::Driven),
     (
         "in_pool",
         Cover::Reason("the thread pool of `sweep`, driven here through `sweep`'s thread count"),

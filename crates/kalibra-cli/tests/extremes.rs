@@ -69,3 +69,44 @@ fn extreme_values_and_counts_give_clear_errors() {
         "{err}"
     );
 }
+
+/// `kalibra tune` on measurements of opposite signs near `f64::MAX` (each finite, the filter's
+/// innovation between them not) and with the largest thread count: the library's typed
+/// errors in one clear message, at once.
+#[test]
+fn tune_extremes_give_clear_errors() {
+    let dir = scratch("tune-extremes");
+    let meas = dir.join("measurements.csv");
+    std::fs::write(&meas, "step,z_0\n0,1e308\n1,-1.5e308\n2,0\n3,0.5\n").unwrap();
+    let out = dir.join("report");
+    let model = common::fixture("tune_model.toml");
+    let max = u64::MAX.to_string();
+    let cases: [(&[&str], &str); 2] = [
+        // The filter's own error, with the exponent and the step (it was cut to
+        // "filter at p = -6" before the sweep's errors carried their source).
+        (&[], "filter at p = -6: innovation is not finite at step 2"),
+        (&["--threads", max.as_str()], "more than MAX_THREADS (4096)"),
+    ];
+    for (extra, needle) in cases {
+        let mut args = vec![
+            "tune",
+            model.to_str().unwrap(),
+            meas.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let start = Instant::now();
+        let run = kalibra(&args);
+        assert!(start.elapsed() < Duration::from_secs(30), "{extra:?}");
+        let err = text(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{extra:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(
+            !err.contains("panicked") && !err.contains("capacity"),
+            "{err}"
+        );
+        assert!(err.contains(needle), "`{needle}` not in: {err}");
+        assert!(!out.exists(), "no report after a failed run");
+    }
+}

@@ -254,7 +254,10 @@ impl ManoeuvreProfile {
         &self.parts
     }
 
-    /// The acceleration at time `t`.
+    /// The acceleration at time `t`: plain arithmetic, infinite only when the active pieces'
+    /// finite accelerations sum beyond f64 (pieces near `f64::MAX` that overlap). Its caller,
+    /// [`ManoeuvringTarget::truth_from_noise`], checks every sample it builds and returns
+    /// [`ModelError::NonFinite`] naming the step.
     pub fn acceleration(&self, t: f64) -> f64 {
         self.parts.iter().map(|p| p.acceleration(t)).sum()
     }
@@ -263,17 +266,21 @@ impl ManoeuvreProfile {
     /// sweep.
     ///
     /// # Errors
-    /// [`ModelError::InvalidParameter`] unless `factor` is finite.
+    /// [`ModelError::InvalidParameter`] unless `factor` is finite and every scaled
+    /// acceleration is (a product beyond f64 is refused, naming the factor).
     pub fn scaled(&self, factor: f64) -> Result<Self, ModelError> {
-        if !factor.is_finite() {
+        let parts: Vec<Manoeuvre> = self.parts.iter().map(|p| p.scaled(factor)).collect();
+        let finite = parts.iter().all(|p| match *p {
+            Manoeuvre::Step { acceleration, .. } => acceleration.is_finite(),
+            Manoeuvre::Sine { amplitude, .. } => amplitude.is_finite(),
+        });
+        if !(factor.is_finite() && finite) {
             return Err(ModelError::InvalidParameter {
                 name: "manoeuvre scale",
                 value: factor,
             });
         }
-        Ok(Self {
-            parts: self.parts.iter().map(|p| p.scaled(factor)).collect(),
-        })
+        Ok(Self { parts })
     }
 }
 
@@ -420,7 +427,8 @@ impl ManoeuvringTarget {
     ///
     /// # Errors
     /// [`ModelError::DimensionMismatch`] unless there are `K + 1` noises;
-    /// [`ModelError::NonFinite`] for a non-finite noise.
+    /// [`ModelError::NonFinite`] for a non-finite noise, or a sample whose angle, rate or
+    /// acceleration leaves f64 (finite parameters near its limits), naming the step.
     pub fn truth_from_noise(&self, noise: &[f64]) -> Result<Vec<Vector3<f64>>, ModelError> {
         let samples = self.steps() + 1;
         if noise.len() != samples {
@@ -441,7 +449,14 @@ impl ManoeuvringTarget {
         let (mut theta, mut rate) = (self.x0[0], self.x0[1]);
         for (k, n) in noise.iter().enumerate() {
             let a = self.x0[2] + self.profile.acceleration(k as f64 * dt) + self.sigma_input * n;
-            truth.push(Vector3::new(theta, rate, a));
+            let sample = Vector3::new(theta, rate, a);
+            if !sample.iter().all(|v| v.is_finite()) {
+                return Err(ModelError::NonFinite {
+                    what: "truth (angle, rate or acceleration beyond f64)",
+                    step: k,
+                });
+            }
+            truth.push(sample);
             theta += rate * dt + 0.5 * a * dt * dt;
             rate += a * dt;
         }
@@ -449,13 +464,15 @@ impl ManoeuvringTarget {
     }
 
     /// A truth drawn from `rng`: `K + 1` standard normals, in sample order.
-    pub fn truth<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<Vector3<f64>> {
+    ///
+    /// # Errors
+    /// [`ModelError::NonFinite`] when a sample leaves f64, as
+    /// [`ManoeuvringTarget::truth_from_noise`] (never for the papers' values).
+    pub fn truth<R: Rng + ?Sized>(&self, rng: &mut R) -> Result<Vec<Vector3<f64>>, ModelError> {
         let noise: Vec<f64> = (0..=self.steps())
             .map(|_| StandardNormal.sample(rng))
             .collect();
-        // The noises are finite and of the right length by construction.
         self.truth_from_noise(&noise)
-            .unwrap_or_else(|_| unreachable!("K + 1 finite draws"))
     }
 
     /// Angle measurements `z_k = theta_k + sqrt(r) n_k` of samples `k = 1 ..= K` (the prior
@@ -464,7 +481,8 @@ impl ManoeuvringTarget {
     /// # Errors
     /// [`ModelError::DimensionMismatch`] unless `noise.len() == truth.len() - 1`;
     /// [`ModelError::InvalidParameter`] unless `r` is finite and non-negative;
-    /// [`ModelError::NonFinite`] for a non-finite noise (`step` is its index in `noise`).
+    /// [`ModelError::NonFinite`] for a non-finite noise or truth, or a measurement beyond f64
+    /// (`step` is its index in `noise`).
     pub fn measurements_from_noise(
         truth: &[Vector3<f64>],
         r: f64,
@@ -491,11 +509,19 @@ impl ManoeuvringTarget {
             });
         }
         let sigma = r.sqrt();
-        Ok(truth[1..]
+        let z: Vec<Vector1<f64>> = truth[1..]
             .iter()
             .zip(noise)
             .map(|(x, n)| Vector1::new(x[0] + sigma * n))
-            .collect())
+            .collect();
+        // A truth near f64::MAX plus its noise, or a non-finite truth, is refused by step.
+        if let Some(step) = z.iter().position(|v| !v[0].is_finite()) {
+            return Err(ModelError::NonFinite {
+                what: "measurement (truth plus noise beyond f64)",
+                step,
+            });
+        }
+        Ok(z)
     }
 
     /// Angle measurements of samples `1 ..= K` drawn from `rng` (one standard normal each, in
@@ -615,8 +641,8 @@ mod tests {
     fn draws_are_seeded_and_sized() {
         let target = target();
         assert_eq!(target.steps(), 100);
-        let a = target.truth(&mut ChaCha8Rng::seed_from_u64(1));
-        let b = target.truth(&mut ChaCha8Rng::seed_from_u64(1));
+        let a = target.truth(&mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        let b = target.truth(&mut ChaCha8Rng::seed_from_u64(1)).unwrap();
         assert_eq!(a, b);
         assert_eq!(a.len(), 101);
         let z =

@@ -62,19 +62,30 @@ impl AirDensity {
     }
 
     /// `rho(h)`.
+    ///
+    /// Plain arithmetic for speed on the filters' hot path: infinite or NaN only for states
+    /// far outside the physical range (speeds near 1e150 m/s, altitudes below -6e6 m). The
+    /// filters that evaluate it through [`Dynamics`] check every output and return
+    /// `FilterError::NonFinite` naming the step (`tests/extreme_floats.rs` `models_paper`).
     pub fn at(&self, h: f64) -> f64 {
         let (c1, c2) = self.coefficients(h);
         c1 * (-c2 * h).exp()
     }
 
     /// `d rho / d h` on the piece containing `h`.
+    ///
+    /// Plain arithmetic for speed on the filters' hot path: infinite or NaN only for states
+    /// far outside the physical range (speeds near 1e150 m/s, altitudes below -6e6 m). The
+    /// filters that evaluate it through [`Dynamics`] check every output and return
+    /// `FilterError::NonFinite` naming the step (`tests/extreme_floats.rs` `models_paper`).
     pub fn derivative(&self, h: f64) -> f64 {
         let (c1, c2) = self.coefficients(h);
         -c2 * c1 * (-c2 * h).exp()
     }
 }
 
-/// `F1`, the constant-velocity part of the transition.
+/// `F1`, the constant-velocity part of the transition: finite for every finite `t` (its
+/// entries are 0, 1 and `t`).
 pub fn ballistic_f1(t: f64) -> Matrix4<f64> {
     Matrix4::new(
         1.0, t, 0.0, 0.0, //
@@ -84,7 +95,8 @@ pub fn ballistic_f1(t: f64) -> Matrix4<f64> {
     )
 }
 
-/// `G`, which maps an acceleration `[a1, a2]` into the state over one period.
+/// `G`, which maps an acceleration `[a1, a2]` into the state over one period: infinite for
+/// `t` above 1.9e154 (`t^2 / 2`), which [`Ballistic::new`] refuses as a period.
 pub fn ballistic_g(t: f64) -> SMatrix<f64, 4, 2> {
     SMatrix::<f64, 4, 2>::new(0.5 * t * t, 0.0, t, 0.0, 0.0, 0.5 * t * t, 0.0, t)
 }
@@ -112,13 +124,28 @@ impl Params {
         }
         let q = PsdMatrix::named(q, "process noise covariance Q")?;
         let gm = ballistic_g(t);
+        // `T^2 / 2` beyond f64 (T above 1.9e154 s), or `g T^2 / 2`: refused here, so that the
+        // model's constant parts are finite.
+        if !gm.iter().all(|v| v.is_finite()) {
+            return Err(ModelError::InvalidParameter {
+                name: "sampling period T",
+                value: t,
+            });
+        }
+        let input = gm * Vector2::new(0.0, -g);
+        if !input.iter().all(|v| v.is_finite()) {
+            return Err(ModelError::InvalidParameter {
+                name: "gravity g",
+                value: g,
+            });
+        }
         Ok(Self {
             t,
             g,
             q,
             f1: ballistic_f1(t),
             gm,
-            input: gm * Vector2::new(0.0, -g),
+            input,
         })
     }
 }
@@ -192,7 +219,9 @@ impl Ballistic {
     ///
     /// # Errors
     /// [`ModelError::InvalidParameter`] for a non-positive `period` or `beta` or a non-finite
-    /// `gravity`; [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
+    /// `gravity`, a `period` (gravity) whose `G` (`G u`) leaves f64, or a `beta` so small that
+    /// `gravity / (2 beta)` does;
+    /// [`ModelError::Linalg`] if `q` is not symmetric positive semi-definite.
     pub fn new(params: BallisticParams, q: Matrix4<f64>) -> Result<Self, ModelError> {
         let BallisticParams {
             period,
@@ -200,8 +229,16 @@ impl Ballistic {
             gravity,
         } = params;
         positive("ballistic coefficient beta", beta)?;
+        let params = Params::new(period, gravity, q)?;
+        // The drag's constant `g / (2 beta)`: a subnormal beta would make every drag infinite.
+        if !(gravity / (2.0 * beta)).is_finite() {
+            return Err(ModelError::InvalidParameter {
+                name: "ballistic coefficient beta",
+                value: beta,
+            });
+        }
         Ok(Self {
-            params: Params::new(period, gravity, q)?,
+            params,
             beta,
             density: AirDensity::farina(),
         })
@@ -251,6 +288,11 @@ impl Ballistic {
     }
 
     /// The drag acceleration `fkk(x)` (m/s^2).
+    ///
+    /// Plain arithmetic for speed on the filters' hot path: infinite or NaN only for states
+    /// far outside the physical range (speeds near 1e150 m/s, altitudes below -6e6 m). The
+    /// filters that evaluate it through [`Dynamics`] check every output and return
+    /// `FilterError::NonFinite` naming the step (`tests/extreme_floats.rs` `models_paper`).
     pub fn drag(&self, x: &Vector4<f64>) -> Vector2<f64> {
         let vel = Vector2::new(x[1], x[3]);
         let v = vel.norm();
@@ -258,6 +300,11 @@ impl Ballistic {
     }
 
     /// `d fkk / d x` (2 x 4).
+    ///
+    /// Plain arithmetic for speed on the filters' hot path: infinite or NaN only for states
+    /// far outside the physical range (speeds near 1e150 m/s, altitudes below -6e6 m). The
+    /// filters that evaluate it through [`Dynamics`] check every output and return
+    /// `FilterError::NonFinite` naming the step (`tests/extreme_floats.rs` `models_paper`).
     pub fn drag_jacobian(&self, x: &Vector4<f64>) -> SMatrix<f64, 2, 4> {
         let (v1, v2) = (x[1], x[3]);
         let v = (v1 * v1 + v2 * v2).sqrt();
@@ -504,6 +551,11 @@ impl ConvertedPosition {
     }
 
     /// `RA` at range `r` and elevation `eps`.
+    ///
+    /// Plain arithmetic: infinite for ranges whose `(r se)^2` leaves f64 (`r` above about
+    /// `1e154 / se`). A filter evaluates it through [`Measurement::noise_cov`] at its prior
+    /// and returns `FilterError::NonFinite` naming the step for a non-finite `R`
+    /// (`tests/extreme_floats.rs` `models_paper`).
     pub fn covariance(&self, r: f64, eps: f64) -> Matrix2<f64> {
         let (s, c) = eps.sin_cos();
         let sr2 = self.sigma_range * self.sigma_range;

@@ -174,7 +174,7 @@ fn the_trace_metric_unit_case_holds() {
 fn ekf_equals_kf_on_the_angle_model() {
     let target = paper002::target();
     let mut rng = kalibra_sim::MonteCarlo::new(1, 11).rng(0);
-    let truth = target.truth(&mut rng);
+    let truth = target.truth(&mut rng).unwrap();
     let z: Vec<Vector1<f64>> = ManoeuvringTarget::measurements(&truth, R, &mut rng).unwrap();
     for set in &Q_SETS {
         let model = AngularTarget::diagonal(target.dt(), set.diag).unwrap();

@@ -2,7 +2,7 @@
 //! filter's innovations.
 
 use kalibra_filters::{FilterError, Start, steady_state};
-use kalibra_linalg::{DMatrix, DVector, spectral_radius};
+use kalibra_linalg::{DMatrix, DVector, ldexp, spectral_radius};
 
 use crate::em::{Structure, natural_value, structure};
 use crate::{NoiseMatrices, NoiseProblem, Parameter};
@@ -209,6 +209,11 @@ impl Als {
             .iter()
             .map(|p| natural_value(p, qw_form, r_form, &out.matrices.qw, &out.matrices.r))
             .collect();
+        if !out.values.iter().all(|v| v.is_finite()) {
+            return Err(AlsError::NonFinite {
+                what: "multiplier (a finite matrix over a tiny nominal one)",
+            });
+        }
         Ok(out)
     }
 
@@ -250,8 +255,8 @@ impl Als {
         let skip = self.skip.unwrap_or(self.lags);
         let sample = autocovariances(model, &gain, runs, skip, self.lags)?;
 
-        let qw_basis = Basis::of(qw.0, qw.1, "Qw")?;
-        let r_basis = Basis::of(r.0, r.1, "R")?;
+        let mut qw_basis = Basis::of(qw.0, qw.1, "Qw")?;
+        let mut r_basis = Basis::of(r.0, r.1, "R")?;
         let response = Response::new(model, &g, &gain, &closed, self.lags);
         let rows = self.lags * m * m;
         let free = qw_basis.matrices.len() + r_basis.matrices.len();
@@ -264,6 +269,30 @@ impl Als {
         }
         let target =
             &sample - response.of_qw(&qw_basis.constant) - response.of_r(&r_basis.constant);
+        // Checked before solving: the projected iterations would otherwise run to their cap
+        // on NaN.
+        if !design.iter().all(|v| v.is_finite()) {
+            return Err(AlsError::NonFinite {
+                what: "autocovariance model (the gain's error dynamics overflow)",
+            });
+        }
+        if !target.iter().all(|v| v.is_finite()) {
+            return Err(AlsError::NonFinite {
+                what: "least-squares target (the fixed matrices' autocovariances)",
+            });
+        }
+        // The solution is linear in the target and the forms' fixed parts: far from 1 (the
+        // autocovariances of measurements near 1e150), it is solved at a power-of-two scale
+        // near 1, so that no sum of squares inside overflows or underflows, and scaled back
+        // exactly; ordinary scales are solved as they are.
+        let shift = crate::noise::max_exponent_of(target.as_slice())
+            .filter(|e| e.abs() > 256)
+            .unwrap_or(0);
+        let target = target.map(|v| ldexp(v, -shift));
+        for basis in [&mut qw_basis, &mut r_basis] {
+            basis.constant = basis.constant.map(|v| ldexp(v, -shift));
+        }
+        let back = |v: f64| ldexp(v, shift);
 
         let (theta, rank, condition) = minimum_norm(&design, &target);
         let split = qw_basis.matrices.len();
@@ -283,16 +312,30 @@ impl Als {
             }
             let mut clipped = theta.clone();
             project_both(&mut clipped, &qw_basis, &r_basis);
-            let clipped_residual = (&design * &clipped - &target).norm();
+            let clipped_residual = back((&design * &clipped - &target).norm());
             let solved = projected(&design, &target, clipped, &qw_basis, &r_basis);
             (solved, true, Some(clipped_residual))
         };
-        let residual = (&design * &theta - &target).norm();
-        let qw_hat = qw_basis.matrix(&theta.rows(0, split).into_owned());
-        let r_hat = r_basis.matrix(&theta.rows(split, free - split).into_owned());
+        let residual = back((&design * &theta - &target).norm());
+        let qw_hat = qw_basis
+            .matrix(&theta.rows(0, split).into_owned())
+            .map(back);
+        let r_hat = r_basis
+            .matrix(&theta.rows(split, free - split).into_owned())
+            .map(back);
+        let q_hat = &g * &qw_hat * g.transpose();
+        if !(qw_hat.iter().chain(r_hat.iter()).chain(q_hat.iter()))
+            .chain([&residual])
+            .chain(clipped_residual.iter())
+            .all(|v| v.is_finite())
+        {
+            return Err(AlsError::NonFinite {
+                what: "estimate (its Qw, R, Q or residual leave the range of f64)",
+            });
+        }
         Ok(AlsEstimate {
             matrices: NoiseMatrices {
-                q: &g * &qw_hat * g.transpose(),
+                q: q_hat,
                 qw: qw_hat,
                 r: r_hat,
             },
@@ -382,9 +425,24 @@ fn autocovariances(
     lags: usize,
 ) -> Result<DVector<f64>, AlsError> {
     let m = model.h.nrows();
-    let mut sums = vec![DMatrix::<f64>::zeros(m, m); lags];
-    let mut counts = vec![0usize; lags];
-    let mut longest = 0;
+    // The counts are checked before anything is reserved by `lags` (which may be any usize).
+    for (run, zs) in runs.iter().enumerate() {
+        if let Some(step) = zs.iter().position(Option::is_none) {
+            return Err(AlsError::MissingMeasurement { run, step });
+        }
+    }
+    let longest = runs
+        .iter()
+        .map(|zs| zs.len().saturating_sub(skip))
+        .max()
+        .unwrap_or(0);
+    if longest <= lags {
+        return Err(AlsError::TooShort {
+            found: longest,
+            lags,
+        });
+    }
+    let mut all = Vec::with_capacity(runs.len());
     for (run, zs) in runs.iter().enumerate() {
         let mut x = match model.start {
             Start::UpdateFirst => model.x0.clone(),
@@ -401,23 +459,32 @@ fn autocovariances(
                 innovations.push(y);
             }
         }
-        longest = longest.max(innovations.len());
-        for j in 0..lags.min(innovations.len()) {
-            for k in 0..innovations.len() - j {
-                sums[j] += &innovations[k + j] * innovations[k].transpose();
-            }
-            counts[j] += innovations.len() - j;
-        }
+        all.push(innovations);
     }
-    if longest <= lags {
-        return Err(AlsError::TooShort {
-            found: longest,
-            lags,
-        });
+    // The products are summed at a power-of-two scale that brings the largest innovation near
+    // 1 and scaled back after the division by the count: exact, and no sum overflows whose
+    // mean is finite (innovations near 1e150 have autocovariances near 1e300).
+    let shift = crate::noise::max_exponent_of(
+        &all.iter().flatten().map(|y| y.amax()).collect::<Vec<f64>>(),
+    )
+    .unwrap_or(0);
+    let mut sums = vec![DMatrix::<f64>::zeros(m, m); lags];
+    let mut counts = vec![0usize; lags];
+    for innovations in &all {
+        let scaled: Vec<DVector<f64>> = innovations
+            .iter()
+            .map(|y| y.map(|v| ldexp(v, -shift)))
+            .collect();
+        for j in 0..lags.min(scaled.len()) {
+            for k in 0..scaled.len() - j {
+                sums[j] += &scaled[k + j] * scaled[k].transpose();
+            }
+            counts[j] += scaled.len() - j;
+        }
     }
     let mut out = DVector::zeros(lags * m * m);
     for (j, (sum, count)) in sums.iter().zip(&counts).enumerate() {
-        let c = sum / *count as f64;
+        let c = (sum / *count as f64).map(|v| ldexp(v, 2 * shift));
         out.rows_mut(j * m * m, m * m).copy_from_slice(c.as_slice());
     }
     if !out.iter().all(|v| v.is_finite()) {

@@ -145,8 +145,12 @@ pub enum NoiseError {
         /// The values given.
         found: usize,
     },
-    /// A parameter vector with NaN or an infinity, or one whose matrices overflow.
-    #[error("parameter {index} of the vector is not finite or gives a non-finite matrix")]
+    /// A parameter vector with NaN or an infinity, or one whose matrices, natural values or
+    /// their derivatives leave the range of f64.
+    #[error(
+        "parameter {index} of the vector is not finite, or its matrices or natural values \
+         leave the range of f64"
+    )]
     NonFiniteTheta {
         /// The first offending parameter.
         index: usize,

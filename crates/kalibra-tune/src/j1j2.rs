@@ -66,6 +66,15 @@ pub enum SweepError {
         /// What failed.
         source: FilterError,
     },
+    /// The parameter's value at a point (its estimate times `10^p`, or a scaled form's
+    /// multiplier of the estimate) is beyond f64.
+    #[error("sweep {parameter} at p = {p}: its value leaves the range of f64")]
+    OutOfRange {
+        /// The parameter swept.
+        parameter: String,
+        /// The exponent (NaN: the estimate's own multiplier).
+        p: f64,
+    },
     /// The metrics of an update failed at a point.
     #[error("sweep {parameter} at p = {p}: {source}")]
     Metrics {
@@ -225,7 +234,7 @@ impl ParameterSweep {
     /// # Errors
     /// [`SweepError::Shape`] when `estimate` does not fit the problem; [`SweepError::Model`],
     /// [`SweepError::Filter`], [`SweepError::Metrics`] naming the parameter and the point
-    /// that failed.
+    /// that failed; [`SweepError::OutOfRange`] for a parameter value beyond f64.
     pub fn sweep(
         &self,
         problem: &NoiseProblem,
@@ -264,8 +273,15 @@ impl ParameterSweep {
         };
         let value = match parameter.entry {
             Some((i, j)) => base[(i, j)],
-            None => base.dot(form.value()) / form.value().norm_squared(),
+            None => crate::noise::multiplier(base, form.value()),
         };
+        let out_of_range = |p: f64| SweepError::OutOfRange {
+            parameter: parameter.name.clone(),
+            p,
+        };
+        if !value.is_finite() {
+            return Err(out_of_range(f64::NAN));
+        }
         if parameter.kind == ParameterKind::Covariance {
             return Ok(ParameterCurve {
                 parameter,
@@ -288,12 +304,13 @@ impl ParameterSweep {
                 NoiseMatrix::R => (&estimate.qw, &scaled),
             };
             let (j1, j2) = j_at(problem, qw, r, &parameter.name, p)?;
-            points.push(CurvePoint {
-                p,
-                value: value * scale,
-                j1,
-                j2,
-            });
+            // The matrices were finite (the models check them); the value itself may not be
+            // (a multiplier of a tiny nominal matrix).
+            let value = value * scale;
+            if !value.is_finite() {
+                return Err(out_of_range(p));
+            }
+            points.push(CurvePoint { p, value, j1, j2 });
         }
         let sweep: Vec<SweepPoint> = points
             .iter()
@@ -309,15 +326,25 @@ impl ParameterSweep {
             p: f64::NAN,
             source,
         })?;
+        let crossover = match crossing {
+            Some(c) => {
+                let at = value * 10f64.powf(c.p);
+                if !at.is_finite() {
+                    return Err(out_of_range(c.p));
+                }
+                Some(CurveCrossover {
+                    p: c.p,
+                    value: at,
+                    j: c.j,
+                })
+            }
+            None => None,
+        };
         Ok(ParameterCurve {
             parameter,
             value,
             points,
-            crossover: crossing.map(|c| CurveCrossover {
-                p: c.p,
-                value: value * 10f64.powf(c.p),
-                j: c.j,
-            }),
+            crossover,
             skipped: None,
         })
     }

@@ -147,3 +147,8 @@ pub use sweep_q::{
     matrix_from_rows,
 };
 pub use tuning::{GRID_MAX_POINTS, TuningError, grid, p_ad, q_ad, sweep, two_point_init};
+
+/// The most iterations [`Em`] and [`MaximumLikelihood`] may be asked for (each iteration runs
+/// a filter over every run, a few times for maximum likelihood): a larger cap or exact count
+/// is refused with a typed error before anything runs, so that an estimate's time is bounded.
+pub const ITERATION_LIMIT: usize = 100_000;

@@ -25,7 +25,7 @@ pub enum LikelihoodError {
         #[source]
         source: FilterError,
     },
-    /// A step's log-density is not finite.
+    /// A step's log-density, or the sum up to it, is not finite.
     #[error("log-likelihood not finite at run {run}, update {update}")]
     NonFinite {
         /// The run.
@@ -100,11 +100,12 @@ pub(crate) fn filter_log_likelihood(
         let mut update = 0;
         let mut bad = None;
         kf.run(zs.iter().map(Option::as_ref), problem.start(), |rec| {
-            let l = rec.log_likelihood();
-            if !l.is_finite() && bad.is_none() {
+            total += rec.log_likelihood();
+            // A non-finite term makes the sum non-finite, and so does an overflowing sum of
+            // finite ones: one check finds both.
+            if !total.is_finite() && bad.is_none() {
                 bad = Some(update);
             }
-            total += l;
             update += 1;
         })
         .map_err(|source| LikelihoodError::Filter { run, source })?;

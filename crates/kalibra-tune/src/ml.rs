@@ -174,7 +174,8 @@ pub struct ParameterEstimate {
     /// without information).
     pub stderr: Option<f64>,
     /// The 95% interval (`None` as for `stderr`); an end at a bound is that bound
-    /// (`0`, or `f64::INFINITY`).
+    /// (`0`, or `f64::INFINITY`), and so is an end beyond f64 (`e^(theta + 1.96 se)` above
+    /// `f64::MAX`): the only non-finite numbers an estimate holds.
     pub ci95: Option<[f64; 2]>,
     /// The bound it ran to, if any.
     pub at_bound: Option<Bound>,
@@ -317,6 +318,8 @@ impl MaximumLikelihood {
     /// ```
     ///
     /// # Errors
+    /// [`MlError::InvalidOption`] for more iterations than
+    /// [`ITERATION_LIMIT`](crate::ITERATION_LIMIT);
     /// [`MlError::NothingToEstimate`]; [`MlError::Start`] when the likelihood cannot be
     /// evaluated at the forms' given matrices (the message names the cause: a singular `S`
     /// at a run and step, a non-finite density). Non-convergence, a parameter at a bound,
@@ -337,6 +340,13 @@ impl MaximumLikelihood {
         measurements: usize,
         ll: &(dyn Fn(&[f64]) -> Result<f64, LikelihoodError> + Sync),
     ) -> Result<MlEstimate, MlError> {
+        // Checked first, so that an estimate's time is bounded by that many iterations.
+        if self.max_iterations > crate::ITERATION_LIMIT {
+            return Err(MlError::InvalidOption {
+                name: "max iterations (at most kalibra_tune::ITERATION_LIMIT = 100000)",
+                value: self.max_iterations as f64,
+            });
+        }
         if noise.is_empty() {
             return Err(MlError::NothingToEstimate);
         }
@@ -535,7 +545,7 @@ impl MaximumLikelihood {
                     let in_flat = flat.iter().any(|v| v[i].abs() > 1e-3);
                     if !in_flat && cov[(i, i)] > 0.0 {
                         stderr_theta[i] = Some(cov[(i, i)].sqrt());
-                        stderr_nat[i] = Some(cov_nat[(i, i)].max(0.0).sqrt());
+                        stderr_nat[i] = Some(natural_stderr(&jac, &cov, i));
                     }
                 }
             }
@@ -592,6 +602,19 @@ impl MaximumLikelihood {
             warnings,
         })
     }
+}
+
+/// The standard error of natural parameter `i`, `sqrt((J C J^T)_ii)`, with row `i` of `J`
+/// brought to a largest entry near 1 by a power of two first: a variance near `1e300` has a
+/// representable standard error whose square is not.
+fn natural_stderr(jac: &DMatrix<f64>, cov: &DMatrix<f64>, i: usize) -> f64 {
+    let row = jac.row(i);
+    let Some(e) = kalibra_linalg::binary_exponent(row.amax()) else {
+        return 0.0;
+    };
+    let row = row.map(|v| kalibra_linalg::ldexp(v, -e));
+    let variance = (&row * cov * row.transpose())[(0, 0)];
+    kalibra_linalg::ldexp(variance.max(0.0).sqrt(), e)
 }
 
 /// Whether `param`'s own `theta` entry is the logarithm of its natural value (a multiplier, a
@@ -763,6 +786,13 @@ fn identifiability(
         .count();
     let min = eigenvalues.first().copied().unwrap_or(0.0);
     let condition_number = (rank == p && min > 0.0).then(|| max / min);
+    // Only the directions matter (each combination is scaled to a largest coefficient of 1),
+    // so `J` is taken at a power-of-two scale near 1: `J v` cannot overflow for a `J` near
+    // f64::MAX (the natural values' scale).
+    let jac = &match kalibra_linalg::binary_exponent(jac.amax()) {
+        Some(e) => jac.map(|v| kalibra_linalg::ldexp(v, -e)),
+        None => jac.clone(),
+    };
     let jac_inv_t = jac.clone().try_inverse().map(|j| j.transpose());
     let mut flat_directions = Vec::new();
     let mut identified = Vec::new();

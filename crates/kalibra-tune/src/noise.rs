@@ -31,7 +31,9 @@
 //! or the covariance entry `Qw[i,j]`, never `theta`. [`Parametrisation::jacobian`] gives
 //! `d natural / d theta`, which carries the covariance of `theta` to theirs.
 
-use kalibra_linalg::{DMatrix, DVector, Definiteness, LinalgError, check_covariance};
+use kalibra_linalg::{
+    DMatrix, DVector, Definiteness, LinalgError, binary_exponent, check_covariance, ldexp,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::NoiseError;
@@ -345,7 +347,7 @@ impl Checked {
         let v = &self.form.value;
         match self.form.kind {
             FormKind::Fixed => Ok(v.clone()),
-            FormKind::Scaled => Ok(v * theta[0].exp()),
+            FormKind::Scaled => Ok(scaled_by_exp(v, theta[0])),
             FormKind::Diagonal => {
                 let mut d = v.clone();
                 for (&(i, _), t) in self.slots.iter().zip(theta) {
@@ -496,14 +498,16 @@ impl Checked {
             FormKind::Fixed => Ok(Vec::new()),
             FormKind::Scaled => {
                 // The least-squares multiplier: exact for a multiple of the nominal matrix.
-                let s = m.dot(v) / v.dot(v);
+                // Its logarithm is taken from the rescaled ratio, so that a multiplier beyond
+                // f64 (a matrix near f64::MAX over a tiny nominal) still has its `theta`.
+                let (s, e) = multiplier_parts(m, v);
                 if s.is_nan() || s <= 0.0 {
                     return Err(NoiseError::NotPositive {
                         name: self.matrix.multiplier().to_string(),
-                        value: s,
+                        value: ldexp(s, e),
                     });
                 }
-                Ok(vec![s.ln()])
+                Ok(vec![s.ln() + f64::from(e) * std::f64::consts::LN_2])
             }
             FormKind::Diagonal => self
                 .slots
@@ -532,13 +536,20 @@ impl Checked {
                         with_fixed[(j, i)] = with_fixed[(i, j)];
                     }
                 }
+                // Factored at a power-of-two scale near 1 (exact), so that entries near
+                // f64::MAX do not overflow the factorisation's sums and subnormal ones keep
+                // their digits; the factor's entries (at most the square root of the largest
+                // entry) are representable at the matrix's own scale.
+                let half = max_exponent(&with_fixed).map_or(0, |e| e / 2);
                 let l = with_fixed
+                    .map(|x| ldexp(x, -2 * half))
                     .cholesky()
                     .ok_or(NoiseError::Matrix {
                         matrix: name,
                         source: LinalgError::NotPositiveDefinite { what: name },
                     })?
-                    .unpack();
+                    .unpack()
+                    .map(|x| ldexp(x, half));
                 Ok(self
                     .slots
                     .iter()
@@ -546,6 +557,87 @@ impl Checked {
                     .collect())
             }
         }
+    }
+}
+
+/// The binary exponent of the largest entry in magnitude (`None` for a zero matrix).
+fn max_exponent(m: &DMatrix<f64>) -> Option<i32> {
+    max_exponent_of(m.as_slice())
+}
+
+/// The binary exponent of the largest value in magnitude (`None` if all are zero).
+pub(crate) fn max_exponent_of(values: &[f64]) -> Option<i32> {
+    binary_exponent(values.iter().fold(0.0f64, |a, x| a.max(x.abs())))
+}
+
+/// The least-squares multiplier `<X, V> / <V, V>` of a nominal `V` (not zero) as `(s, e)`
+/// with the multiplier `s 2^e`: both matrices are brought to a largest entry near 1 by
+/// powers of two before the sums, so that neither sum overflows or underflows for finite
+/// matrices of any scale, and the multiplier's exponent is kept apart from `s` (it may be
+/// beyond f64 while its logarithm is not).
+pub(crate) fn multiplier_parts(x: &DMatrix<f64>, v: &DMatrix<f64>) -> (f64, i32) {
+    let ev = max_exponent(v).unwrap_or(0);
+    let Some(ex) = max_exponent(x) else {
+        return (0.0, 0);
+    };
+    let xs = x.map(|a| ldexp(a, -ex));
+    let vs = v.map(|a| ldexp(a, -ev));
+    (xs.dot(&vs) / vs.dot(&vs), ex - ev)
+}
+
+/// The least-squares multiplier `<X, V> / <V, V>`: infinite only when the multiplier itself
+/// leaves f64 (see [`multiplier_parts`]).
+pub(crate) fn multiplier(x: &DMatrix<f64>, v: &DMatrix<f64>) -> f64 {
+    let (s, e) = multiplier_parts(x, v);
+    ldexp(s, e)
+}
+
+/// `V e^t`, with `e^t` applied as a power of two and a factor in `[2^-1/2, 2^1/2]` when `e^t`
+/// alone overflows or underflows, so that `V e^t` is finite wherever its entries are (a tiny
+/// nominal with a large multiplier); the plain product otherwise.
+fn scaled_by_exp(v: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
+    let plain = t.exp();
+    if plain.is_normal() {
+        let out = v * plain;
+        if out.iter().all(|x| x.is_finite()) {
+            return out;
+        }
+    }
+    let k = (t / std::f64::consts::LN_2).round().clamp(-4400.0, 4400.0);
+    let factor = (t - k * std::f64::consts::LN_2).exp();
+    // `k` is within +-4400 after the clamp, so the cast is exact.
+    #[allow(clippy::cast_possible_truncation)]
+    let k = k as i32;
+    // The power of two first where it grows the entries (exact until the result itself
+    // overflows), last where it shrinks them (halved first so that `x factor` cannot
+    // overflow for `x` near f64::MAX).
+    if k >= 0 {
+        v.map(|x| ldexp(x, k) * factor)
+    } else {
+        v.map(|x| ldexp(ldexp(x, -1) * factor, k + 1))
+    }
+}
+
+/// The index of the largest `|theta_i|`: which parameter overflowed is not known where a
+/// result is found non-finite; the largest is the likeliest, and the message says the vector
+/// is at fault either way.
+fn largest(theta: &[f64]) -> usize {
+    theta
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .map_or(0, |(i, _)| i)
+}
+
+/// `Ok` if every value is finite, else [`NoiseError::NonFiniteTheta`]: a natural value
+/// (a multiplier `e^theta`) or a derivative beyond f64.
+fn all_finite_or_theta_error(theta: &[f64], values: &[f64]) -> Result<(), NoiseError> {
+    if values.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(NoiseError::NonFiniteTheta {
+            index: largest(theta),
+        })
     }
 }
 
@@ -755,14 +847,9 @@ impl Parametrisation {
             .chain(q.iter())
             .any(|x| !x.is_finite())
         {
-            // Which parameter overflowed is not known here; the first large one is the
-            // likeliest, and the message says the vector is at fault either way.
-            let index = theta
-                .iter()
-                .enumerate()
-                .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-                .map_or(0, |(i, _)| i);
-            return Err(NoiseError::NonFiniteTheta { index });
+            return Err(NoiseError::NonFiniteTheta {
+                index: largest(theta),
+            });
         }
         Ok(NoiseMatrices { qw, r, q })
     }
@@ -771,12 +858,14 @@ impl Parametrisation {
     /// order): multipliers and covariance entries.
     ///
     /// # Errors
-    /// As [`Parametrisation::matrices`].
+    /// As [`Parametrisation::matrices`]; [`NoiseError::NonFiniteTheta`] also for a multiplier
+    /// `e^theta` beyond f64 (its matrix may be finite: a tiny nominal).
     pub fn natural(&self, theta: &[f64]) -> Result<DVector<f64>, NoiseError> {
         let (tq, tr) = self.split(theta)?;
         let m = self.matrices(theta)?;
         let mut out = self.qw.natural(tq, &m.qw);
         out.extend(self.r.natural(tr, &m.r));
+        all_finite_or_theta_error(theta, &out)?;
         Ok(DVector::from_vec(out))
     }
 
@@ -785,7 +874,8 @@ impl Parametrisation {
     /// covariance of `theta` to the natural parameters (`J C J^T`).
     ///
     /// # Errors
-    /// As [`Parametrisation::matrices`].
+    /// As [`Parametrisation::natural`], and [`NoiseError::NonFiniteTheta`] for a derivative
+    /// beyond f64.
     pub fn jacobian(&self, theta: &[f64]) -> Result<DMatrix<f64>, NoiseError> {
         let (tq, tr) = self.split(theta)?;
         let m = self.matrices(theta)?;
@@ -795,6 +885,7 @@ impl Parametrisation {
         let mut jac = DMatrix::zeros(a + b, a + b);
         jac.view_mut((0, 0), (a, a)).copy_from(&jq);
         jac.view_mut((a, a), (b, b)).copy_from(&jr);
+        all_finite_or_theta_error(theta, jac.as_slice())?;
         Ok(jac)
     }
 

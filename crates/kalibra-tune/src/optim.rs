@@ -70,9 +70,10 @@ fn gradient_step(xi: f64) -> f64 {
 }
 
 /// The central-difference gradient at `x` (value `fx`), components evaluated in parallel; a
-/// one-sided difference where one side is infeasible. `None` if neither side is.
+/// one-sided difference where one side is infeasible. `None` if neither side is, or if a
+/// difference leaves f64 (values of opposite signs near its limits).
 pub(crate) fn gradient(obj: &dyn Objective, x: &[f64], fx: f64) -> Option<Vec<f64>> {
-    (0..x.len())
+    let g: Vec<f64> = (0..x.len())
         .into_par_iter()
         .map(|i| {
             let h = gradient_step(x[i]);
@@ -88,13 +89,14 @@ pub(crate) fn gradient(obj: &dyn Objective, x: &[f64], fx: f64) -> Option<Vec<f6
                 (None, None) => None,
             }
         })
-        .collect()
+        .collect::<Option<Vec<f64>>>()?;
+    g.iter().all(|v| v.is_finite()).then_some(g)
 }
 
 /// The central-difference Hessian at `x` with step `h` on every coordinate, the evaluations
 /// run in parallel: `(f(x+h e_i+h e_j) - f(x+h e_i-h e_j) - f(x-h e_i+h e_j) + f(x-h e_i-h e_j))
 /// / 4h^2` off the diagonal and `(f(x+2h e_i) - 2 f(x) + f(x-2h e_i)) / 4h^2` on it (the same
-/// step pattern). `None` if any evaluation fails.
+/// step pattern). `None` if any evaluation fails or an entry leaves f64.
 pub(crate) fn hessian(obj: &dyn Objective, x: &[f64], fx: f64, h: f64) -> Option<Vec<Vec<f64>>> {
     let p = x.len();
     let pairs: Vec<(usize, usize)> = (0..p).flat_map(|i| (0..=i).map(move |j| (i, j))).collect();
@@ -115,6 +117,9 @@ pub(crate) fn hessian(obj: &dyn Objective, x: &[f64], fx: f64, h: f64) -> Option
         })
         .collect();
     let entries = entries?;
+    if !entries.iter().all(|v| v.is_finite()) {
+        return None;
+    }
     let mut out = vec![vec![0.0; p]; p];
     for (&(i, j), v) in pairs.iter().zip(entries) {
         out[i][j] = v;
@@ -177,6 +182,11 @@ pub(crate) fn minimise(obj: &dyn Objective, x0: &[f64], settings: Settings) -> O
         let mut accepted = None;
         for _ in 0..50 {
             let trial: Vec<f64> = x.iter().zip(&d).map(|(xi, di)| xi + alpha * di).collect();
+            // A step too small to move `x` cannot decrease the objective; accepting it (the
+            // Armijo test can pass at equality) would repeat the iteration without end.
+            if trial == x {
+                break;
+            }
             evaluations += 1;
             if let Some(ft) = obj.value(&trial)
                 && ft <= f + 1e-4 * alpha * slope

@@ -151,7 +151,7 @@ pub enum TuneError {
         value: f64,
     },
     /// The model at one `p` could not be built (`Q` overflowed).
-    #[error("model at p = {p}")]
+    #[error("model at p = {p}: {source}")]
     Model {
         /// The exponent.
         p: f64,
@@ -160,7 +160,7 @@ pub enum TuneError {
         source: ModelError,
     },
     /// The filter failed at one `p` (a singular innovation covariance, an overflow).
-    #[error("filter at p = {p}")]
+    #[error("filter at p = {p}: {source}")]
     Filter {
         /// The exponent.
         p: f64,
@@ -170,7 +170,7 @@ pub enum TuneError {
     },
     /// The `J1`/`J2` metrics failed at one update (a singular `A_k + B_k`, for instance with
     /// `Q = 0` and `P0 = 0`).
-    #[error("J metrics at p = {p}, update {update}")]
+    #[error("J metrics at p = {p}, update {update}: {source}")]
     Metrics {
         /// The exponent.
         p: f64,

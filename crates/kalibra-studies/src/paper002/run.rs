@@ -218,7 +218,7 @@ fn outcome(
     models: &[AngularTarget],
     rng: &mut kalibra_sim::ChaCha8Rng,
 ) -> Result<Outcome, StudyError> {
-    let truth = target.truth(rng);
+    let truth = target.truth(rng)?;
     let z = ManoeuvringTarget::measurements(&truth, R, rng)?;
     let times = target.times();
     let mut out = Outcome {
@@ -277,7 +277,7 @@ pub fn run(config: &Config) -> Result<Report, StudyError> {
 
     // The default truth: run 0's draws, in full detail.
     let mut rng = mc.rng(0);
-    let truth = target.truth(&mut rng);
+    let truth = target.truth(&mut rng)?;
     let z = ManoeuvringTarget::measurements(&truth, R, &mut rng)?;
 
     let mut q_sets = BTreeMap::new();
@@ -416,7 +416,7 @@ mod tests {
         .unwrap();
         let model = AngularTarget::diagonal(0.01, Q_SETS[1].diag).unwrap();
         let mut rng = MonteCarlo::new(1, 7).rng(0);
-        let truth = target.truth(&mut rng);
+        let truth = target.truth(&mut rng).unwrap();
         let z = ManoeuvringTarget::measurements(&truth, R, &mut rng).unwrap();
         let errors = instantaneous_errors(&track(&model, &z).unwrap(), &truth).unwrap();
         // Skip the transient (10 s).

@@ -164,7 +164,7 @@ mod tests {
         assert_eq!(target.sigma_input(), 0.8);
         assert_eq!(target.profile(), &manoeuvre());
         let mut rng = MonteCarlo::new(1, 1).rng(0);
-        let truth = target.truth(&mut rng);
+        let truth = target.truth(&mut rng).unwrap();
         assert_eq!(truth.len(), 2001);
         let z = ManoeuvringTarget::measurements(&truth, R, &mut rng).unwrap();
         assert_eq!(z.len(), 2000);

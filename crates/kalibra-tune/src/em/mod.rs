@@ -65,7 +65,18 @@ pub enum EmError {
         /// Its value.
         value: f64,
     },
-    /// A parameter estimate became non-finite.
+    /// More iterations asked for than [`ITERATION_LIMIT`](crate::ITERATION_LIMIT).
+    #[error(
+        "use at most {limit} EM iterations ({asked} asked for): each runs a filter and a \
+         smoother over every run"
+    )]
+    TooManyIterations {
+        /// The iterations asked for.
+        asked: usize,
+        /// [`ITERATION_LIMIT`](crate::ITERATION_LIMIT).
+        limit: usize,
+    },
+    /// A parameter estimate or the log-likelihood left the range of f64.
     #[error("estimate {what}: it is not finite at iteration {iteration}")]
     NonFinite {
         /// Which matrix.
@@ -193,11 +204,19 @@ impl Em {
     /// ```
     ///
     /// # Errors
+    /// [`EmError::TooManyIterations`] for a cap above [`ITERATION_LIMIT`](crate::ITERATION_LIMIT)
+    /// (checked first, so the time EM may take is bounded by that many E-steps);
     /// [`EmError::Unsupported`] for a full form with fixed entries (no closed-form M-step) or
     /// a `G` without full column rank; [`EmError::NoData`] when a free matrix has nothing to
     /// be estimated from; [`EmError::Filter`], [`EmError::Model`] and [`EmError::NonFinite`]
-    /// naming the iteration whose parameters failed.
+    /// naming the iteration whose parameters, log-likelihood or multiplier left f64.
     pub fn estimate(&self, problem: &NoiseProblem) -> Result<EmEstimate, EmError> {
+        if self.max_iterations > crate::ITERATION_LIMIT {
+            return Err(EmError::TooManyIterations {
+                asked: self.max_iterations,
+                limit: crate::ITERATION_LIMIT,
+            });
+        }
         let noise = problem.noise();
         let known = Known {
             f: problem.f(),
@@ -220,10 +239,17 @@ impl Em {
             None => qw.clone(),
         };
         let parameters = noise.parameters();
-        let values = parameters
+        let values: Vec<f64> = parameters
             .iter()
             .map(|p| natural_value(p, noise.qw_form(), noise.r_form(), &qw, &r))
             .collect();
+        // A multiplier beyond f64 (a finite matrix over a tiny nominal one).
+        if !values.iter().all(|v| v.is_finite()) {
+            return Err(EmError::NonFinite {
+                what: "multiplier",
+                iteration: iterations,
+            });
+        }
         Ok(EmEstimate {
             matrices: NoiseMatrices { qw, r, q },
             parameters,
@@ -256,6 +282,13 @@ impl Em {
         let mut iteration = 0;
         let converged = loop {
             let stats = estep::expectation(known, &full_q(&qw_now), &r_now, runs, iteration)?;
+            // Every term is finite (the filter checks its steps), but their sum may not be.
+            if !stats.log_likelihood.is_finite() {
+                return Err(EmError::NonFinite {
+                    what: "log-likelihood",
+                    iteration,
+                });
+            }
             log_likelihood.push(stats.log_likelihood);
             if let [.., before, now] = log_likelihood[..]
                 && !self.exact
@@ -339,7 +372,7 @@ pub(crate) fn natural_value(
     };
     match parameter.entry {
         Some((i, j)) => x[(i, j)],
-        None => x.dot(form.value()) / form.value().norm_squared(),
+        None => crate::noise::multiplier(x, form.value()),
     }
 }
 
