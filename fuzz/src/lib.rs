@@ -1,5 +1,5 @@
 //! What every fuzz target checks, as `kalibra_io::fuzzing` defines it for the readers'
-//! property test too (`crates/kalibra-io/tests/readers_fuzz.rs`): the input gives an error
+//! property test too (`crates/kalibra-io/tests/it/readers_fuzz.rs`): the input gives an error
 //! naming the file, or a report whose numbers are all finite. A panic, an allocation beyond
 //! libFuzzer's `-rss_limit_mb` or a run beyond its `-timeout` is a finding too, reported by
 //! libFuzzer itself.

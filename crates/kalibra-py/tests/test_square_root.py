@@ -1,7 +1,7 @@
 """form="square_root": kalibra's SqrtKf and SqrtUkf behind KalmanFilter and
 UnscentedKalmanFilter, equal to the standard form on a normal case, and carrying on where the
 standard form fails (the ill-conditioned case of kalibra-filters'
-tests/sqrt_ill_conditioned.rs)."""
+tests/it/sqrt_ill_conditioned.rs)."""
 
 import numpy as np
 import pytest
@@ -70,7 +70,7 @@ def test_square_root_unscented_filter_adapts_kappa_as_the_standard_one(criterion
 def test_square_root_carries_on_where_the_standard_form_fails():
     """Near-perfect, nearly collinear scalar measurements (d = 2^-30, R = d^2; F stretches the
     third state by 1 + d, so that the second measurement sees [1, 1, 1 + d], as in
-    tests/sqrt_ill_conditioned.rs): the standard form's covariance turns indefinite and its
+    tests/it/sqrt_ill_conditioned.rs): the standard form's covariance turns indefinite and its
     estimate overflows; the square-root form stays finite, its covariance positive
     semi-definite to rounding (the exact one has an eigenvalue near 1e-19 beside ones, below
     what a matrix of f64 shows), the unseen direction (1, -1, 0) keeps its prior variance 1

@@ -1,0 +1,10 @@
+//! The integration tests of kalibra-tune, linked into one test binary (linking one per file
+//! dominated CI's build): each file is a module; `tests/architecture.rs` keeps it one.
+
+mod als;
+mod em;
+mod em_pykalman;
+mod j1j2;
+mod ml;
+mod statsmodels;
+mod sweep_q;
