@@ -539,7 +539,6 @@ impl MaximumLikelihood {
                     e[i] = 1.0;
                     e
                 }));
-                let cov_nat = &jac * &cov * jac.transpose();
                 for i in 0..p {
                     // A parameter with weight in a flat direction has no standard error.
                     let in_flat = flat.iter().any(|v| v[i].abs() > 1e-3);

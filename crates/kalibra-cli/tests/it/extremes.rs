@@ -1,6 +1,7 @@
 //! Extreme but finite inputs through the command line: each comes back promptly as an answer
 //! or as the library's typed error in one clear message with exit code 1 (no panic, no hang).
 
+use crate::common;
 use std::time::{Duration, Instant};
 
 use crate::common::{kalibra, scratch, text};

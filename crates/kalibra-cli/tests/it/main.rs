@@ -9,3 +9,4 @@ mod extremes;
 mod generate_fixtures;
 mod options;
 mod tune;
+mod tune_noise;

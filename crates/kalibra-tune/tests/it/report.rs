@@ -1,9 +1,7 @@
 //! The report of every method, its profile likelihood and its consistency check, and the bad
 //! inputs: each a typed error or a clear message, never a panic or a silent estimate.
 
-mod common;
-
-use common::{System, one};
+use crate::common::{System, one};
 use kalibra_tune::{
     Als, CovarianceForm, DMatrix, DVector, Em, LikelihoodError, MaximumLikelihood, Method,
     MethodKind, NoiseError, NoiseProblem, NoiseReport, ParameterSweep, Parametrisation,

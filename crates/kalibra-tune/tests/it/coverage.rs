@@ -10,9 +10,7 @@
 //! falls outside for correct intervals. The seeds are fixed, so the outcome is too: a change
 //! that moves a count outside the range is a change in the intervals.
 
-mod common;
-
-use common::{System, one};
+use crate::common::{System, one};
 use kalibra_tune::{
     CovarianceForm, DMatrix, DVector, MaximumLikelihood, NoiseProblem, Parametrisation, Run, Start,
 };

@@ -2,8 +2,6 @@
 //! fixtures (a model with `G` and `[Q]`, `[R]` tables), today's sweep files unchanged byte for
 //! byte, and bad inputs.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
 use kalibra_io::noise_report::NoiseReportFile;
@@ -13,7 +11,8 @@ use kalibra_tune::{
     ParameterSweep, Parametrisation, ReportOptions, Start,
 };
 
-use common::{fixture, kalibra, scratch, text};
+use crate::common;
+use crate::common::{fixture, kalibra, scratch, text};
 
 /// The fixtures' problem built in-process from the generator's constants and its seeded
 /// simulation (not from the files the binary reads).
