@@ -348,3 +348,11 @@ pub fn write_noise_report(
 ) -> Result<(), Error> {
     output::write_report(out, report, &Document::noise(files, report))
 }
+
+/// Writes `json` as `dir/report.json`, creating `dir`: the report of a model given as
+/// callables, which has no figures (the Python package writes through here, so that file
+/// access stays in this crate, `tests/it/architecture.rs`).
+pub fn write_report_json(dir: &Path, json: &str) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    std::fs::write(dir.join("report.json"), json)
+}

@@ -248,11 +248,8 @@ impl NoiseEstimate {
             }
             None => {
                 let json = self.to_json()? + "\n";
-                py.detach(|| {
-                    std::fs::create_dir_all(&dir)?;
-                    std::fs::write(dir.join("report.json"), json)
-                })
-                .map_err(|e| PyOSError::new_err(format!("write {}: {e}", dir.display())))
+                py.detach(|| kalibra_io::noise_report::write_report_json(&dir, &json))
+                    .map_err(|e| PyOSError::new_err(format!("write {}: {e}", dir.display())))
             }
         }
     }
