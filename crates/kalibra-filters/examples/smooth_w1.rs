@@ -1,7 +1,7 @@
 //! Smooths runs of W1's model (the 4-state constant-velocity KF of `cargo xtask bench smooth`)
 //! with the library's [`Kf`] smoother or with the hand-written nalgebra loop of that bench, for
-//! profilers: the smoother's cost per run without the bench's bookkeeping, for
-//! `valgrind --tool=callgrind`.
+//! profilers: the smoother's cost per run without the bench's bookkeeping (the figures
+//! are `cargo xtask bench smooth`'s).
 //!
 //! `cargo run --release -p kalibra-filters --example smooth_w1 -- [kalibra|hand] [runs] [steps]`
 //!

@@ -1,16 +1,10 @@
-//! The log-likelihood evaluations of maximum likelihood, for profiling under callgrind: the
+//! The log-likelihood evaluations of maximum likelihood, for profiling on their own: the
 //! model of `cargo xtask bench tune` (4 states, 2 measurements, noise through `G`, diagonal
 //! `Qw` and `R`) on a simulated log of `STEPS` steps, evaluated `EVALS` times at the truth,
 //! either by [`kalibra_tune::log_likelihood`] (`lib`) or through the generic `Kf` on run-time
 //! sizes (`kf`, what the evaluation cost before the allocation-free loop).
 //!
-//! ```text
-//! cargo build --release -p kalibra-tune --example ml_eval
-//! valgrind --tool=callgrind target/release/examples/ml_eval lib 10000 10
-//! valgrind --tool=callgrind target/release/examples/ml_eval lib 10000 0
-//! ```
-//!
-//! The difference of the two counts over `EVALS` is the instructions of one evaluation.
+//! Usage: `ml_eval lib|kf STEPS EVALS`; the figures are `cargo xtask bench tune`'s.
 
 // An example reports what it ran on standard output.
 #![allow(clippy::print_stdout)]

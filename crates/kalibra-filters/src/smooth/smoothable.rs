@@ -152,7 +152,8 @@ where
 /// there from the stored `P_k` and `jacobian`, evaluated as [`linearised_cross`] does (at the
 /// filtered mean, with the prediction's step), so the result is [`ForwardPass::smooth`]'s to
 /// the bit. Nothing is cloned that is not kept, and a step allocates nothing on the
-/// fixed-size path (`examples/smooth_w1.rs` under callgrind shows the cost).
+/// fixed-size path, because an allocation per step dominated the backward pass (`cargo
+/// xtask bench smooth`).
 fn smooth_linearised<'z, N: Dim, M: Dim, F: Filter<N, M>, I>(
     filter: &mut F,
     measurements: I,
