@@ -1,7 +1,7 @@
 //! `report.json` of `kalibra tune --method ml|em|als|j1j2` (and of the Python package's
 //! `estimate_noise(...).save(dir)`): the estimate of `Q` and `R` with its parameters,
 //! intervals and identifiability, in one serialisable [`NoiseReportFile`], written with its
-//! human-readable [`Document`](crate::document::Document) by [`write_noise_report`].
+//! human-readable [`Document`] by [`write_noise_report`].
 //!
 //! Every number is written as serde_json writes an `f64` (the shortest text that reads back
 //! to the same bits), never rounded; a non-finite number (an interval's end at infinity) is

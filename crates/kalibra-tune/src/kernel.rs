@@ -58,7 +58,9 @@ fn settled(p: &[f64], prev: &[f64], n: usize) -> bool {
     let tol = STEADY_ULPS * f64::EPSILON;
     (0..n).all(|j| {
         (0..n).all(|i| {
-            let scale = (p[i + i * n] * p[j + j * n]).abs().sqrt();
+            // Each root first: the product of two variances near 2^1000 overflows, which
+            // would make every prior count as settled (`steady_state_is_scale_free`).
+            let scale = p[i + i * n].abs().sqrt() * p[j + j * n].abs().sqrt();
             (p[i + j * n] - prev[i + j * n]).abs() <= tol * scale
         })
     })
@@ -484,5 +486,54 @@ mod tests {
         .unwrap();
         assert!(log_likelihood(&problem, &one(0.0), &one(0.0)).is_none());
         assert!(crate::log_likelihood(&problem, &[]).is_err());
+    }
+    /// A scalar walk at scale `2^k` (measurements and `x0` times `2^k`, every covariance
+    /// times `2^(2k)`): every operation of the loop scales exactly, so the sum moves by
+    /// `-N k ln 2` and the steady state starts at the same update, also where a product of
+    /// two variances leaves f64.
+    #[test]
+    fn steady_state_is_scale_free() {
+        let one = |v: f64| DMatrix::from_element(1, 1, v);
+        let walk = |k: i32| {
+            let s = 2f64.powi(k);
+            let noise = Parametrisation::new(
+                None,
+                CovarianceForm::scaled(one(0.2 * s * s)),
+                CovarianceForm::scaled(one(0.5 * s * s)),
+            )
+            .unwrap();
+            let run = (0..40)
+                .map(|i| {
+                    let i = f64::from(i);
+                    Some(DVector::from_element(1, s * (0.1 * i + (0.7 * i).sin())))
+                })
+                .collect();
+            NoiseProblem::new(
+                one(1.0),
+                one(1.0),
+                DVector::from_element(1, 0.05 * s),
+                one(s * s),
+                Start::PredictFirst,
+                noise,
+                vec![run],
+            )
+            .unwrap()
+        };
+        let at = |k: i32| {
+            let problem = walk(k);
+            let m = problem.noise().matrices(&[0.3, -0.2]).unwrap();
+            counted(&problem, &m.q, &m.r).unwrap()
+        };
+        let (plain, steady) = at(0);
+        assert!(steady > 0, "the plain walk reaches its steady state");
+        for k in [-500, -300, 257, 300, 500] {
+            let (scaled, scaled_steady) = at(k);
+            let shift = 40.0 * f64::from(k) * std::f64::consts::LN_2;
+            assert_eq!(scaled_steady, steady, "k = {k}");
+            assert!(
+                (scaled + shift - plain).abs() <= 1e-12 * shift.abs().max(1.0),
+                "k = {k}: {scaled} + {shift} vs {plain}"
+            );
+        }
     }
 }
