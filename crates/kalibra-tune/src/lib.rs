@@ -23,7 +23,8 @@
 //! * the same for nonlinear models ([`MaximumLikelihood::estimate_nonlinear`] on a
 //!   [`NonlinearNoiseProblem`]): any model implementing kalibra's model traits, its likelihood
 //!   from the EKF or the UKF ([`LikelihoodFilter`]) with the model's noise replaced by each
-//!   candidate's `Q` and `R` ([`WithProcessNoise`], [`WithMeasurementNoise`]).
+//!   candidate's `Q` and `R` ([`WithProcessNoise`], [`WithMeasurementNoise`]), with the
+//!   linear report ([`NoiseReport::estimate_nonlinear`]).
 //!
 //! * one report for every estimator ([`NoiseReport::estimate`] with a [`Method`]): the
 //!   estimate, intervals, identifiability and warnings in words, the profile likelihood of
@@ -65,8 +66,9 @@
 //! * `ml`: [`MaximumLikelihood`] -> [`MlEstimate`] (estimates, standard errors and 95% intervals
 //!   from the observed information, [`Identifiability`], [`MlWarning`]s); `optim`: its BFGS
 //!   minimiser and finite differences (why not argmin: in `optim`'s docs).
-//! * `report`: [`NoiseReport`], the one result of every [`Method`], with [`Profile`]s and the
-//!   [`Consistency`] of the tuned filter on the data ([`ReportError`]).
+//! * `report`: [`NoiseReport`], the one result of every [`Method`] and of nonlinear maximum
+//!   likelihood, with [`Profile`]s and the [`Consistency`] of the tuned filter on the data
+//!   ([`ReportError`]), over any [`ReportProblem`].
 //! * `ml_nonlinear`: maximum likelihood through the EKF or the UKF ([`NonlinearNoiseProblem`],
 //!   [`LikelihoodFilter`], [`NonlinearProblemError`], the noise-replacing models
 //!   [`WithProcessNoise`] and [`WithMeasurementNoise`]); the optimiser, the information and
@@ -125,6 +127,7 @@ pub use problem::{NoiseProblem, Run};
 pub use report::{
     Consistency, FilterCheck, Method, MethodKind, NoiseReport, PROFILE_POINTS, Profile,
     ProfilePoint, ReportError, ReportIdentifiability, ReportOptions, ReportParameter,
+    ReportProblem,
 };
 
 pub use als::{ALS_LAGS, ALS_MAX_ITERATIONS, ALS_RANK_TOLERANCE, Als, AlsError, AlsEstimate};

@@ -48,6 +48,7 @@ use kalibra_models::{Dynamics, Measurement};
 
 use crate::likelihood::LikelihoodError;
 use crate::problem::shape;
+use crate::report::{CheckError, check_runs};
 use crate::{MaximumLikelihood, MlError, MlEstimate, NoiseError, NoiseMatrices, Parametrisation};
 
 /// Which filter evaluates the likelihood of a [`NonlinearNoiseProblem`].
@@ -566,6 +567,26 @@ where
             });
         }
         Ok(total)
+    }
+
+    /// The problem's filter with `matrices` over every run, judged by the evaluation (the
+    /// report's consistency check, `report::check_runs`).
+    pub(crate) fn check_filter_at(
+        &self,
+        matrices: &NoiseMatrices,
+        truth: Option<&[crate::Run]>,
+    ) -> Result<crate::FilterCheck, CheckError> {
+        let (n, m) = (self.state_dim(), self.measurement_dim());
+        match self.filter {
+            LikelihoodFilter::Ekf => check_runs(n, m, &self.runs, self.start, truth, || {
+                let (f, h) = self.models(matrices);
+                Ekf::new(f, h, self.x0.clone(), self.p0.clone())
+            }),
+            LikelihoodFilter::Ukf(set) => check_runs(n, m, &self.runs, self.start, truth, || {
+                let (f, h) = self.models(matrices);
+                self.ukf(f, h, set)
+            }),
+        }
     }
 
     /// The dynamics model.

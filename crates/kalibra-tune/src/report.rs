@@ -20,8 +20,16 @@
 //!   identifiability is that of its least-squares matrix; J1/J2 has none (it measures no
 //!   likelihood: maximum likelihood on the same problem says what the data identify).
 //!
+//! # Nonlinear models
+//! [`NoiseReport::estimate_nonlinear`] gives maximum likelihood through the EKF or the UKF
+//! ([`MaximumLikelihood::estimate_nonlinear`]) the same report. Both constructors finish in
+//! one place over a [`ReportProblem`] (the linear [`NoiseProblem`] or the
+//! [`NonlinearNoiseProblem`]): its likelihood is what the profiles re-maximise and its own
+//! filter is what the consistency check runs, so the profiles and the check are written once.
+//!
 //! # Consistency on the data
-//! The filter (the library's [`kalibra_filters::Kf`]) runs over every run with the estimate
+//! The problem's filter (the library's [`kalibra_filters::Kf`]; for a nonlinear problem the
+//! EKF or the UKF its likelihood ran through) runs over every run with the estimate
 //! and with the starting guess (the forms' given matrices), and each run is judged by
 //! [`kalibra_eval::Evaluation`], the library's evaluation of a log: ANIS with its chi-square
 //! band (one run) or its t-test (several runs), the whiteness of the normalised innovations
@@ -40,14 +48,15 @@
 //! where the profile falls `chi2_1(0.95) / 2 = 1.92` below the maximum.
 
 use kalibra_eval::{ConsistencyTest, Evaluation, FilterLog, Matrices, Vectors, WhitenessReport};
-use kalibra_filters::{Filter, FilterError, Kf};
-use kalibra_linalg::{DMatrix, DVector};
-use kalibra_models::{LinearGaussian, LinearObservation, ModelError};
+use kalibra_filters::{Filter, FilterError, Kf, Start};
+use kalibra_linalg::{Alloc, DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
+use kalibra_models::{Dynamics, LinearGaussian, LinearObservation, Measurement, ModelError};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::j1j2::scale_parameter;
-use crate::likelihood::{log_likelihood, log_likelihood_of};
+use crate::likelihood::{LikelihoodError, log_likelihood, log_likelihood_of};
+use crate::ml_nonlinear::{LikelihoodFilter, NonlinearNoiseProblem};
 use crate::optim::{self, Settings, StopReason};
 use crate::{
     Als, AlsError, Bound, CovarianceForm, Em, EmError, FormKind, MaximumLikelihood, MlError,
@@ -79,6 +88,162 @@ const HALF_CHI2_95: f64 = 1.920_729_410_347_062;
 const PROFILE_WALL: f64 = 40.0;
 /// Whiteness lags of the consistency check.
 const WHITENESS_LAGS: usize = 10;
+
+/// A likelihood problem a [`NoiseReport`] can profile and judge on its data: the linear
+/// [`NoiseProblem`] (the Kalman filter's exact likelihood) and the [`NonlinearNoiseProblem`]
+/// (its EKF's or UKF's). The profiles, the consistency check and the report file are written
+/// once against this trait; it is sealed (implemented for these two only), since the report
+/// also runs each problem's own filter.
+///
+/// ```
+/// use kalibra_tune::{CovarianceForm, DMatrix, DVector, NoiseProblem, Parametrisation,
+///     ReportProblem, Start};
+///
+/// fn sizes(problem: &dyn ReportProblem) -> (usize, usize, usize) {
+///     (problem.state_dim(), problem.measurement_dim(), problem.measurement_count())
+/// }
+/// let one = |v: f64| DMatrix::from_element(1, 1, v);
+/// let run = vec![Some(DVector::from_element(1, 0.3)), None, Some(DVector::from_element(1, 0.5))];
+/// let noise = Parametrisation::new(None, CovarianceForm::scaled(one(1.0)),
+///     CovarianceForm::scaled(one(1.0)))?;
+/// let problem = NoiseProblem::new(one(1.0), one(1.0), DVector::zeros(1), one(1.0),
+///     Start::PredictFirst, noise, vec![run])?;
+/// assert_eq!(sizes(&problem), (1, 1, 2));
+/// assert_eq!(problem.run_lengths(), [3]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub trait ReportProblem: sealed::Sealed + Sync {
+    /// The noise parametrisation.
+    fn noise(&self) -> &Parametrisation;
+    /// `n`, the states.
+    fn state_dim(&self) -> usize;
+    /// `m`, the measurements.
+    fn measurement_dim(&self) -> usize;
+    /// The measurements present over every run.
+    fn measurement_count(&self) -> usize;
+    /// The steps of each run (with or without a measurement).
+    fn run_lengths(&self) -> Vec<usize>;
+    /// Where `x0`, `P0` sit.
+    fn start(&self) -> Start;
+    /// The filter whose likelihood is maximised: `None` for the linear Kalman filter (exact),
+    /// the EKF or the UKF of a nonlinear problem (the likelihood of its Gaussian
+    /// approximation).
+    fn likelihood_filter(&self) -> Option<LikelihoodFilter>;
+    /// The log-likelihood of every run's measurements with the noise `matrices` (`q` and `r`
+    /// are read).
+    ///
+    /// # Errors
+    /// The problem's own: [`LikelihoodError`] where its filter cannot run with them.
+    fn log_likelihood_at(&self, matrices: &NoiseMatrices) -> Result<f64, LikelihoodError>;
+}
+
+mod sealed {
+    /// What the report runs that users do not: the problem's own filter over every run.
+    pub trait Sealed {
+        /// The problem's filter with `matrices` over every run, judged by the evaluation
+        /// (an error in words where it cannot run).
+        fn check(
+            &self,
+            matrices: &crate::NoiseMatrices,
+            truth: Option<&[crate::Run]>,
+        ) -> Result<super::FilterCheck, String>;
+    }
+}
+
+impl ReportProblem for NoiseProblem {
+    fn noise(&self) -> &Parametrisation {
+        NoiseProblem::noise(self)
+    }
+    fn state_dim(&self) -> usize {
+        NoiseProblem::state_dim(self)
+    }
+    fn measurement_dim(&self) -> usize {
+        NoiseProblem::measurement_dim(self)
+    }
+    fn measurement_count(&self) -> usize {
+        NoiseProblem::measurement_count(self)
+    }
+    fn run_lengths(&self) -> Vec<usize> {
+        self.runs().iter().map(Vec::len).collect()
+    }
+    fn start(&self) -> Start {
+        NoiseProblem::start(self)
+    }
+    fn likelihood_filter(&self) -> Option<LikelihoodFilter> {
+        None
+    }
+    fn log_likelihood_at(&self, matrices: &NoiseMatrices) -> Result<f64, LikelihoodError> {
+        log_likelihood_of(self, matrices)
+    }
+}
+
+impl sealed::Sealed for NoiseProblem {
+    fn check(
+        &self,
+        matrices: &NoiseMatrices,
+        truth: Option<&[Run]>,
+    ) -> Result<FilterCheck, String> {
+        let model = |e: ModelError| e.to_string();
+        let dynamics = LinearGaussian::new(self.f().clone(), matrices.q.clone()).map_err(model)?;
+        let sensor = LinearObservation::new(self.h().clone(), matrices.r.clone()).map_err(model)?;
+        check_runs(
+            self.state_dim(),
+            self.measurement_dim(),
+            self.runs(),
+            self.start(),
+            truth,
+            || Kf::new(&dynamics, &sensor, self.x0().clone(), self.p0().clone()),
+        )
+        .map_err(|e| e.to_string())
+    }
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> ReportProblem
+    for NonlinearNoiseProblem<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+    NonlinearNoiseProblem<N, M, D, H>: Sync,
+{
+    fn noise(&self) -> &Parametrisation {
+        NonlinearNoiseProblem::noise(self)
+    }
+    fn state_dim(&self) -> usize {
+        NonlinearNoiseProblem::state_dim(self)
+    }
+    fn measurement_dim(&self) -> usize {
+        NonlinearNoiseProblem::measurement_dim(self)
+    }
+    fn measurement_count(&self) -> usize {
+        NonlinearNoiseProblem::measurement_count(self)
+    }
+    fn run_lengths(&self) -> Vec<usize> {
+        self.runs().iter().map(Vec::len).collect()
+    }
+    fn start(&self) -> Start {
+        NonlinearNoiseProblem::start(self)
+    }
+    fn likelihood_filter(&self) -> Option<LikelihoodFilter> {
+        Some(self.filter())
+    }
+    fn log_likelihood_at(&self, matrices: &NoiseMatrices) -> Result<f64, LikelihoodError> {
+        self.log_likelihood_of(matrices)
+    }
+}
+
+impl<N: Dim, M: Dim, D: Dynamics<N>, H: Measurement<N, M>> sealed::Sealed
+    for NonlinearNoiseProblem<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn check(
+        &self,
+        matrices: &NoiseMatrices,
+        truth: Option<&[Run]>,
+    ) -> Result<FilterCheck, String> {
+        self.check_filter_at(matrices, truth)
+            .map_err(|e| e.to_string())
+    }
+}
 
 /// The estimator a [`NoiseReport`] runs, with its options.
 #[derive(Clone, Debug, PartialEq)]
@@ -403,96 +568,182 @@ impl NoiseReport {
         options: ReportOptions,
         truth: Option<&[Run]>,
     ) -> Result<NoiseReport, ReportError> {
-        if let Some(truth) = truth {
-            check_truth(problem, truth)?;
-        }
-        let noise = problem.noise();
-        let scalars = problem.measurement_count() * problem.measurement_dim();
-        if scalars < noise.len() {
-            return Err(ReportError::TooFewMeasurements {
-                measurements: scalars,
-                parameters: noise.len(),
-            });
-        }
-        let start = noise
-            .matrices(noise.start().as_slice())
-            .map_err(ReportError::Start)?;
+        let start = prepare(problem, truth)?;
         let fit = match method {
             Method::MaximumLikelihood(ml) => fit_ml(problem, ml)?,
             Method::Em(em) => fit_em(problem, em)?,
             Method::Als(als) => fit_als(problem, als)?,
             Method::J1J2(sweep) => fit_j1j2(problem, sweep, &start)?,
         };
-        let mut warnings = fit.warnings;
-        let log_likelihood = match log_likelihood_of(problem, &fit.matrices) {
-            Ok(l) => Some(l),
-            Err(e) => {
-                warnings.push(format!("the log-likelihood at the estimate: {e}"));
-                None
-            }
+        Ok(finish(problem, method.kind(), fit, &start, options, truth))
+    }
+
+    /// Maximum likelihood through the EKF or the UKF
+    /// ([`MaximumLikelihood::estimate_nonlinear`]) with the report of
+    /// [`NoiseReport::estimate`]: the same intervals, identifiability and warnings, each
+    /// parameter's profile likelihood re-maximised through the same filter, and the problem's
+    /// own filter (the EKF or the UKF the estimate used) run over the data with the estimate
+    /// and with the starting guess and judged by the same evaluation (ANIS with its band,
+    /// whiteness; ANEES and RMSE with `truth`). A warning says that the likelihood is the
+    /// filter's Gaussian approximation's (a quasi-likelihood).
+    ///
+    /// ```
+    /// use kalibra_linalg::{DMatrix, DVector, Dyn};
+    /// use kalibra_models::{LinearGaussian, LinearObservation};
+    /// use kalibra_tune::{CovarianceForm, LikelihoodFilter, MaximumLikelihood,
+    ///     NonlinearNoiseProblem, NoiseReport, Parametrisation, ReportOptions, Start};
+    ///
+    /// let one = |v: f64| DMatrix::from_element(1, 1, v);
+    /// let zs = [0.1, 0.5, 0.2, 1.1, 1.6, 1.2, 2.3, 2.0, 2.9, 3.4, 2.8, 3.9, 4.4, 4.1, 5.2];
+    /// let run = zs.iter().map(|&z| Some(DVector::from_element(1, z))).collect();
+    /// let noise = Parametrisation::new(None, CovarianceForm::scaled(one(1.0)),
+    ///     CovarianceForm::scaled(one(1.0)))?;
+    /// let problem = NonlinearNoiseProblem::new(LinearGaussian::new(one(1.0), one(1.0))?,
+    ///     LinearObservation::<Dyn, Dyn>::new(one(1.0), one(1.0))?, LikelihoodFilter::Ekf,
+    ///     DVector::zeros(1), one(1.0), Start::PredictFirst, noise, vec![run])?;
+    /// let report = NoiseReport::estimate_nonlinear(&problem, &MaximumLikelihood::new(),
+    ///     ReportOptions::new(), None)?;
+    /// assert!(report.parameters.iter().all(|p| p.profile.is_some()));
+    /// assert!(report.consistency.estimate.as_ref().unwrap().anis.is_some());
+    /// assert!(report.consistency.start.as_ref().unwrap().whiteness.is_some());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`ReportError::Ml`] for the estimator's refusal; [`ReportError::TooFewMeasurements`];
+    /// [`ReportError::Start`]; [`ReportError::TruthRuns`], [`ReportError::TruthLength`],
+    /// [`ReportError::TruthValue`] for a truth that does not fit the measurements.
+    pub fn estimate_nonlinear<N: Dim, M: Dim, D, H>(
+        problem: &NonlinearNoiseProblem<N, M, D, H>,
+        ml: &MaximumLikelihood,
+        options: ReportOptions,
+        truth: Option<&[Run]>,
+    ) -> Result<NoiseReport, ReportError>
+    where
+        DefaultAllocator: Alloc<N, M>,
+        D: Dynamics<N>,
+        H: Measurement<N, M>,
+        NonlinearNoiseProblem<N, M, D, H>: Sync,
+    {
+        let start = prepare(problem, truth)?;
+        let est = ml.estimate_nonlinear(problem).map_err(ReportError::Ml)?;
+        let mut fit = ml_fit(est);
+        let filter = match problem.filter() {
+            LikelihoodFilter::Ekf => "EKF",
+            LikelihoodFilter::Ukf(_) => "UKF",
         };
-        let start_log_likelihood = log_likelihood_of(problem, &start).ok();
-        let params = noise.parameters();
-        let mut parameters: Vec<ReportParameter> = params
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let from_view = fit.view.as_ref().map(|v| &v.parameters[i]);
-                let intervals = fit.intervals;
-                ReportParameter {
-                    name: p.name.clone(),
-                    value: fit.values[i],
-                    stderr: from_view.and_then(|v| v.stderr).filter(|_| intervals),
-                    ci95: from_view.and_then(|v| v.ci95).filter(|_| intervals),
-                    at_bound: from_view.and_then(|v| v.at_bound).filter(|_| intervals),
-                    profile: None,
-                }
-            })
-            .collect();
-        if options.profile
-            && fit.intervals
-            && let (Some(view), Some(ll)) = (&fit.view, log_likelihood)
-        {
-            let profiles: Vec<Option<Profile>> = (0..params.len())
-                .into_par_iter()
-                .map(|i| profile(problem, view, &parameters[i], i, ll))
-                .collect();
-            for (p, prof) in parameters.iter_mut().zip(profiles) {
-                p.profile = prof;
-            }
+        fit.warnings.push(format!(
+            "the likelihood is that of the {filter}'s Gaussian approximation (a \
+             quasi-likelihood): the intervals and profiles are those of that approximation"
+        ));
+        Ok(finish(problem, MethodKind::Ml, fit, &start, options, truth))
+    }
+}
+
+/// The checks every report makes before its method runs: the truth fits the measurements,
+/// there are at least as many scalar measurements as free parameters, the starting guess has
+/// matrices (returned).
+fn prepare(
+    problem: &dyn ReportProblem,
+    truth: Option<&[Run]>,
+) -> Result<NoiseMatrices, ReportError> {
+    if let Some(truth) = truth {
+        check_truth(problem, truth)?;
+    }
+    let noise = problem.noise();
+    let scalars = problem.measurement_count() * problem.measurement_dim();
+    if scalars < noise.len() {
+        return Err(ReportError::TooFewMeasurements {
+            measurements: scalars,
+            parameters: noise.len(),
+        });
+    }
+    noise
+        .matrices(noise.start().as_slice())
+        .map_err(ReportError::Start)
+}
+
+/// The parts of a report common to every method and problem: the log-likelihoods, the
+/// parameters with their profiles, and the filter with the estimate and with the starting
+/// guess judged on the data.
+fn finish(
+    problem: &dyn ReportProblem,
+    method: MethodKind,
+    fit: Fit,
+    start: &NoiseMatrices,
+    options: ReportOptions,
+    truth: Option<&[Run]>,
+) -> NoiseReport {
+    let noise = problem.noise();
+    let mut warnings = fit.warnings;
+    let log_likelihood = match problem.log_likelihood_at(&fit.matrices) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            warnings.push(format!("the log-likelihood at the estimate: {e}"));
+            None
         }
-        let estimate_check = match check_filter(problem, &fit.matrices, truth) {
-            Ok(c) => Some(c),
-            Err(e) => {
-                warnings.push(format!("the filter with the estimate: {e}"));
-                None
+    };
+    let start_log_likelihood = problem.log_likelihood_at(start).ok();
+    let params = noise.parameters();
+    let mut parameters: Vec<ReportParameter> = params
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let from_view = fit.view.as_ref().map(|v| &v.parameters[i]);
+            let intervals = fit.intervals;
+            ReportParameter {
+                name: p.name.clone(),
+                value: fit.values[i],
+                stderr: from_view.and_then(|v| v.stderr).filter(|_| intervals),
+                ci95: from_view.and_then(|v| v.ci95).filter(|_| intervals),
+                at_bound: from_view.and_then(|v| v.at_bound).filter(|_| intervals),
+                profile: None,
             }
-        };
-        let start_check = match check_filter(problem, &start, truth) {
-            Ok(c) => Some(c),
-            Err(e) => {
-                warnings.push(format!("the filter with the starting guess: {e}"));
-                None
-            }
-        };
-        Ok(NoiseReport {
-            method: method.kind(),
-            log_likelihood,
-            start_log_likelihood,
-            q: rows_of(&fit.matrices.q),
-            qw: rows_of(&fit.matrices.qw),
-            r: rows_of(&fit.matrices.r),
-            parameters,
-            converged: fit.converged,
-            iterations: fit.iterations,
-            identifiability: fit.identifiability,
-            warnings,
-            consistency: Consistency {
-                estimate: estimate_check,
-                start: start_check,
-            },
-            j1j2: fit.curves,
         })
+        .collect();
+    if options.profile
+        && fit.intervals
+        && let (Some(view), Some(ll)) = (&fit.view, log_likelihood)
+    {
+        let profiles: Vec<Option<Profile>> = (0..params.len())
+            .into_par_iter()
+            .map(|i| profile(problem, view, &parameters[i], i, ll))
+            .collect();
+        for (p, prof) in parameters.iter_mut().zip(profiles) {
+            p.profile = prof;
+        }
+    }
+    let estimate_check = match problem.check(&fit.matrices, truth) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            warnings.push(format!("the filter with the estimate: {e}"));
+            None
+        }
+    };
+    let start_check = match problem.check(start, truth) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            warnings.push(format!("the filter with the starting guess: {e}"));
+            None
+        }
+    };
+    NoiseReport {
+        method,
+        log_likelihood,
+        start_log_likelihood,
+        q: rows_of(&fit.matrices.q),
+        qw: rows_of(&fit.matrices.qw),
+        r: rows_of(&fit.matrices.r),
+        parameters,
+        converged: fit.converged,
+        iterations: fit.iterations,
+        identifiability: fit.identifiability,
+        warnings,
+        consistency: Consistency {
+            estimate: estimate_check,
+            start: start_check,
+        },
+        j1j2: fit.curves,
     }
 }
 
@@ -599,8 +850,8 @@ fn significant(v: f64) -> String {
     format!("{v:.digits$}")
 }
 
-fn check_truth(problem: &NoiseProblem, truth: &[Run]) -> Result<(), ReportError> {
-    let runs = problem.runs();
+fn check_truth(problem: &dyn ReportProblem, truth: &[Run]) -> Result<(), ReportError> {
+    let runs = problem.run_lengths();
     if truth.len() != runs.len() {
         return Err(ReportError::TruthRuns {
             expected: runs.len(),
@@ -608,11 +859,11 @@ fn check_truth(problem: &NoiseProblem, truth: &[Run]) -> Result<(), ReportError>
         });
     }
     let n = problem.state_dim();
-    for (run, (t, zs)) in truth.iter().zip(runs).enumerate() {
-        if t.len() != zs.len() {
+    for (run, (t, steps)) in truth.iter().zip(runs).enumerate() {
+        if t.len() != steps {
             return Err(ReportError::TruthLength {
                 run,
-                expected: zs.len(),
+                expected: steps,
                 found: t.len(),
             });
         }
@@ -686,8 +937,12 @@ fn identifiability_of(view: &MlEstimate) -> Option<ReportIdentifiability> {
 }
 
 fn fit_ml(problem: &NoiseProblem, ml: &MaximumLikelihood) -> Result<Fit, ReportError> {
-    let est = ml.estimate(problem).map_err(ReportError::Ml)?;
-    Ok(Fit {
+    Ok(ml_fit(ml.estimate(problem).map_err(ReportError::Ml)?))
+}
+
+/// A maximum-likelihood estimate (linear or through the EKF or the UKF) as the report's fit.
+fn ml_fit(est: MlEstimate) -> Fit {
+    Fit {
         matrices: est.matrices.clone(),
         values: est.parameters.iter().map(|p| p.value).collect(),
         converged: est.converged,
@@ -697,7 +952,7 @@ fn fit_ml(problem: &NoiseProblem, ml: &MaximumLikelihood) -> Result<Fit, ReportE
         intervals: true,
         view: Some(est),
         curves: None,
-    })
+    }
 }
 
 /// The likelihood's view (information, bounds, identifiability, intervals) at `matrices`,
@@ -900,7 +1155,7 @@ fn fit_j1j2(
 
 /// Why the filter could not be judged.
 #[derive(Debug, thiserror::Error)]
-enum CheckError {
+pub(crate) enum CheckError {
     #[error("model: {0}")]
     Model(#[from] ModelError),
     #[error("run {run}: {source}")]
@@ -909,16 +1164,20 @@ enum CheckError {
     Eval(#[from] kalibra_eval::EvalError),
 }
 
-/// Runs the filter with `matrices` over every run and judges the log.
-fn check_filter(
-    problem: &NoiseProblem,
-    matrices: &NoiseMatrices,
+/// Runs a filter made by `filter_of` (a fresh one from `x0`, `P0` for each run) over every
+/// run and judges the log with [`kalibra_eval::Evaluation`]: the one filter check of the
+/// Kalman filter, the EKF and the UKF.
+pub(crate) fn check_runs<N: Dim, M: Dim, F: Filter<N, M>>(
+    n: usize,
+    m: usize,
+    runs: &[Vec<Option<OVector<f64, M>>>],
+    start: Start,
     truth: Option<&[Run]>,
-) -> Result<FilterCheck, CheckError> {
-    let (n, m) = (problem.state_dim(), problem.measurement_dim());
-    let dynamics = LinearGaussian::new(problem.f().clone(), matrices.q.clone())?;
-    let sensor = LinearObservation::new(problem.h().clone(), matrices.r.clone())?;
-    let runs = problem.runs();
+    mut filter_of: impl FnMut() -> Result<F, FilterError>,
+) -> Result<FilterCheck, CheckError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
     let steps = runs.iter().map(Vec::len).max().unwrap_or(0);
     let cells = runs.len() * steps;
     let mut innovation = vec![None; cells];
@@ -927,15 +1186,9 @@ fn check_filter(
     let mut covariance = vec![None; cells];
     for (run, zs) in runs.iter().enumerate() {
         let filter = |source| CheckError::Filter { run, source };
-        let mut kf = Kf::new(
-            &dynamics,
-            &sensor,
-            problem.x0().clone(),
-            problem.p0().clone(),
-        )
-        .map_err(filter)?;
+        let mut kf = filter_of().map_err(filter)?;
         let trajectory = kf
-            .run_all(zs.iter().map(Option::as_ref), problem.start())
+            .run_all(zs.iter().map(Option::as_ref), start)
             .map_err(filter)?;
         // Entry 0 is the initial estimate; entry i + 1 belongs to step i of the run.
         for (step, entry) in trajectory.entries()[1..].iter().enumerate() {
@@ -995,9 +1248,12 @@ fn check_filter(
     })
 }
 
-fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+fn row_major<D: Dim>(m: &OMatrix<f64, D, D>) -> Vec<f64>
+where
+    DefaultAllocator: Alloc<D>,
+{
     (0..m.nrows())
-        .flat_map(|i| m.row(i).iter().copied().collect::<Vec<_>>())
+        .flat_map(|i| (0..m.ncols()).map(move |j| m[(i, j)]))
         .collect()
 }
 
@@ -1087,7 +1343,7 @@ fn held_form(
 /// The profile log-likelihood at one value of parameter `index`, re-maximised over the
 /// others from the warm start `warm`. Returns the maximum and the matrices there.
 fn profile_point(
-    problem: &NoiseProblem,
+    problem: &dyn ReportProblem,
     param: &Parameter,
     value: f64,
     warm: &NoiseMatrices,
@@ -1103,30 +1359,23 @@ fn profile_point(
             held_form(noise.r_form(), param, value, &warm.r)?,
         ),
     };
+    // The problem's likelihood under the held parametrisation: the runs are not copied.
     let held = Parametrisation::new(noise.g().cloned(), qw_form, r_form).ok()?;
-    let sub = NoiseProblem::new(
-        problem.f().clone(),
-        problem.h().clone(),
-        problem.x0().clone(),
-        problem.p0().clone(),
-        problem.start(),
-        held,
-        problem.runs().to_vec(),
-    )
-    .ok()?;
-    let held = sub.noise();
+    let ll = |theta: &[f64]| -> Result<f64, LikelihoodError> {
+        problem.log_likelihood_at(&held.matrices(theta)?)
+    };
     if held.is_empty() {
         let m = held.matrices(&[]).ok()?;
-        let ll = log_likelihood_of(&sub, &m).ok()?;
+        let ll = problem.log_likelihood_at(&m).ok()?;
         return Some((ll, true, m));
     }
     // Warm start: the neighbour's other parameters (the held entry is not read, or is set).
     let theta0 = held
         .theta_of(&warm.qw, &warm.r)
         .ok()
-        .filter(|t| log_likelihood(&sub, t.as_slice()).is_ok())
+        .filter(|t| ll(t.as_slice()).is_ok())
         .unwrap_or_else(|| held.start());
-    let scale = sub.measurement_count() as f64;
+    let scale = problem.measurement_count() as f64;
     let objective = |theta: &[f64]| -> Option<f64> {
         if theta
             .iter()
@@ -1135,7 +1384,7 @@ fn profile_point(
         {
             return None;
         }
-        log_likelihood(&sub, theta).ok().map(|l| -l / scale)
+        ll(theta).ok().map(|l| -l / scale)
     };
     let out = optim::minimise(
         &objective,
@@ -1151,7 +1400,7 @@ fn profile_point(
 
 /// The profile of parameter `index` (see the module docs and [`PROFILE_POINTS`]).
 fn profile(
-    problem: &NoiseProblem,
+    problem: &dyn ReportProblem,
     view: &MlEstimate,
     param: &ReportParameter,
     index: usize,
@@ -1253,7 +1502,7 @@ fn profile(
 /// start 10^4` at infinity), walked from the estimate; the crossing of the threshold is the
 /// one-sided 95% limit the data put on it.
 fn bound_profile(
-    problem: &NoiseProblem,
+    problem: &dyn ReportProblem,
     view: &MlEstimate,
     meta: &Parameter,
     value: f64,

@@ -11,5 +11,6 @@ mod j1j2;
 mod ml;
 mod ml_nonlinear;
 mod report;
+mod report_nonlinear;
 mod statsmodels;
 mod sweep_q;
