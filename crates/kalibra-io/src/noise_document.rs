@@ -382,10 +382,13 @@ impl Document {
             blocks.push(Block::Heading("The filter on the data".into()));
             blocks.push(Block::Paragraph(
                 None,
-                "The Kalman filter run over the measurements with the estimate and with the \
-                 starting guess: ANIS with its 95% chi-square band, and the whiteness of the \
-                 normalised innovations (Box-Pierce test); with the truth, ANEES and the RMSE."
-                    .into(),
+                format!(
+                    "The {} run over the measurements with the estimate and with the \
+                     starting guess: ANIS with its 95% chi-square band, and the whiteness of \
+                     the normalised innovations (Box-Pierce test); with the truth, ANEES and \
+                     the RMSE.",
+                    filter_words(r.problem.filter.as_deref())
+                ),
             ));
             blocks.push(Block::Table(
                 vec![
@@ -501,4 +504,14 @@ fn start_values(r: &NoiseReportFile) -> Vec<Option<f64>> {
             m.get(i).and_then(|row| row.get(j)).copied()
         })
         .collect()
+}
+
+/// The filter the report ran, in words: the Kalman filter for a linear model, the EKF or the
+/// UKF (the one the likelihood was maximised through) for a nonlinear one.
+fn filter_words(filter: Option<&str>) -> &'static str {
+    match filter {
+        Some("ekf") => "extended Kalman filter",
+        Some("ukf") => "unscented Kalman filter",
+        _ => "Kalman filter",
+    }
 }

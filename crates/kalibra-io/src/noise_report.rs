@@ -11,8 +11,8 @@ use std::path::Path;
 
 use kalibra_eval::ConsistencyTest;
 use kalibra_tune::{
-    Bound, DMatrix, FilterCheck, MethodKind, NoiseProblem, NoiseReport, ParameterCurve,
-    ReportParameter,
+    Bound, DMatrix, FilterCheck, LikelihoodFilter, MethodKind, NoiseReport, ParameterCurve,
+    ReportParameter, ReportProblem,
 };
 use serde::{Deserialize, Serialize};
 
@@ -191,6 +191,10 @@ pub struct ProblemRow {
     pub start: String,
     /// `n m + m (m + 1) / 2`, the most free parameters innovations can identify.
     pub identifiable_limit: usize,
+    /// The filter of a nonlinear model's likelihood, `"ekf"` or `"ukf"`; absent for a linear
+    /// model (the Kalman filter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub filter: Option<String>,
 }
 
 /// `report.json` of a noise estimate: [`kalibra_tune::NoiseReport`] with the names the
@@ -263,8 +267,9 @@ fn parameter_row(p: &ReportParameter) -> ParameterRow {
 }
 
 impl NoiseReportFile {
-    /// `report.json` of `report`, the estimate on `problem`.
-    pub fn new(problem: &NoiseProblem, report: &NoiseReport) -> Self {
+    /// `report.json` of `report`, the estimate on `problem` (a linear
+    /// [`kalibra_tune::NoiseProblem`] or a [`kalibra_tune::NonlinearNoiseProblem`]).
+    pub fn new<P: ReportProblem + ?Sized>(problem: &P, report: &NoiseReport) -> Self {
         let noise = problem.noise();
         let (sq, sqw, sr) = match noise.matrices(noise.start().as_slice()) {
             Ok(m) => (rows(&m.q), rows(&m.qw), rows(&m.r)),
@@ -322,14 +327,21 @@ impl NoiseReportFile {
                 state_dim: problem.state_dim(),
                 meas_dim: problem.measurement_dim(),
                 channels: noise.channels(),
-                runs: problem.runs().len(),
-                steps: problem.runs().iter().map(Vec::len).sum(),
+                runs: problem.run_lengths().len(),
+                steps: problem.run_lengths().iter().sum(),
                 measurements: problem.measurement_count(),
                 start: match problem.start() {
                     kalibra_tune::Start::PredictFirst => "predict_first".into(),
                     kalibra_tune::Start::UpdateFirst => "update_first".into(),
                 },
                 identifiable_limit: noise.identifiable_limit(),
+                filter: problem.likelihood_filter().map(|f| {
+                    match f {
+                        LikelihoodFilter::Ekf => "ekf",
+                        _ => "ukf",
+                    }
+                    .to_string()
+                }),
             },
         }
     }

@@ -28,49 +28,6 @@ const METHODS: [&str; 4] = ["ml", "em", "als", "j1j2"];
 /// The forms of a noise matrix, by their names.
 const FORMS: [&str; 4] = ["fixed", "scaled", "diagonal", "full"];
 
-/// The report as `report.json` holds it: [`NoiseReport`]'s fields under the names of
-/// `kalibra tune --method`'s report (`Q`, `Qw`, `R`, `identifiable`).
-#[derive(Serialize)]
-struct JsonView<'a> {
-    method: &'static str,
-    log_likelihood: Option<f64>,
-    start_log_likelihood: Option<f64>,
-    #[serde(rename = "Q")]
-    q: &'a [Vec<f64>],
-    #[serde(rename = "Qw")]
-    qw: &'a [Vec<f64>],
-    #[serde(rename = "R")]
-    r: &'a [Vec<f64>],
-    parameters: &'a [ReportParameter],
-    converged: bool,
-    iterations: usize,
-    identifiable: Option<&'a ReportIdentifiability>,
-    warnings: &'a [String],
-    consistency: &'a kalibra_tune::Consistency,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    j1j2: Option<&'a [kalibra_tune::ParameterCurve]>,
-}
-
-impl<'a> JsonView<'a> {
-    fn of(r: &'a NoiseReport) -> Self {
-        Self {
-            method: r.method.name(),
-            log_likelihood: r.log_likelihood,
-            start_log_likelihood: r.start_log_likelihood,
-            q: &r.q,
-            qw: &r.qw,
-            r: &r.r,
-            parameters: &r.parameters,
-            converged: r.converged,
-            iterations: r.iterations,
-            identifiable: r.identifiability.as_ref(),
-            warnings: &r.warnings,
-            consistency: &r.consistency,
-            j1j2: r.j1j2.as_deref(),
-        }
-    }
-}
-
 /// The noise covariances `Q` and `R` estimated from measurements: what `kalibra tune
 /// --method` writes as `report.json` (kalibra-tune's `NoiseReport`).
 ///
@@ -80,14 +37,14 @@ impl<'a> JsonView<'a> {
 /// `ci95`, `at_bound`, `profile`); `identifiable` says what the data can separate;
 /// `consistency` judges the filter with the estimate and with the starting guess on the data
 /// (ANIS with its band, whiteness; ANEES and RMSE with the truth). `to_dict()` holds every
-/// field (the keys of `report.json`); `save(dir)` writes `report.json`.
+/// field (the keys of `report.json`); `save(dir)` writes `report.json`, `report.md`,
+/// `report.html` and the profile figures.
 #[pyclass(module = "kalibra", frozen)]
 pub struct NoiseEstimate {
     report: NoiseReport,
-    /// `report.json` as `kalibra tune --method` writes it (`None` for a model given as
-    /// callables, which has no linear problem to describe: `report.json` is then
-    /// [`JsonView`] alone).
-    file: Option<NoiseReportFile>,
+    /// `report.json` as `kalibra tune --method` writes it (for a model given as callables, with
+    /// the filter its likelihood ran through).
+    file: NoiseReportFile,
     /// The (model, measurements) names of the report's title.
     names: (String, String),
 }
@@ -218,40 +175,26 @@ impl NoiseEstimate {
 
     /// Every field as a dict with the keys of `report.json`.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        match &self.file {
-            Some(file) => json_value(py, file),
-            None => json_value(py, &JsonView::of(&self.report)),
-        }
+        json_value(py, &self.file)
     }
 
     /// The report as JSON text: `report.json` without its final newline.
     fn to_json(&self) -> PyResult<String> {
-        match &self.file {
-            Some(file) => serde_json::to_string_pretty(file),
-            None => serde_json::to_string_pretty(&JsonView::of(&self.report)),
-        }
-        .map_err(|e| error(format!("cannot serialise the report: {e}")))
+        serde_json::to_string_pretty(&self.file)
+            .map_err(|e| error(format!("cannot serialise the report: {e}")))
     }
 
     /// Writes `report.json`, `report.md`, `report.html` and the profile figures into `dir`,
     /// as `kalibra tune --method` does and through its writer (the same bytes on the same
-    /// model and data); a model given as callables writes `report.json` alone.
+    /// model and data); a model given as callables gets the same files, its filter (the EKF
+    /// or the UKF) named in them.
     ///
     /// Raises:
     ///     OSError: `dir` holds something other than a report, or cannot be written.
     fn save(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
-        match &self.file {
-            Some(file) => {
-                let names = (Path::new(&self.names.0), Path::new(&self.names.1));
-                py.detach(|| kalibra_io::noise_report::write_noise_report(&dir, file, Some(names)))
-                    .map_err(|e| PyOSError::new_err(e.to_string()))
-            }
-            None => {
-                let json = self.to_json()? + "\n";
-                py.detach(|| kalibra_io::noise_report::write_report_json(&dir, &json))
-                    .map_err(|e| PyOSError::new_err(format!("write {}: {e}", dir.display())))
-            }
-        }
+        let names = (Path::new(&self.names.0), Path::new(&self.names.1));
+        py.detach(|| kalibra_io::noise_report::write_noise_report(&dir, &self.file, Some(names)))
+            .map_err(|e| PyOSError::new_err(e.to_string()))
     }
 
     fn __repr__(&self) -> String {
@@ -586,94 +529,6 @@ fn estimator(
     }
 }
 
-/// An ML warning in words (a nonlinear estimate has no `NoiseReport::estimate` of its own).
-fn ml_warning(w: &MlWarning) -> String {
-    match w {
-        MlWarning::NotConverged {
-            stop,
-            gradient,
-            iterations,
-        } => format!(
-            "the optimiser did not converge: it stopped ({stop:?}) after {iterations} \
-             iterations with a gradient of {gradient:.2e} on -ln L / N"
-        ),
-        MlWarning::AtBound { parameter, bound } => format!(
-            "{parameter} ran to its bound {}: the data cannot tell it from that bound",
-            match bound {
-                kalibra_tune::Bound::Zero => "0",
-                kalibra_tune::Bound::Infinity => "infinity",
-            }
-        ),
-        MlWarning::Unidentifiable { message } => message.clone(),
-        MlWarning::NotAMaximum { eigenvalue } => format!(
-            "the estimate is not a maximum of the likelihood: its curvature has the negative \
-             eigenvalue {eigenvalue:.3e}"
-        ),
-        MlWarning::LocalMaxima { best, other } => format!(
-            "the starts reached different maxima (ln L = {best:.6} and {other:.6}); the best \
-             is reported"
-        ),
-        MlWarning::NoInformation => {
-            "the observed information could not be computed: no standard errors".to_string()
-        }
-        other => format!("{other:?}"),
-    }
-}
-
-/// A nonlinear model's ML estimate in the report's schema: no profile and no consistency
-/// check (the report's filter checks run the linear Kalman filter), said in a warning.
-fn nonlinear_report(est: &MlEstimate, kind: &str) -> NoiseReport {
-    let rows = |m: &DMatrix<f64>| -> Vec<Vec<f64>> {
-        (0..m.nrows())
-            .map(|i| m.row(i).iter().copied().collect())
-            .collect()
-    };
-    let mut warnings: Vec<String> = est.warnings.iter().map(ml_warning).collect();
-    warnings.push(format!(
-        "the likelihood is that of the {kind}'s Gaussian approximation (a quasi-likelihood); \
-         no profile likelihood or consistency check is computed for a model given as callables"
-    ));
-    NoiseReport {
-        method: MethodKind::Ml,
-        log_likelihood: Some(est.log_likelihood),
-        start_log_likelihood: Some(est.start_log_likelihood),
-        q: rows(&est.matrices.q),
-        qw: rows(&est.matrices.qw),
-        r: rows(&est.matrices.r),
-        parameters: est
-            .parameters
-            .iter()
-            .map(|p| ReportParameter {
-                name: p.parameter.name.clone(),
-                value: p.value,
-                stderr: p.stderr,
-                ci95: p.ci95,
-                at_bound: p.at_bound,
-                profile: None,
-            })
-            .collect(),
-        converged: est.converged,
-        iterations: est.iterations,
-        identifiability: est
-            .identifiability
-            .as_ref()
-            .map(|id| ReportIdentifiability {
-                source: "observed information".to_string(),
-                parameters: id.parameters,
-                rank: id.rank,
-                condition: id.condition_number,
-                unidentifiable: id.flat_directions.iter().map(|c| c.text.clone()).collect(),
-                message: id.message.clone(),
-            }),
-        warnings,
-        consistency: Consistency {
-            estimate: None,
-            start: None,
-        },
-        j1j2: None,
-    }
-}
-
 /// The callables of a nonlinear model: `f`, `h`, their Jacobians and the residual.
 struct Callables {
     f: Py<PyAny>,
@@ -706,6 +561,7 @@ fn estimate_nonlinear(
     (x0, p0): (DVector<f64>, DMatrix<f64>),
     start: Start,
     ml: &MaximumLikelihood,
+    (options, truth, names): (ReportOptions, Option<Vec<Run>>, (String, String)),
 ) -> PyResult<NoiseEstimate> {
     let (n, m) = (noise.state_dim(), noise.measurement_dim());
     let filter = match kind {
@@ -756,16 +612,20 @@ fn estimate_nonlinear(
     }
     // The GIL is released so that the optimiser's threads can each take it to call the
     // model; the calls themselves run one at a time.
-    let result = py.detach(|| ml.estimate_nonlinear(&problem));
+    let result =
+        py.detach(|| NoiseReport::estimate_nonlinear(&problem, ml, options, truth.as_deref()));
     if let Some(e) = failure.take() {
         return Err(e);
     }
-    let est =
-        result.map_err(|e| error(format!("estimate the noise by ml through the {kind}: {e}")))?;
+    let report = result.map_err(|e| match e {
+        ReportError::Ml(e) => error(format!("estimate the noise by ml through the {kind}: {e}")),
+        other => report_error(&other, "ml"),
+    })?;
+    let file = NoiseReportFile::new(&problem, &report);
     Ok(NoiseEstimate {
-        report: nonlinear_report(&est, kind),
-        file: None,
-        names: ("model".into(), "measurements".into()),
+        report,
+        file,
+        names,
     })
 }
 
@@ -778,7 +638,8 @@ fn estimate_nonlinear(
 /// callables in place of F and H, as `ExtendedKalmanFilter` and `UnscentedKalmanFilter` take
 /// them: its likelihood is that of the EKF (with `F_jacobian` and `H_jacobian`) or of the UKF
 /// (`kind="ukf"`, the recommended symmetric sigma points), maximised over the same forms
-/// (method "ml" only; no profile or consistency check).
+/// (method "ml" only), with the same report: the profiles are re-maximised through that
+/// filter, and the consistency runs it with the estimate and with the starting guess.
 ///
 /// Args:
 ///     F: (n, n), or the callable f(x, k) -> (n,) of a nonlinear model.
@@ -818,12 +679,13 @@ fn estimate_nonlinear(
 ///     kind: for callables, "ekf" (default) or "ukf".
 ///     names: the (model, measurements) names in the saved report's title.
 ///     profile: compute the profile likelihood of every parameter (ML and converged EM; 10
-///         re-maximisations per parameter, the costliest part); default True.
+///         re-maximisations per parameter, the costliest part, and for callables each one
+///         runs the filter through Python); default True.
 ///
 /// Returns:
 ///     NoiseEstimate: `method`, `log_likelihood`, `Q`, `Qw`, `R`, `parameters` (name, value,
 ///     stderr, ci95, profile), `converged`, `iterations`, `identifiable`, `consistency`,
-///     `warnings`; `save(dir)` writes `report.json`.
+///     `warnings`; `save(dir)` writes `report.json`, `report.md` and `report.html`.
 ///
 /// Raises:
 ///     KalibraError: naming the argument: a shape that disagrees, a non-finite value, an
@@ -914,11 +776,6 @@ fn estimate_noise(
                  \"ml\" only"
             )));
         };
-        if truth.is_some_and(|t| !t.is_none()) {
-            return Err(error(
-                "argument truth: not used for a model given as callables (no consistency check)",
-            ));
-        }
         let model = Callables {
             f,
             f_jacobian: callable(F_jacobian, "F_jacobian")?,
@@ -928,7 +785,27 @@ fn estimate_noise(
         };
         let noise = Parametrisation::new(g, qw, r).map_err(|e| noise_error(&e))?;
         let initial = (DVector::from_vec(x0.data), p0);
-        return estimate_nonlinear(py, model, kind, measurements, noise, initial, start, &ml);
+        let n = noise.state_dim();
+        let truth = truth
+            .filter(|t| !t.is_none())
+            .map(|t| runs_of(t, "truth", n, &format!("the model has {n} states")))
+            .transpose()?;
+        let report = (
+            ReportOptions::new().profile(profile),
+            truth,
+            names.unwrap_or_else(|| ("model".into(), "measurements".into())),
+        );
+        return estimate_nonlinear(
+            py,
+            model,
+            kind,
+            measurements,
+            noise,
+            initial,
+            start,
+            &ml,
+            report,
+        );
     }
     for (name, given) in [
         ("F_jacobian", F_jacobian),
@@ -957,7 +834,7 @@ fn estimate_noise(
     let report = py
         .detach(|| NoiseReport::estimate(&problem, &chosen, options, truth.as_deref()))
         .map_err(|e| report_error(&e, method))?;
-    let file = Some(NoiseReportFile::new(&problem, &report));
+    let file = NoiseReportFile::new(&problem, &report);
     Ok(NoiseEstimate {
         report,
         file,

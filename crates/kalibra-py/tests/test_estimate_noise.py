@@ -319,6 +319,37 @@ def test_callables_through_the_ekf_and_the_ukf_equal_the_linear_estimate():
         kalibra.estimate_noise(broken, f, z, kind="ukf", **args)
 
 
+def test_callables_report_has_profiles_consistency_and_saves_the_full_report(tmp_path):
+    """A model given as callables gets the linear report: a profile per parameter holding the
+    estimate, the EKF judged with the estimate and with the starting guess (with the truth,
+    ANEES and RMSE too), and save(dir) writes report.json, report.md and report.html."""
+    rng = np.random.default_rng(5)
+    x = np.cumsum(rng.normal(0.0, np.sqrt(0.5), 120))
+    z = (x + rng.normal(0.0, np.sqrt(2.0), x.shape))[:, None]
+    f = lambda x, k: x
+    one = lambda x, k: np.eye(1)
+    est = kalibra.estimate_noise(f, f, z, F_jacobian=one, H_jacobian=one, Q=("scaled", [[0.05]]),
+                                 R=("scaled", [[1.0]]), x0=[0.0], P0=[[1.0]],
+                                 truth=x[:, None], names=("walk", "z"))
+    for p in est.parameters:
+        lo, hi = p["profile"]["interval"]
+        assert lo < p["value"] < hi
+    for which in ("estimate", "start"):
+        check = est.consistency[which]
+        assert check["anis"]["statistic"] == "anis" and check["whiteness"] is not None
+        assert check["rmse"] is not None
+    assert est.to_dict()["problem"]["filter"] == "ekf"
+    est.save(tmp_path / "out")
+    files = {p.name for p in (tmp_path / "out").iterdir()}
+    assert {"report.json", "report.md", "report.html"} <= files
+    assert "extended Kalman filter" in (tmp_path / "out" / "report.md").read_text()
+    assert json.loads((tmp_path / "out" / "report.json").read_text()) == est.to_dict()
+    quick = kalibra.estimate_noise(f, f, z, kind="ukf", Q=("scaled", [[0.05]]),
+                                   R=("scaled", [[1.0]]), x0=[0.0], P0=[[1.0]], profile=False)
+    assert all(p["profile"] is None for p in quick.parameters)
+    assert quick.consistency["estimate"]["anis"] is not None
+
+
 def test_save_is_kalibra_tune_s_report_file_for_file(kalibra_cli, tmp_path):
     """save(dir) on the CLI's noise fixture writes what `kalibra tune --method ml --out` does,
     byte for byte (the same estimator, report and writer)."""
