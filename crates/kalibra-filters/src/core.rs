@@ -360,8 +360,8 @@ where
     /// leaves the filter and its last record as they were.
     ///
     /// The posterior comes from an out-of-line call because, when both fields are plain reads,
-    /// the compiler loads both matrices and blends them on every step; `examples/kf_w1.rs`
-    /// under callgrind shows the cost.
+    /// the compiler loads both matrices and blends them on every step (`cargo xtask bench w1`,
+    /// the scalar library).
     #[inline(always)]
     pub(crate) fn update_prior(&self) -> &Estimate<N> {
         match self.phase {
@@ -406,8 +406,7 @@ where
     }
 
     /// [`KalmanCore::begin_record`]'s copy, out of line: an update with no prediction before
-    /// it is rare, and its code inlined would lengthen every update (`examples/kf_w1.rs` under
-    /// callgrind shows it).
+    /// it is rare, and its code inlined would lengthen every update (`cargo xtask bench w1`).
     #[cold]
     #[inline(never)]
     fn begin_record_cold(&mut self) {

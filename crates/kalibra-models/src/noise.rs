@@ -10,8 +10,10 @@ pub fn standard_normal<D: Dim, R: Rng + ?Sized>(d: D, rng: &mut R) -> OVector<f6
 where
     DefaultAllocator: Alloc<D>,
 {
-    // A plain loop over the contiguous storage rather than `from_fn_generic` (whose closure
-    // LLVM did not inline) or nalgebra's strided iterator (more instructions per entry).
+    // A plain loop over the contiguous storage rather than `from_fn_generic` (a closure LLVM
+    // may leave out of line) or nalgebra's strided iterator (more work per entry): every noise
+    // draw of a linear model goes through it (`cargo xtask bench w1`, whose scalar study
+    // simulates its truths so).
     let mut v = OVector::<f64, D>::zeros_generic(d, U1);
     for x in v.as_mut_slice() {
         *x = StandardNormal.sample(rng);
