@@ -7,13 +7,19 @@
 //! (`tests/smooth.rs`, `kf_smooth_is_its_forward_pass_smoothed`), at less cost (`cargo xtask
 //! bench smooth`): the record's bookkeeping was a tenth of the smoother's instructions.
 //!
-//! The checks stay, in a cheaper form: every quantity the filter and the backward pass check
-//! for finiteness is added, entry by entry, into running sums, which are checked once at the
-//! end (NaN and the infinities survive any sum; an overflow of a sum only costs the detour
-//! below). A failed check or a failed Cholesky factorisation sends the whole run, from the
-//! untouched filter, through the checked path ([`Kf`]'s `predict` and `update`, then
-//! [`rts::smooth_in_place`](super::rts)), which returns the same typed error naming its step
-//! and leaves the filter where it failed.
+//! The checks stay, in a cheaper form. Every covariance and mean the filter and the backward
+//! pass check for finiteness reaches the first step's smoothed estimate: a product `A P A^T`
+//! or `G v` with one NaN or infinite entry in `P` or `v` (or in `A`, `G`) has no finite entry
+//! at all (each entry sums a product with it, and `0 * inf` is NaN), so NaN or an infinity in
+//! any filtered, predicted or smoothed covariance, gain or mean spreads forward through the
+//! predictions and Joseph updates and back through the backward steps to step 0, which is
+//! checked once. What does not pass through such a product, the measurements and the factor
+//! of `S`, is summed entry by entry and the sum checked at the end (NaN and the infinities
+//! survive any sum; an overflow of the sum only costs the detour below). A failed check or a
+//! failed Cholesky factorisation sends the whole run, from the untouched filter, through the
+//! checked path ([`Kf`]'s `predict` and `update`, then [`rts::smooth_in_place`](super::rts)),
+//! which returns the same typed error naming its step and leaves the filter where it failed
+//! (`tests/smooth.rs`, `a_non_finite_measurement_fails_smooth_as_forward`).
 
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, joseph_update, propagate};
 use kalibra_linalg::{all_finite, symmetrize};
@@ -78,10 +84,8 @@ where
     let mut k = kf.step_index();
     let mut x = kf.mean().clone();
     let mut p = kf.covariance().clone();
-    let (n, m) = (x.shape_generic().0, measurement.meas_dim());
-    // The running sums of every checked quantity, by size.
-    let mut sum_n = OVector::<f64, N>::zeros_generic(n, nalgebra::U1);
-    let mut sum_nn = OMatrix::<f64, N, N>::zeros_generic(n, n);
+    let m = measurement.meas_dim();
+    // The sum of the measurements and of the factors' diagonals of `S` (see the module docs).
     let mut sum_m = OVector::<f64, M>::zeros_generic(m, nalgebra::U1);
     let mut steps = Vec::with_capacity(zs.len() + 1);
     let mut priors = Vec::with_capacity(zs.len());
@@ -115,16 +119,13 @@ where
         if i > 0 || predict_first {
             x = dynamics.transition(k, &x);
             let (f, q) = (dynamics.matrix(k), dynamics.noise_cov(k));
-            let (propagated, noise) = match split.take() {
+            let (propagated, noise) = match &split {
                 None => (propagate(&f, &p), q),
-                Some((propagated, noise)) => {
-                    (propagate(&f, &propagated), propagate(&f, &noise) + q)
-                }
+                Some((propagated, noise)) => carry(&f, propagated, noise, q),
             };
+            split = None;
             p = &propagated + &noise;
             symmetrize(&mut p);
-            sum_n += &x;
-            sum_nn += &p;
             k += 1;
             priors.push(Estimate {
                 mean: x.clone(),
@@ -147,14 +148,29 @@ where
             let gain = chol.solve(&pht.transpose()).transpose();
             x = &x + &gain * &innovation;
             p = joseph_update(&p, &gain, &h, &r);
-            sum_n += &x;
-            sum_nn += &p;
         }
         updated = z.is_some();
         steps.push(step(k, updated, &x, &p));
     }
-    let finite = all_finite(&sum_n) && all_finite(&sum_nn) && all_finite(&sum_m);
-    finite.then_some((steps, priors, resume?))
+    all_finite(&sum_m).then_some((steps, priors, resume?))
+}
+
+/// A second prediction without an update between: both parts of the prior's covariance are
+/// carried through `F` (as `KalmanCore::predict` does). Out of line, because moving the parts
+/// out of their `Option` on every prediction cost a copy per step (`examples/smooth_w1.rs`
+/// under callgrind).
+#[cold]
+#[inline(never)]
+fn carry<N: Dim>(
+    f: &OMatrix<f64, N, N>,
+    propagated: &OMatrix<f64, N, N>,
+    noise: &OMatrix<f64, N, N>,
+    q: OMatrix<f64, N, N>,
+) -> PriorSplit<N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    (propagate(f, propagated), propagate(f, noise) + q)
 }
 
 /// The backward pass in place, the arithmetic of `rts::backward_step` with `C_k = P_k F_k^T`;
@@ -168,27 +184,22 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let dynamics = kf.dynamics();
-    let n = kf.mean().shape_generic().0;
-    // The running sums of every checked quantity (the factors' diagonals with the means).
-    let mut sum_n = OVector::<f64, N>::zeros_generic(n, nalgebra::U1);
-    let mut sum_nn = OMatrix::<f64, N, N>::zeros_generic(n, n);
     for (i, prior) in priors.iter().enumerate().rev() {
         let (head, tail) = steps.split_at_mut(i + 1);
         let (current, next) = (&mut head[i], &mut tail[0]);
         let cross = &current.estimate.cov * dynamics.matrix(current.step).transpose();
         let current = &mut current.estimate;
         let chol = Cholesky::new(prior.cov.clone())?;
-        sum_n += chol.l_dirty().diagonal();
         let gain = chol.solve(&cross.transpose()).transpose();
-        sum_nn += &gain;
         current.mean += &gain * (&next.estimate.mean - &prior.mean);
         current.cov += propagate(&gain, &(&next.estimate.cov - &prior.cov));
         symmetrize(&mut current.cov);
         next.lag_one = Some(&next.estimate.cov * gain.transpose());
-        sum_n += &current.mean;
-        sum_nn += &current.cov;
     }
-    (all_finite(&sum_n) && all_finite(&sum_nn)).then_some(())
+    // Where every non-finite entry ends (see the module docs); a predicted covariance's factor
+    // has a finite diagonal when the covariance is finite.
+    let first = &steps.first()?.estimate;
+    (all_finite(&first.mean) && all_finite(&first.cov)).then_some(())
 }
 
 /// Leaves `kf` where running it over `zs` would: at the estimate before the last element
