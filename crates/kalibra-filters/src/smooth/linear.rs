@@ -156,9 +156,9 @@ where
 }
 
 /// A second prediction without an update between: both parts of the prior's covariance are
-/// carried through `F` (as `KalmanCore::predict` does). Out of line, because moving the parts
-/// out of their `Option` on every prediction cost a copy per step (`examples/smooth_w1.rs`
-/// under callgrind).
+/// carried through `F` (as `KalmanCore::predict` does). Out of line, so that the common
+/// prediction after an update does not move the parts out of their `Option` each step
+/// (`cargo xtask bench smooth`).
 #[cold]
 #[inline(never)]
 fn carry<N: Dim>(
