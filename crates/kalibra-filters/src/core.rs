@@ -139,6 +139,10 @@ enum Phase {
     Prior,
 }
 
+/// A prior covariance's propagated and process-noise parts, which a prediction without an
+/// update before it carries apart.
+pub(crate) type PriorSplit<N> = (OMatrix<f64, N, N>, OMatrix<f64, N, N>);
+
 /// An update computed outside the core (unscented, shifted Rayleigh): what the step record
 /// stores.
 pub(crate) struct UpdateParts<N: Dim, M: Dim>
@@ -284,6 +288,41 @@ where
         self.predict_split::<AS_GIVEN>(x_pred, f, propagated, noise)
     }
 
+    /// The covariance update the filter applies.
+    pub(crate) fn update_form(&self) -> UpdateForm {
+        self.update
+    }
+
+    /// Puts the core where its own predictions and updates would have left it after a pass
+    /// computed outside it (the KF smoother's, `smooth/linear.rs`), so that the next step runs
+    /// as usual: at step `k` with `estimate` as the posterior, or, with `split` (its
+    /// propagated and process-noise parts), as the prior of a prediction no update followed;
+    /// `updated` when that posterior is an update's. The rest of the record is left for the
+    /// next prediction and update to overwrite, which the caller runs at once.
+    pub(crate) fn resume(
+        &mut self,
+        k: usize,
+        estimate: Estimate<N>,
+        split: Option<PriorSplit<N>>,
+        updated: bool,
+    ) {
+        let rec = &mut self.record;
+        rec.k = k;
+        match split {
+            None => {
+                rec.posterior = estimate;
+                self.phase = Phase::Posterior;
+                self.has_record |= updated;
+            }
+            Some((propagated, noise)) => {
+                rec.prior = estimate;
+                rec.propagated = propagated;
+                rec.process_noise = noise;
+                self.phase = Phase::Prior;
+            }
+        }
+    }
+
     /// Whether the current estimate is a prior (a prediction ran since the last update).
     pub(crate) fn is_prior(&self) -> bool {
         self.phase == Phase::Prior
@@ -360,8 +399,8 @@ where
     /// leaves the filter and its last record as they were.
     ///
     /// The posterior comes from an out-of-line call because, when both fields are plain reads,
-    /// the compiler loads both matrices and blends them on every step; `examples/kf_w1.rs`
-    /// under callgrind shows the cost.
+    /// the compiler loads both matrices and blends them on every step (`cargo xtask bench w1`,
+    /// the scalar library).
     #[inline(always)]
     pub(crate) fn update_prior(&self) -> &Estimate<N> {
         match self.phase {
@@ -406,8 +445,7 @@ where
     }
 
     /// [`KalmanCore::begin_record`]'s copy, out of line: an update with no prediction before
-    /// it is rare, and its code inlined would lengthen every update (`examples/kf_w1.rs` under
-    /// callgrind shows it).
+    /// it is rare, and its code inlined would lengthen every update (`cargo xtask bench w1`).
     #[cold]
     #[inline(never)]
     fn begin_record_cold(&mut self) {

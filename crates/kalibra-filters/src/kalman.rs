@@ -166,6 +166,21 @@ macro_rules! constructors {
 constructors!(Kf, LinearDynamics, LinearMeasurement);
 constructors!(Ekf, Dynamics, Measurement);
 
+impl<N: Dim, M: Dim, D, H> Kf<N, M, D, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The filter's core, for the KF smoother's own pass (`smooth/linear.rs`).
+    pub(crate) fn core(&self) -> &KalmanCore<N, M> {
+        &self.core
+    }
+
+    /// The filter's core, for the KF smoother to put it where its pass ended.
+    pub(crate) fn core_mut(&mut self) -> &mut KalmanCore<N, M> {
+        &mut self.core
+    }
+}
+
 /// Checks that the measurement model is built for the dynamics' state: a
 /// `Dyn` model of another state size is a [`FilterError::DimensionMismatch`] naming both sizes
 /// at construction, not a panic inside nalgebra at the first step. Models that do not say

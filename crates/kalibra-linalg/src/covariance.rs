@@ -191,7 +191,7 @@ where
     /// [`LinalgError::DimensionMismatch`] if `v` has the wrong length (possible only with `Dyn`
     /// dimensions); [`LinalgError::NonFinite`] naming `"vector"` if `v` holds NaN or an
     /// infinity, and naming `"quadratic form"` if the form of a finite `v` lies beyond f64's
-    /// range (before, both came back as a NaN or an infinity inside `Ok`).
+    /// range, so that no `Ok` holds a NaN or an infinity (`tests/it/extreme_floats.rs`).
     pub fn quad_form<S>(&self, v: &Matrix<f64, D, U1, S>) -> Result<f64, LinalgError>
     where
         S: Storage<f64, D, U1>,

@@ -15,8 +15,8 @@ use crate::{Alloc, LinalgError, backend};
 /// the backend is chosen: faer's branch reads some operands as raw slices by the sizes of the
 /// others (`R` by `H`'s rows), where a wrong size would read the wrong entries instead of
 /// panicking. For fixed sizes the comparisons are constant and vanish, which needs the check
-/// inlined into the calling crate, which a plain non-generic function is not (kalibra-filters'
-/// `examples/kf_w1.rs` under callgrind shows the calls' cost per step).
+/// inlined into the calling crate, which a plain non-generic function is not, and a call per
+/// kernel would weigh on a small filter's step (`cargo xtask bench w1`).
 #[inline(always)]
 #[track_caller]
 fn assert_shape(what: &str, found: (usize, usize), expected: (usize, usize)) {
@@ -319,7 +319,7 @@ pub fn check_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C> + IsContiguous>(
 /// Whether every entry of `m` is finite. A non-short-circuiting `&` reduction over the
 /// contiguous storage: it has no data-dependent branches and vectorises, and filters run it
 /// on every matrix of every step, where nalgebra's strided iterator costs more per entry
-/// (example `kf_batch_w1` of kalibra-filters under callgrind shows the difference).
+/// (`cargo xtask bench w1`).
 #[inline]
 pub fn all_finite<R: Dim, C: Dim, S: RawStorage<f64, R, C> + IsContiguous>(
     m: &Matrix<f64, R, C, S>,

@@ -5,13 +5,17 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 /// A vector of independent standard normal draws of dimension `d`.
-#[inline]
+// Always inlined: out of line, its call costs about 20 instructions per draw of a vector,
+// a tenth of the draw (`cargo xtask bench w1`'s library loop under callgrind).
+#[inline(always)]
 pub fn standard_normal<D: Dim, R: Rng + ?Sized>(d: D, rng: &mut R) -> OVector<f64, D>
 where
     DefaultAllocator: Alloc<D>,
 {
-    // A plain loop over the contiguous storage rather than `from_fn_generic` (whose closure
-    // LLVM did not inline) or nalgebra's strided iterator (more instructions per entry).
+    // A plain loop over the contiguous storage rather than `from_fn_generic` (a closure LLVM
+    // may leave out of line) or nalgebra's strided iterator (more work per entry): every noise
+    // draw of a linear model goes through it (`cargo xtask bench w1`, whose scalar study
+    // simulates its truths so).
     let mut v = OVector::<f64, D>::zeros_generic(d, U1);
     for x in v.as_mut_slice() {
         *x = StandardNormal.sample(rng);

@@ -354,7 +354,8 @@ impl ChaCha8Lanes {
     /// [`ChaCha8Lanes::standard_normals`] from the lane-wise blocks: the fast path across
     /// lanes with gathers on AVX-512 (`gather.rs`), per lane otherwise.
     fn lane_normals(&mut self, rows: &mut [Lanes]) {
-        // AVX-512 only: with AVX2's gathers (two ymm halves) it measured slower than per lane.
+        // AVX-512 only: AVX2's gathers (two ymm halves) make it slower than per lane (example
+        // `lane_normals`).
         #[cfg(target_arch = "x86_64")]
         if self.isa == Isa::Avx512
             && let Some(simd) = pulp::x86::V4::try_new()

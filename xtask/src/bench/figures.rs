@@ -66,7 +66,7 @@ impl Machine {
 pub(crate) struct Record {
     /// [`SCHEMA`].
     pub schema: u32,
-    /// The workload's name (`w1`, `w2`, `w3`, `w4`, `eval`, `shards`).
+    /// The workload's name (`w1`, `w2`, `w3`, `w4`, `eval`, `shards`, `smooth`, `tune`).
     pub workload: String,
     /// What the workload runs, in one line.
     pub title: String,

@@ -113,8 +113,8 @@ pub(super) struct Kernel<'a, const N: usize, const M: usize, const PREDICT: bool
 
 // The helpers below use plain loops over arrays, never closures (`std::array::from_fn`): a
 // closure is a function of its own, compiled for the baseline instruction set unless it is
-// inlined, and one that was not made the AVX-512 kernel slower than the scalar one (example
-// `kf_batch_w1`).
+// inlined, and one left out of line can make the AVX-512 kernel slower than the scalar one
+// (`cargo xtask bench w1` times the batched study on each instruction set).
 
 /// `sum_k a[i][k] b[k][j]`, accumulated in `k` order like nalgebra's small products, with a
 /// fused multiply-add where the instruction set has one.

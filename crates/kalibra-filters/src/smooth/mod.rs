@@ -66,6 +66,7 @@
 
 mod fixed_lag;
 mod forward;
+mod linear;
 mod rts;
 mod smoothable;
 mod unscented;

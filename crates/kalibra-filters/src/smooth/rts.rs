@@ -76,26 +76,25 @@ where
     }
 }
 
-/// A backward step's smoothed estimate and the lag-one covariance of the step after it.
-type Backward<N> = (Estimate<N>, OMatrix<f64, N, N>);
-
-/// One backward step: the smoothed estimate at `k` from the filtered one, the prior of the
-/// prediction to `k + 1` with its cross-covariance `C_k`, and the smoothed estimate of
-/// `k + 1`; returned with the lag-one covariance of step `k + 1`.
+/// One backward step, in place: `current` holds the filtered estimate at `k` on entry and the
+/// smoothed one on return, from the prior of the prediction to `k + 1` with its
+/// cross-covariance `C_k` and the smoothed estimate of `k + 1`; returns the lag-one covariance
+/// of step `k + 1`. Written in place because building a new estimate and moving it over the
+/// old one cost a copy per step (`cargo xtask bench smooth`).
 ///
 /// `G = C P-^-1` is a Cholesky solve with `P-_{k+1}`; `x = x_k + G (x_{k+1|n} - x-_{k+1})`
 /// (the difference through the state space's residual, the result normalised);
 /// `P = P_k + G (P_{k+1|n} - P-_{k+1}) G^T`, symmetrised; `P_{k+1,k|n} = P_{k+1|n} G^T`.
 /// Every filter symmetrises its predicted covariance, so `P-` is factored as it stands, with
-/// no symmetry check.
+/// no symmetry check. On an error `current` may hold a partly smoothed estimate.
 pub(crate) fn backward_step<N: Dim>(
     k: usize,
-    filtered: &Estimate<N>,
+    current: &mut Estimate<N>,
     prior: &Estimate<N>,
     cross: &OMatrix<f64, N, N>,
     next: &Estimate<N>,
     space: Option<&dyn SigmaSpace<N>>,
-) -> Result<Backward<N>, FilterError>
+) -> Result<OMatrix<f64, N, N>, FilterError>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -109,17 +108,17 @@ where
         None => &next.mean - &prior.mean,
         Some(space) => space.residual(&next.mean, &prior.mean),
     };
-    let mut mean = &filtered.mean + &gain * dx;
+    current.mean += &gain * dx;
     if let Some(space) = space {
-        space.normalize(&mut mean);
+        space.normalize(&mut current.mean);
     }
-    let mut cov = &filtered.cov + propagate(&gain, &(&next.cov - &prior.cov));
-    symmetrize(&mut cov);
+    current.cov += propagate(&gain, &(&next.cov - &prior.cov));
+    symmetrize(&mut current.cov);
     let lag_one = &next.cov * gain.transpose();
     let at = |e| FilterError::at(k, e);
-    check_finite(&mean, "smoothed mean").map_err(at)?;
-    check_finite(&cov, "smoothed covariance").map_err(at)?;
-    Ok((Estimate { mean, cov }, lag_one))
+    check_finite(&current.mean, "smoothed mean").map_err(at)?;
+    check_finite(&current.cov, "smoothed covariance").map_err(at)?;
+    Ok(lag_one)
 }
 
 /// The backward pass in place over `steps`, which hold the filtered estimates on entry and
@@ -139,16 +138,15 @@ where
         let (head, tail) = steps.split_at_mut(i + 1);
         let (current, next) = (&mut head[i], &mut tail[0]);
         let (cross, prior) = links(i, current);
-        let (estimate, lag_one) = backward_step(
+        let lag_one = backward_step(
             current.step,
-            &current.estimate,
+            &mut current.estimate,
             prior,
             cross.borrow(),
             &next.estimate,
             space,
         )?;
         next.lag_one = Some(lag_one);
-        current.estimate = estimate;
     }
     Ok(())
 }

@@ -6,6 +6,7 @@ use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector};
 use kalibra_models::{Dynamics, LinearDynamics, LinearMeasurement, Measurement};
 
 use super::forward::{ForwardPass, record};
+use super::linear;
 use super::rts::smooth_in_place;
 use super::{FixedLagSmoother, Smoothed, SmoothedStep};
 use crate::{Ekf, Estimate, Filter, FilterError, Kf, SigmaSpace, Start};
@@ -222,15 +223,23 @@ where
         linearised_cross(self, |kf, k, _| kf.dynamics().matrix(k))
     }
 
-    /// As the provided method, without a [`ForwardPass`] in between (`smooth_linearised`):
-    /// the same result to the bit, at less cost (`cargo xtask bench smooth`).
+    /// As the provided method, without a [`ForwardPass`] in between: for fixed sizes and the
+    /// Joseph update the KF's own pass (`smooth/linear.rs`), otherwise, or when a check fails
+    /// there, the filter's steps (`smooth_linearised`); the same result to the bit either way,
+    /// at less cost (`cargo xtask bench smooth`).
     fn smooth<'z, I>(&mut self, measurements: I, start: Start) -> Result<Smoothed<N>, FilterError>
     where
         Self: Sized,
         I: IntoIterator<Item = Option<&'z OVector<f64, M>>>,
         OVector<f64, M>: 'z,
     {
-        smooth_linearised(self, measurements, start, |kf, k, _| {
+        // Collected, so that a run the KF's own pass sends back can run again on the checked
+        // path.
+        let zs: Vec<Option<&'z OVector<f64, M>>> = measurements.into_iter().collect();
+        if let Some(smoothed) = linear::smooth(self, &zs, start) {
+            return smoothed;
+        }
+        smooth_linearised(self, zs.iter().copied(), start, |kf, k, _| {
             kf.dynamics().matrix(k)
         })
     }

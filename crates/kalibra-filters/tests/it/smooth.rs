@@ -4,7 +4,7 @@
 
 use kalibra_filters::smooth::{FixedLagSmoother, Smoothable, Smoothed, SmoothedStep};
 use kalibra_filters::{Ekf, Filter, FilterError, Kf, SigmaSet, Start, Ukf};
-use kalibra_linalg::{Matrix2, Matrix3, SMatrix, U3, Vector1, Vector2, Vector3};
+use kalibra_linalg::{Matrix2, Matrix3, SMatrix, U2, U3, Vector1, Vector2, Vector3};
 use kalibra_models::{LinearGaussian, LinearObservation};
 use proptest::prelude::*;
 
@@ -263,4 +263,103 @@ fn an_empty_sequence_is_the_initial_estimate() {
         assert_eq!(smoothed.steps()[0].mean(), &Vector2::new(1.0, 2.0));
         assert!(smoothed.steps()[0].lag_one().is_none());
     }
+}
+
+/// A filter's state as far as its accessors show it: the estimate, the step and the last
+/// update's record.
+fn filter_state(kf: &Kf<U3, U2, &LinearGaussian<U3>, &LinearObservation<U3, U2>>) -> String {
+    let record = kf.last_record().map(|r| {
+        (
+            r.step(),
+            r.prior().clone(),
+            r.posterior().clone(),
+            *r.innovation(),
+            *r.s_matrix(),
+            *r.gain(),
+            *r.f(),
+            *r.propagated(),
+            *r.process_noise(),
+        )
+    });
+    format!(
+        "{:?}",
+        (kf.step_index(), kf.mean(), kf.covariance(), record)
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// The KF's `smooth` (its own forward pass, `smooth/linear.rs`) is its forward pass
+    /// smoothed, to the bit, and leaves the filter as the forward pass does, record included,
+    /// for the next prediction too (after a last step without a measurement it carries the
+    /// prior's split).
+    #[test]
+    fn kf_smooth_is_its_forward_pass_smoothed(run in runs(), start in starts()) {
+        let ((f, h), x0, p0, z) = &run;
+        let mut fast = Kf::new(f, h, *x0, *p0).unwrap();
+        let mut slow = Kf::new(f, h, *x0, *p0).unwrap();
+        let a = fast.smooth(z.iter().map(Option::as_ref), start).unwrap();
+        let b = slow.forward(z.iter().map(Option::as_ref), start).unwrap().smooth().unwrap();
+        prop_assert_eq!(a.steps().len(), b.steps().len());
+        for (x, y) in a.steps().iter().zip(b.steps()) {
+            same_step(x, y);
+        }
+        prop_assert_eq!(filter_state(&fast), filter_state(&slow));
+        fast.predict().unwrap();
+        slow.predict().unwrap();
+        prop_assert_eq!(filter_state(&fast), filter_state(&slow));
+    }
+}
+
+/// A non-finite measurement fails the KF's `smooth` as it fails its forward pass: the same
+/// typed error naming the step, and the filter left at the same place.
+#[test]
+fn a_non_finite_measurement_fails_smooth_as_forward() {
+    let f = LinearGaussian::new(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity()).unwrap();
+    let h = LinearObservation::new(
+        SMatrix::<f64, 1, 2>::new(1.0, 0.0),
+        SMatrix::<f64, 1, 1>::new(1.0),
+    )
+    .unwrap();
+    let z = [Vector1::new(0.5), Vector1::new(f64::NAN), Vector1::new(0.7)];
+    for start in [Start::PredictFirst, Start::UpdateFirst] {
+        let mut fast = Kf::new(&f, &h, Vector2::zeros(), Matrix2::identity()).unwrap();
+        let mut slow = fast.clone();
+        let a = fast.smooth(z.iter().map(Some), start).unwrap_err();
+        let b = slow.forward(z.iter().map(Some), start).unwrap_err();
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        assert!(matches!(a, FilterError::NonFinite { .. }), "{a:?}");
+        assert_eq!(fast.step_index(), slow.step_index());
+        assert_eq!(fast.mean(), slow.mean());
+    }
+}
+
+/// A predicted covariance without a Cholesky factor fails the KF's `smooth` as it fails its
+/// forward pass smoothed, naming the same step.
+#[test]
+fn a_singular_prediction_fails_smooth_as_the_pass() {
+    let f = LinearGaussian::new(Matrix2::new(1.0, 0.0, 0.0, 0.0), Matrix2::zeros()).unwrap();
+    let h = LinearObservation::new(
+        SMatrix::<f64, 1, 2>::new(1.0, 0.0),
+        SMatrix::<f64, 1, 1>::new(1.0),
+    )
+    .unwrap();
+    let z = [Vector1::new(0.5), Vector1::new(0.7)];
+    let mut fast = Kf::new(&f, &h, Vector2::zeros(), Matrix2::identity()).unwrap();
+    let mut slow = fast.clone();
+    let a = fast
+        .smooth(z.iter().map(Some), Start::PredictFirst)
+        .unwrap_err();
+    let b = slow
+        .forward(z.iter().map(Some), Start::PredictFirst)
+        .unwrap()
+        .smooth()
+        .unwrap_err();
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    assert!(
+        matches!(a, FilterError::NotPositiveDefinite { step: 2, .. }),
+        "{a:?}"
+    );
+    assert_eq!(fast.step_index(), slow.step_index());
 }

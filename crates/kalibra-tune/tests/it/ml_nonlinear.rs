@@ -309,13 +309,15 @@ fn check_radar(filter: LikelihoodFilter, logs: u64, min_covered: usize) {
     }
 }
 
-/// 40 logs (about 12 s of one core in a debug build).
+/// 40 logs: enough for the coverage limits above to catch a biased likelihood, few enough
+/// for the debug-build test suite.
 #[test]
 fn radar_through_the_ekf_centres_on_the_truth_and_covers_it() {
     check_radar(LikelihoodFilter::Ekf, 40, 33);
 }
 
-/// 30 logs: the UKF's step costs about twice the EKF's.
+/// 30 logs: the UKF's step propagates `2n + 1` sigma points, so it runs fewer logs than the
+/// EKF's test, with the limit scaled to match.
 #[test]
 fn radar_through_the_ukf_centres_on_the_truth_and_covers_it() {
     check_radar(LikelihoodFilter::Ukf(SigmaSet::recommended(4)), 30, 24);
