@@ -7,10 +7,9 @@ use std::path::{Path, PathBuf};
 use kalibra_io::noise_report::NoiseReportFile;
 
 use kalibra_tune::{
-    Als, Consistency, CovarianceForm, DMatrix, DVector, Em, LikelihoodFilter, MaximumLikelihood,
-    Method, MethodKind, MlEstimate, MlWarning, NoiseError, NoiseProblem, NoiseReport,
-    NonlinearNoiseProblem, NonlinearProblemError, ParameterSweep, Parametrisation, ReportError,
-    ReportIdentifiability, ReportOptions, ReportParameter, Run, SigmaSet, Start,
+    Als, CovarianceForm, DMatrix, DVector, Em, LikelihoodFilter, MaximumLikelihood, Method,
+    NoiseError, NoiseProblem, NoiseReport, NonlinearNoiseProblem, NonlinearProblemError,
+    ParameterSweep, Parametrisation, ReportError, ReportOptions, Run, SigmaSet, Start,
 };
 use numpy::PyArrayDyn;
 use pyo3::exceptions::PyOSError;
