@@ -98,6 +98,9 @@ fn problem(system: &System, noise: &Parametrisation, run: Run) -> NoiseProblem {
 }
 
 fn check(name: &str, counts: &[usize], names: &[&str]) {
+    // The counts are the figures a closing note quotes (`cargo test -p kalibra-tune --test it
+    // coverage -- --nocapture`); the test's verdict is the assertion below.
+    eprintln!("{name}: covering logs of {LOGS}: {names:?} = {counts:?}");
     for (c, p) in counts.iter().zip(names) {
         assert!(
             (90..=99).contains(c),
