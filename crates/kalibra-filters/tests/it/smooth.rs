@@ -4,7 +4,7 @@
 
 use kalibra_filters::smooth::{FixedLagSmoother, Smoothable, Smoothed, SmoothedStep};
 use kalibra_filters::{Ekf, Filter, FilterError, Kf, SigmaSet, Start, Ukf};
-use kalibra_linalg::{Matrix2, Matrix3, SMatrix, U2, U3, Vector1, Vector2, Vector3};
+use kalibra_linalg::{Matrix2, Matrix3, SMatrix, U1, U2, U3, Vector1, Vector2, Vector3};
 use kalibra_models::{LinearGaussian, LinearObservation};
 use proptest::prelude::*;
 
@@ -227,17 +227,27 @@ fn lag_one_is_the_joint_posterior_cross_covariance() {
     assert!((steps[1].lag_one().unwrap()[(0, 0)] - joint[(1, 0)]).abs() < 1e-14);
 }
 
-/// A predicted covariance without a Cholesky factor (a state that the dynamics zero and no
-/// noise refills) fails the smoothing step that solves with it, named by its step.
-#[test]
-fn a_singular_prediction_names_its_step() {
+/// A model whose second state the dynamics zero and no noise refills, so every predicted
+/// covariance is singular, and two measurements of the first state.
+fn singular_prediction() -> (
+    LinearGaussian<U2>,
+    LinearObservation<U2, U1>,
+    [Vector1<f64>; 2],
+) {
     let f = LinearGaussian::new(Matrix2::new(1.0, 0.0, 0.0, 0.0), Matrix2::zeros()).unwrap();
     let h = LinearObservation::new(
         SMatrix::<f64, 1, 2>::new(1.0, 0.0),
         SMatrix::<f64, 1, 1>::new(1.0),
     )
     .unwrap();
-    let z = [Vector1::new(0.5), Vector1::new(0.7)];
+    (f, h, [Vector1::new(0.5), Vector1::new(0.7)])
+}
+
+/// A predicted covariance without a Cholesky factor (a state that the dynamics zero and no
+/// noise refills) fails the smoothing step that solves with it, named by its step.
+#[test]
+fn a_singular_prediction_names_its_step() {
+    let (f, h, z) = singular_prediction();
     let mut kf = Kf::new(&f, &h, Vector2::zeros(), Matrix2::identity()).unwrap();
     let pass = kf.forward(z.iter().map(Some), Start::PredictFirst).unwrap();
     assert_eq!(pass.filtered().len(), 3);
@@ -339,13 +349,7 @@ fn a_non_finite_measurement_fails_smooth_as_forward() {
 /// forward pass smoothed, naming the same step.
 #[test]
 fn a_singular_prediction_fails_smooth_as_the_pass() {
-    let f = LinearGaussian::new(Matrix2::new(1.0, 0.0, 0.0, 0.0), Matrix2::zeros()).unwrap();
-    let h = LinearObservation::new(
-        SMatrix::<f64, 1, 2>::new(1.0, 0.0),
-        SMatrix::<f64, 1, 1>::new(1.0),
-    )
-    .unwrap();
-    let z = [Vector1::new(0.5), Vector1::new(0.7)];
+    let (f, h, z) = singular_prediction();
     let mut fast = Kf::new(&f, &h, Vector2::zeros(), Matrix2::identity()).unwrap();
     let mut slow = fast.clone();
     let a = fast
