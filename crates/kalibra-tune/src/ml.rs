@@ -7,7 +7,8 @@
 //! on `-ln L / N` (`N` the measurements present, so that the gradient tolerance does not depend
 //! on the log's length), gradients by central differences whose `2 p` evaluations run side by
 //! side on rayon's pool; it starts from the forms' given matrices and from that point with
-//! every log-scale parameter moved by `+-ln 10` (a factor 10 either way), and keeps the best.
+//! every log-scale parameter moved by `+-ln 10` (a factor 10 either way), the starts side by
+//! side too, and keeps the best (weighed in start order, so the thread count changes nothing).
 //!
 //! # Intervals
 //! The observed information `I = -d^2 ln L / d theta^2` is the central-difference Hessian at
@@ -35,6 +36,7 @@
 //! `theta` is kept within `+-40` of the start so that such a parameter stops at a finite value.
 
 use kalibra_linalg::{DMatrix, DVector};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::likelihood::{LikelihoodError, log_likelihood};
@@ -375,15 +377,23 @@ impl MaximumLikelihood {
             gradient_tolerance: self.gradient_tolerance,
             max_iterations: self.max_iterations,
         };
+        // The starts are independent: they run side by side on rayon's pool, and their
+        // outcomes are weighed below in start order, so the estimate does not depend on the
+        // number of threads (`cargo xtask bench tune` times 1 and 2 threads).
+        let runs: Vec<Option<optim::Outcome>> = starts
+            .par_iter()
+            .map(|s| {
+                if s.len() == noise.len() {
+                    optim::minimise(&objective, s.as_slice(), settings)
+                } else {
+                    None
+                }
+            })
+            .collect();
         let mut outcomes = Vec::new();
         let mut best: Option<optim::Outcome> = None;
         let mut evaluations = 1;
-        for s in &starts {
-            let out = if s.len() == noise.len() {
-                optim::minimise(&objective, s.as_slice(), settings)
-            } else {
-                None
-            };
+        for (s, out) in starts.iter().zip(runs) {
             outcomes.push(StartOutcome {
                 theta: s.iter().copied().collect(),
                 log_likelihood: out.as_ref().map(|o| -o.f * scale),

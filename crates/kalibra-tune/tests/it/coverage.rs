@@ -97,6 +97,7 @@ fn problem(system: &System, noise: &Parametrisation, run: Run) -> NoiseProblem {
     .unwrap()
 }
 
+#[allow(clippy::print_stderr)]
 fn check(name: &str, counts: &[usize], names: &[&str]) {
     // The counts are the figures a closing note quotes (`cargo test -p kalibra-tune --test it
     // coverage -- --nocapture`); the test's verdict is the assertion below.

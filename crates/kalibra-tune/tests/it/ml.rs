@@ -51,6 +51,7 @@ fn scaled_walk(run: Run) -> NoiseProblem {
 /// 0.95), outside 90..=99 with probability 1.2% (P(X <= 89) = 0.6%, P(X = 100) = 0.6%); the
 /// seeds are fixed, so the test's outcome is fixed too.
 #[test]
+#[allow(clippy::print_stderr)]
 fn intervals_cover_the_truth() {
     let (q, r) = (0.5, 1.0);
     let mut covered = [0usize; 2];
@@ -197,4 +198,21 @@ fn non_convergence_is_reported() {
             .iter()
             .any(|w| matches!(w, MlWarning::NotConverged { .. }))
     );
+}
+
+/// The starts and the gradient's evaluations run side by side on rayon's pool; the estimate,
+/// every start's outcome and the evaluation count are the same on one thread and on three.
+#[test]
+fn the_estimate_does_not_depend_on_the_thread_count() {
+    let problem = scaled_walk(random_walk(0.5, 1.0, 150, 7));
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| MaximumLikelihood::new().estimate(&problem).unwrap())
+    };
+    let one = on(1);
+    assert_eq!(one.starts.len(), 3);
+    assert_eq!(one, on(3));
 }
