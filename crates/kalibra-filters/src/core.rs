@@ -300,6 +300,20 @@ where
         self.predict_split::<AS_GIVEN>(x_pred, f, propagated, noise)
     }
 
+    /// [`KalmanCore::predict`] for a caller that has tested that an update ran since the last
+    /// prediction ([`KalmanCore::is_prior`] is false): the posterior is read at its fixed place,
+    /// with no run-time choice of field (`cargo xtask bench w1`, the scalar library).
+    #[inline(always)]
+    pub(crate) fn predict_after_update<const AS_GIVEN: bool>(
+        &mut self,
+        x_pred: OVector<f64, N>,
+        f: OMatrix<f64, N, N>,
+        q: OMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        let propagated = propagate(&f, &self.record.posterior.cov);
+        self.predict_split::<AS_GIVEN>(x_pred, f, propagated, q)
+    }
+
     /// The covariance update the filter applies.
     pub(crate) fn update_form(&self) -> UpdateForm {
         self.update
@@ -349,6 +363,7 @@ where
     /// Predicts from step `k` to `k + 1` given the predicted mean, the Jacobian to record, and
     /// the prior covariance already split into its propagated and process-noise parts (the
     /// unscented prediction computes the first part itself).
+    #[inline(always)]
     pub(crate) fn predict_split<const AS_GIVEN: bool>(
         &mut self,
         x_pred: OVector<f64, N>,
@@ -428,22 +443,10 @@ where
         &self.record.posterior
     }
 
-    /// The estimate a prediction starts from: the last update's posterior, or the prior of
-    /// the last prediction (a second prediction without an update, out of line for the reason
-    /// given at [`KalmanCore::update_prior`]).
+    /// The last update's posterior, which a prediction after it starts from.
     #[inline(always)]
-    pub(crate) fn predict_base(&self) -> &Estimate<N> {
-        match self.phase {
-            Phase::Posterior => &self.record.posterior,
-            Phase::Prior => self.prior_cold(),
-        }
-    }
-
-    /// The prior, out of line (see [`KalmanCore::predict_base`]).
-    #[cold]
-    #[inline(never)]
-    fn prior_cold(&self) -> &Estimate<N> {
-        &self.record.prior
+    pub(crate) fn posterior(&self) -> &Estimate<N> {
+        &self.record.posterior
     }
 
     /// On a successful update's way into the record: when no prediction ran since the last
