@@ -30,6 +30,19 @@ pub(crate) fn check_model_output<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R,
         .map_err(|e| FilterError::at(k, e))
 }
 
+/// `F P F^T` for a fixed-size prediction, as [`propagate`] computes it (the same products in
+/// the same order, so the same bits), but always inlined: the compiler keeps [`propagate`] out
+/// of line in the scalar KF's step, and the call, which clobbers every vector register,
+/// lengthens the step (`cargo xtask bench w1`, the scalar library).
+#[inline(always)]
+fn propagate_inline<N: Dim>(f: &OMatrix<f64, N, N>, p: &OMatrix<f64, N, N>) -> OMatrix<f64, N, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let fp = f * p;
+    fp * f.transpose()
+}
+
 /// Which covariance update a filter applies.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[non_exhaustive]
@@ -310,7 +323,11 @@ where
         f: OMatrix<f64, N, N>,
         q: OMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
-        let propagated = propagate(&f, &self.record.posterior.cov);
+        let propagated = if N::try_to_usize().is_some() {
+            propagate_inline(&f, &self.record.posterior.cov)
+        } else {
+            propagate(&f, &self.record.posterior.cov)
+        };
         self.predict_split::<AS_GIVEN>(x_pred, f, propagated, q)
     }
 
