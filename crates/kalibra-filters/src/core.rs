@@ -30,6 +30,19 @@ pub(crate) fn check_model_output<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R,
         .map_err(|e| FilterError::at(k, e))
 }
 
+/// `F P F^T` for a fixed-size prediction, as [`propagate`] computes it (the same products in
+/// the same order, so the same bits), but always inlined: the compiler keeps [`propagate`] out
+/// of line in the scalar KF's step, and the call, which clobbers every vector register,
+/// lengthens the step (`cargo xtask bench w1`, the scalar library).
+#[inline(always)]
+fn propagate_inline<N: Dim>(f: &OMatrix<f64, N, N>, p: &OMatrix<f64, N, N>) -> OMatrix<f64, N, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let fp = f * p;
+    fp * f.transpose()
+}
+
 /// Which covariance update a filter applies.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[non_exhaustive]
@@ -142,6 +155,18 @@ enum Phase {
 /// A prior covariance's propagated and process-noise parts, which a prediction without an
 /// update before it carries apart.
 pub(crate) type PriorSplit<N> = (OMatrix<f64, N, N>, OMatrix<f64, N, N>);
+
+/// The record's prior fields as the last update left them, kept while an update with no
+/// prediction before it runs ([`KalmanCore::begin_update`]).
+pub(crate) struct SavedPrior<N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    prior: Estimate<N>,
+    f: OMatrix<f64, N, N>,
+    propagated: OMatrix<f64, N, N>,
+    process_noise: OMatrix<f64, N, N>,
+}
 
 /// An update computed outside the core (unscented, shifted Rayleigh): what the step record
 /// stores.
@@ -288,6 +313,24 @@ where
         self.predict_split::<AS_GIVEN>(x_pred, f, propagated, noise)
     }
 
+    /// [`KalmanCore::predict`] for a caller that has tested that an update ran since the last
+    /// prediction ([`KalmanCore::is_prior`] is false): the posterior is read at its fixed place,
+    /// with no run-time choice of field (`cargo xtask bench w1`, the scalar library).
+    #[inline(always)]
+    pub(crate) fn predict_after_update<const AS_GIVEN: bool>(
+        &mut self,
+        x_pred: OVector<f64, N>,
+        f: OMatrix<f64, N, N>,
+        q: OMatrix<f64, N, N>,
+    ) -> Result<(), FilterError> {
+        let propagated = if N::try_to_usize().is_some() {
+            propagate_inline(&f, &self.record.posterior.cov)
+        } else {
+            propagate(&f, &self.record.posterior.cov)
+        };
+        self.predict_split::<AS_GIVEN>(x_pred, f, propagated, q)
+    }
+
     /// The covariance update the filter applies.
     pub(crate) fn update_form(&self) -> UpdateForm {
         self.update
@@ -337,6 +380,7 @@ where
     /// Predicts from step `k` to `k + 1` given the predicted mean, the Jacobian to record, and
     /// the prior covariance already split into its propagated and process-noise parts (the
     /// unscented prediction computes the first part itself).
+    #[inline(always)]
     pub(crate) fn predict_split<const AS_GIVEN: bool>(
         &mut self,
         x_pred: OVector<f64, N>,
@@ -416,22 +460,10 @@ where
         &self.record.posterior
     }
 
-    /// The estimate a prediction starts from: the last update's posterior, or the prior of
-    /// the last prediction (a second prediction without an update, out of line for the reason
-    /// given at [`KalmanCore::update_prior`]).
+    /// The last update's posterior, which a prediction after it starts from.
     #[inline(always)]
-    pub(crate) fn predict_base(&self) -> &Estimate<N> {
-        match self.phase {
-            Phase::Posterior => &self.record.posterior,
-            Phase::Prior => self.prior_cold(),
-        }
-    }
-
-    /// The prior, out of line (see [`KalmanCore::predict_base`]).
-    #[cold]
-    #[inline(never)]
-    fn prior_cold(&self) -> &Estimate<N> {
-        &self.record.prior
+    pub(crate) fn posterior(&self) -> &Estimate<N> {
+        &self.record.posterior
     }
 
     /// On a successful update's way into the record: when no prediction ran since the last
@@ -457,6 +489,69 @@ where
         self.phase = Phase::Prior;
     }
 
+    /// Puts the prior of the coming update where a prediction leaves it, the record's prior
+    /// field, so that the update reads it at one fixed place. After a prediction there is
+    /// nothing to do; after an update with no prediction since (rare), the record's prior
+    /// fields take the posterior ([`KalmanCore::begin_record`]) and their old values come back,
+    /// to be put back by [`KalmanCore::undo_begin_update`] if the update fails, so that a
+    /// failed update leaves the filter and its last record as they were.
+    ///
+    /// A run-time choice between the prior and the posterior field instead makes the compiler
+    /// read the prior through a pointer and keep less of the prediction in registers, which
+    /// lengthens the step (`cargo xtask bench w1`, the scalar library).
+    #[inline(always)]
+    pub(crate) fn begin_update(&mut self) -> Option<Box<SavedPrior<N>>> {
+        match self.phase {
+            Phase::Prior => None,
+            Phase::Posterior => Some(self.begin_update_cold()),
+        }
+    }
+
+    /// [`KalmanCore::begin_update`] after an update, out of line.
+    #[cold]
+    #[inline(never)]
+    fn begin_update_cold(&mut self) -> Box<SavedPrior<N>> {
+        let rec = &self.record;
+        let saved = Box::new(SavedPrior {
+            prior: rec.prior.clone(),
+            f: rec.f.clone(),
+            propagated: rec.propagated.clone(),
+            process_noise: rec.process_noise.clone(),
+        });
+        self.begin_record();
+        saved
+    }
+
+    /// Undoes [`KalmanCore::begin_update`] after a failed update: the record's prior fields
+    /// and the phase as they were.
+    #[cold]
+    #[inline(never)]
+    pub(crate) fn undo_begin_update(&mut self, saved: SavedPrior<N>) {
+        let SavedPrior {
+            prior,
+            f,
+            propagated,
+            process_noise,
+        } = saved;
+        let rec = &mut self.record;
+        rec.prior = prior;
+        rec.f = f;
+        rec.propagated = propagated;
+        rec.process_noise = process_noise;
+        self.phase = Phase::Posterior;
+    }
+
+    /// The record's prior field: an update's prior once [`KalmanCore::begin_update`] ran.
+    #[inline(always)]
+    pub(crate) fn prior(&self) -> &Estimate<N> {
+        &self.record.prior
+    }
+
+    /// The record of the update just stored by [`KalmanCore::update`].
+    pub(crate) fn updated_record(&self) -> &StepRecord<N, M> {
+        &self.record
+    }
+
     /// Stores an update computed by the caller (the unscented and shifted Rayleigh filters) and
     /// returns its record. The posterior is symmetrised here and checked for finiteness.
     pub(crate) fn commit_update(
@@ -474,6 +569,16 @@ where
         &mut self,
         parts: UpdateParts<N, M>,
     ) -> Result<&StepRecord<N, M>, FilterError> {
+        self.check_posterior(&parts)?;
+        self.begin_record();
+        self.store(parts);
+        Ok(&self.record)
+    }
+
+    /// Checks that an update's posterior is finite (the first half of
+    /// [`KalmanCore::check_and_store`]).
+    #[inline(always)]
+    fn check_posterior(&self, parts: &UpdateParts<N, M>) -> Result<(), FilterError> {
         let k = self.record.k;
         if !(all_finite(&parts.mean) && all_finite(&parts.cov)) {
             check_finite(&parts.innovation, "innovation").map_err(|e| FilterError::at(k, e))?;
@@ -482,7 +587,13 @@ where
                 step: k,
             });
         }
-        self.begin_record();
+        Ok(())
+    }
+
+    /// Writes a checked update into the record, whose prior fields hold its prior, and makes
+    /// its posterior current.
+    #[inline(always)]
+    fn store(&mut self, parts: UpdateParts<N, M>) {
         let rec = &mut self.record;
         rec.posterior.mean = parts.mean;
         rec.posterior.cov = parts.cov;
@@ -494,13 +605,15 @@ where
         rec.r = parts.r;
         self.phase = Phase::Posterior;
         self.has_record = true;
-        Ok(&self.record)
     }
 
     /// Updates at the current step with the predicted measurement, the innovation (residual),
     /// the measurement Jacobian and the noise, all evaluated by the caller; with `fixed_gain`
     /// (the constant-gain filter) instead of the optimal gain. The KF and EKF pass `None`, a
     /// constant the compiler folds away, so their hot path carries no branch for it.
+    ///
+    /// The prior is the record's prior field: the caller has run
+    /// [`KalmanCore::begin_update`]. On success [`KalmanCore::updated_record`] has the record.
     pub(crate) fn update<const AS_GIVEN: bool>(
         &mut self,
         zhat: OVector<f64, M>,
@@ -508,14 +621,14 @@ where
         h: OMatrix<f64, M, N>,
         r: OMatrix<f64, M, M>,
         fixed_gain: Option<&OMatrix<f64, N, M>>,
-    ) -> Result<&StepRecord<N, M>, FilterError> {
+    ) -> Result<(), FilterError> {
         if AS_GIVEN {
             return self.update_as_given(zhat, innovation, h, r, fixed_gain);
         }
         let k = self.record.k;
         let at = |e| FilterError::at(k, e);
         let form = self.update;
-        let prior = self.update_prior();
+        let prior = &self.record.prior;
         // Run-time sizes go through the kernels, which may hand them to faer. Fixed sizes keep
         // the expressions written out: the same arithmetic as the kernels' nalgebra branch,
         // in a shorter step than through the kernel calls (`cargo xtask bench w1`), whose faer
@@ -547,7 +660,7 @@ where
             UpdateForm::Joseph => joseph_update(&prior.cov, &gain, &h, &r),
             UpdateForm::Standard => standard_update(&prior.cov, &gain, &h),
         };
-        self.check_and_store(UpdateParts {
+        let parts = UpdateParts {
             zhat,
             innovation,
             h,
@@ -556,7 +669,10 @@ where
             gain,
             mean: x_post,
             cov: p_post,
-        })
+        };
+        self.check_posterior(&parts)?;
+        self.store(parts);
+        Ok(())
     }
 
     /// The update of [`InitialCheck::AsGiven`]: the Kalman update in exact arithmetic for an
@@ -570,10 +686,10 @@ where
         h: OMatrix<f64, M, N>,
         r: OMatrix<f64, M, M>,
         fixed_gain: Option<&OMatrix<f64, N, M>>,
-    ) -> Result<&StepRecord<N, M>, FilterError> {
+    ) -> Result<(), FilterError> {
         let k = self.record.k;
         let form = self.update;
-        let prior = self.update_prior();
+        let prior = &self.record.prior;
         let s = &h * &prior.cov * h.transpose() + &r;
         let gain = match fixed_gain {
             Some(gain) => gain.clone(),
@@ -601,7 +717,6 @@ where
                 step: k,
             });
         }
-        self.begin_record();
         let rec = &mut self.record;
         rec.posterior.mean = mean;
         rec.posterior.cov = cov;
@@ -615,7 +730,7 @@ where
         rec.r = r;
         self.phase = Phase::Posterior;
         self.has_record = true;
-        Ok(&self.record)
+        Ok(())
     }
 
     /// Checks the length and finiteness of a measurement handed in from outside.

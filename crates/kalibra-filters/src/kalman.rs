@@ -244,10 +244,36 @@ pub(crate) fn measurement_update<'a, const AS_GIVEN: bool, N: Dim, M: Dim, H: Me
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    let k = core.step();
     let m = measurement.meas_dim().value();
     core.check_measurement(m, z)?;
-    let x = &core.update_prior().mean;
+    let saved = core.begin_update();
+    match update_from_prior::<AS_GIVEN, _, _, _>(core, measurement, z, h_matrix, fixed_gain) {
+        Ok(()) => Ok(core.updated_record()),
+        Err(e) => {
+            if let Some(saved) = saved {
+                core.undo_begin_update(*saved);
+            }
+            Err(e)
+        }
+    }
+}
+
+/// [`measurement_update`] once the prior sits in the record's prior field
+/// ([`KalmanCore::begin_update`]).
+#[inline(always)]
+fn update_from_prior<const AS_GIVEN: bool, N: Dim, M: Dim, H: Measurement<N, M>>(
+    core: &mut KalmanCore<N, M>,
+    measurement: &H,
+    z: &OVector<f64, M>,
+    h_matrix: impl FnOnce(usize, &OVector<f64, N>) -> OMatrix<f64, M, N>,
+    fixed_gain: Option<&OMatrix<f64, N, M>>,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let k = core.step();
+    let m = measurement.meas_dim().value();
+    let x = &core.prior().mean;
     let n = x.nrows();
     let zhat = measurement.measure(k, x);
     check_model_output("predicted measurement h(x)", &zhat, (m, 1), k)?;
@@ -293,6 +319,9 @@ where
 }
 
 /// The prediction of the filters with linear dynamics (KF, SRF): `F_k` is the model's matrix.
+/// The phase is tested once: the usual prediction, after an update, reads the posterior at
+/// its fixed place inline; a second prediction without an update goes out of line.
+#[inline(always)]
 pub(crate) fn linear_predict<const AS_GIVEN: bool, N: Dim, M: Dim, D: LinearDynamics<N>>(
     core: &mut KalmanCore<N, M>,
     dynamics: &D,
@@ -300,8 +329,29 @@ pub(crate) fn linear_predict<const AS_GIVEN: bool, N: Dim, M: Dim, D: LinearDyna
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    if core.is_prior() {
+        return linear_predict_again::<AS_GIVEN, _, _, _>(core, dynamics);
+    }
     let k = core.step();
-    let x = &core.predict_base().mean;
+    let x = &core.posterior().mean;
+    let x_pred = dynamics.transition(k, x);
+    let (f, q) = (dynamics.matrix(k), dynamics.noise_cov(k));
+    check_prediction(k, x.nrows(), &x_pred, &f, &q)?;
+    core.predict_after_update::<AS_GIVEN>(x_pred, f, q)
+}
+
+/// [`linear_predict`] with a prediction since the last update, out of line.
+#[cold]
+#[inline(never)]
+fn linear_predict_again<const AS_GIVEN: bool, N: Dim, M: Dim, D: LinearDynamics<N>>(
+    core: &mut KalmanCore<N, M>,
+    dynamics: &D,
+) -> Result<(), FilterError>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let k = core.step();
+    let x = core.mean();
     let x_pred = dynamics.transition(k, x);
     let (f, q) = (dynamics.matrix(k), dynamics.noise_cov(k));
     check_prediction(k, x.nrows(), &x_pred, &f, &q)?;
