@@ -11,16 +11,11 @@
 //! holds the statistics and a few batches, never the arrays. The small arrays (`time`, `F`,
 //! `H`, `Q`, `R`) are read whole.
 //!
-//! Without model matrices a batch is a group of whole runs (about [`GROUP_CELLS`] cells),
-//! fed to the evaluator in strips of [`STRIP_STEPS`] steps, each strip run after run, as
-//! `kalibra_eval::Evaluation::evaluate` feeds a block of steps: NCI keeps each step's errors
-//! in a vector of its own, so a pass run after run stores to far-apart places cell after cell.
-//! Every step still takes the runs in run order and every run its steps in step order, so the
-//! report is that of a pass run after run, to the bit; the group, not every run, is what a
-//! reader of a run-major file can hold (`cargo xtask bench eval` prints the evaluate stage fed
-//! each way). A failing cell is looked up again run after run, so its error is that of one
-//! pass. `J1`/`J2` pair each step with the one before it as they come, so a log with model
-//! matrices is fed run after run.
+//! The cells go to the evaluator run after run, not in the strips of 32 steps across the runs
+//! that `kalibra_eval::Evaluation::evaluate` feeds its blocks of steps: one evaluator fed in
+//! strips is no faster on the bench's log (`cargo xtask bench eval` prints the evaluate stage
+//! fed each way, the figures `npz: evaluate, run after run / ...`), and a strip across all
+//! runs would hold a part of every run, read with a seek per run and array.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -35,16 +30,8 @@ use crate::raw::{
     ARRAY_NAMES, KNOWN, MODEL, ModelArray, PER_CELL, cell_shape, model_given, no_per_cell_array,
 };
 
-/// Cells per batch handed from the reader thread to the evaluation, fed run after run.
+/// Cells per batch handed from the reader thread to the evaluation.
 const BATCH_CELLS: usize = 4096;
-
-/// About the cells of a group of whole runs fed in strips ([`GROUP_CELLS`] / K runs, at least
-/// two, else run after run): the larger, the longer each strip's run of stores into a step's
-/// vector, at the cost of a group's values in memory.
-const GROUP_CELLS: usize = 16384;
-
-/// Steps per strip, as `kalibra_eval::Evaluation::evaluate` feeds a block of steps.
-const STRIP_STEPS: usize = 32;
 
 type Archive<R> = zip::ZipArchive<R>;
 
@@ -344,35 +331,6 @@ fn evaluate_from<R: Read + Seek + Send>(
     source: &impl Fn() -> std::io::Result<R>,
     evaluation: &Evaluation,
 ) -> Result<Report, Error> {
-    match evaluate_fed(file, source, evaluation, GROUP_CELLS) {
-        // The strips meet the cells in another order than one pass: the error to report is
-        // that of the first failing cell run after run (or of the file as one pass reads it).
-        Err((_, true)) => evaluate_fed(file, source, evaluation, 0).map_err(|(e, _)| e),
-        fed => fed.map_err(|(e, _)| e),
-    }
-}
-
-/// [`evaluate_from`] feeding groups of whole runs of about `group_cells` cells in strips
-/// (0: run after run); an error comes with whether the cells were fed in strips.
-fn evaluate_fed<R: Read + Seek + Send>(
-    file: &Path,
-    source: &impl Fn() -> std::io::Result<R>,
-    evaluation: &Evaluation,
-    group_cells: usize,
-) -> Result<Report, (Error, bool)> {
-    let mut in_strips = false;
-    evaluate_grouped(file, source, evaluation, group_cells, &mut in_strips)
-        .map_err(|e| (e, in_strips))
-}
-
-/// [`evaluate_fed`], setting `in_strips` once it decides to feed strips.
-fn evaluate_grouped<R: Read + Seek + Send>(
-    file: &Path,
-    source: &impl Fn() -> std::io::Result<R>,
-    evaluation: &Evaluation,
-    group_cells: usize,
-    in_strips: &mut bool,
-) -> Result<Report, Error> {
     let fail = |e: Error| e.in_file(file);
     let file_error = |message: String| Error::File {
         file: file.to_path_buf(),
@@ -516,24 +474,13 @@ fn evaluate_grouped<R: Read + Seek + Send>(
     // Every array's values fit in its entry (`check_fits`) and the evaluation refused cells of
     // no values, so this product is at most the archive's size.
     let total = runs.saturating_mul(steps);
-    // Runs per group fed in strips; 0 for a pass run after run.
-    let group = match group_cells / steps {
-        g if g >= 2 && model.is_none() => g.min(runs),
-        _ => 0,
-    };
-    *in_strips = group > 0;
-    let (batch_cells, depth) = match group {
-        0 => (BATCH_CELLS, 4),
-        // One group in the channel: with the one read and the one fed, three in memory.
-        g => (g * steps, 1),
-    };
     let fed: Result<(), Error> = std::thread::scope(|scope| {
         // The reader: batches of cells, run-major, while this thread evaluates the last.
-        let (tx, rx) = mpsc::sync_channel::<Result<Batch, (&'static str, String)>>(depth);
+        let (tx, rx) = mpsc::sync_channel::<Result<Batch, (&'static str, String)>>(4);
         scope.spawn(move || {
             let mut first = 0;
             while first < total {
-                let cells = batch_cells.min(total - first);
+                let cells = BATCH_CELLS.min(total - first);
                 let mut values = Vec::with_capacity(streams.len());
                 for s in &mut streams {
                     let mut out = Vec::with_capacity(cells * s.width);
@@ -565,12 +512,7 @@ fn evaluate_grouped<R: Read + Seek + Send>(
         while let Ok(batch) = rx.recv() {
             let batch =
                 batch.map_err(|(array, message)| Error::array(array, message).in_file(file))?;
-            // A group's cells in strips of steps, each strip run after run; else as read.
-            let order: Box<dyn Iterator<Item = usize>> = match group {
-                0 => Box::new(0..batch.cells),
-                _ => Box::new(strip_order(batch.cells / steps, steps)),
-            };
-            let cells: Vec<_> = order
+            let cells: Vec<_> = (0..batch.cells)
                 .map(|i| {
                     let (run, step) = ((batch.first + i) / steps, (batch.first + i) % steps);
                     let mut cell = Cell::default();
@@ -614,15 +556,6 @@ fn evaluate_grouped<R: Read + Seek + Send>(
             source: e,
         },
         other => evaluate_error(other),
-    })
-}
-
-/// The indices, run-major, of the cells of `runs` runs of `steps` steps in strips of
-/// [`STRIP_STEPS`] steps, each strip run after run.
-fn strip_order(runs: usize, steps: usize) -> impl Iterator<Item = usize> {
-    (0..steps).step_by(STRIP_STEPS).flat_map(move |start| {
-        let strip = start..(start + STRIP_STEPS).min(steps);
-        (0..runs).flat_map(move |run| strip.clone().map(move |step| run * steps + step))
     })
 }
 
@@ -670,114 +603,4 @@ fn model(
         }
     }
     Ok(Some([f, h, q, r]))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A `.npy` file of little-endian float64 of `shape`, C order.
-    fn npy(shape: &[usize], values: &[f64]) -> Vec<u8> {
-        let dims: Vec<String> = shape.iter().map(ToString::to_string).collect();
-        let dict = format!(
-            "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}), }}\n",
-            dims.join(", ")
-        );
-        let mut out = b"\x93NUMPY\x01\x00".to_vec();
-        out.extend_from_slice(&(dict.len() as u16).to_le_bytes());
-        out.extend_from_slice(dict.as_bytes());
-        out.extend(values.iter().flat_map(|v| v.to_le_bytes()));
-        out
-    }
-
-    /// An NPZ log of `runs` x `steps` cells (n = 2, m = 1) with varied errors, a few cells
-    /// not logged (all NaN), a NaN covariance (a finding) and a non-finite truth at each of
-    /// `bad_truth`.
-    fn log(runs: usize, steps: usize, bad_truth: &[(usize, usize)]) -> Vec<u8> {
-        let cells = runs * steps;
-        let wobble = |i: usize, k: usize| ((i * 7919 + k * 104_729) % 1000) as f64 / 500.0 - 1.0;
-        let mut truth: Vec<f64> = (0..cells * 2).map(|i| i as f64 * 0.01).collect();
-        let estimate: Vec<f64> = (0..cells * 2)
-            .map(|i| i as f64 * 0.01 + wobble(i, 1))
-            .collect();
-        let mut covariance: Vec<f64> = (0..cells)
-            .flat_map(|i| [0.4 + wobble(i, 2).abs(), 0.1, 0.1, 0.5 + wobble(i, 3).abs()])
-            .collect();
-        let innovation: Vec<f64> = (0..cells).map(|i| wobble(i, 4)).collect();
-        let mut innovation_cov: Vec<f64> = (0..cells).map(|i| 0.3 + wobble(i, 5).abs()).collect();
-        // Run 1, step 3: no covariance logged; run 2, step 40: a NaN in it (a finding).
-        let at = |run: usize, step: usize| run * steps + step;
-        covariance[at(1, 3) * 4..at(1, 3) * 4 + 4].fill(f64::NAN);
-        covariance[at(2, steps - 1) * 4 + 1] = f64::NAN;
-        innovation_cov[at(0, 5)] = f64::NAN;
-        for &(run, step) in bad_truth {
-            truth[at(run, step) * 2] = f64::INFINITY;
-        }
-        let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-        let options = zip::write::SimpleFileOptions::default()
-            .compression_method(zip::CompressionMethod::Stored);
-        for (name, shape, values) in [
-            ("truth", vec![runs, steps, 2], &truth),
-            ("estimate", vec![runs, steps, 2], &estimate),
-            ("covariance", vec![runs, steps, 2, 2], &covariance),
-            ("innovation", vec![runs, steps, 1], &innovation),
-            ("innovation_cov", vec![runs, steps, 1, 1], &innovation_cov),
-        ] {
-            zip.start_file(format!("{name}.npy"), options).unwrap();
-            std::io::Write::write_all(&mut zip, &npy(&shape, values)).unwrap();
-        }
-        zip.finish().unwrap().into_inner()
-    }
-
-    fn fed(bytes: &[u8], group_cells: usize) -> Result<Report, (Error, bool)> {
-        let source = || Ok(std::io::Cursor::new(bytes));
-        evaluate_fed(
-            Path::new("log.npz"),
-            &source,
-            &Evaluation::new(),
-            group_cells,
-        )
-    }
-
-    /// Groups of 3 runs (7 = 3 + 3 + 1) of 70 steps in strips of 32, 32 and 6 give the
-    /// report of one pass run after run, to the bit.
-    #[test]
-    fn strips_of_groups_of_runs_give_one_pass_to_the_bit() {
-        let (runs, steps) = (7, 70);
-        let bytes = log(runs, steps, &[]);
-        let in_strips = fed(&bytes, 3 * steps).unwrap();
-        let one_pass = fed(&bytes, 0).unwrap();
-        assert_eq!(
-            serde_json::to_string(&in_strips).unwrap(),
-            serde_json::to_string(&one_pass).unwrap()
-        );
-        assert!(in_strips.findings.state.cells > 0);
-        assert!(in_strips.nci_per_step.iter().all(Option::is_some));
-        // And the default groups, through the reader's entry point.
-        let whole = evaluate_bytes(Path::new("log.npz"), &bytes, &Evaluation::new()).unwrap();
-        assert_eq!(whole, one_pass);
-    }
-
-    /// The strips meet run 2's step 3 before run 1's step 40; one pass run after run meets
-    /// run 1's first, and that is the error reported.
-    #[test]
-    fn a_failing_cell_is_the_first_run_after_run() {
-        let (runs, steps) = (7, 70);
-        let bytes = log(runs, steps, &[(1, 40), (2, 3)]);
-        let cell = |e: &Error| match e {
-            Error::Refused {
-                source: EvalError::NonFinite { run, step, .. },
-                ..
-            } => Some((*run, *step)),
-            _ => None,
-        };
-        let (in_strips, fed_in_strips) = fed(&bytes, 3 * steps).unwrap_err();
-        assert!(fed_in_strips);
-        assert_eq!(cell(&in_strips), Some((2, 3)));
-        let (one_pass, _) = fed(&bytes, 0).unwrap_err();
-        assert_eq!(cell(&one_pass), Some((1, 40)));
-        let source = || Ok(std::io::Cursor::new(&bytes[..]));
-        let reported = evaluate_from(Path::new("log.npz"), &source, &Evaluation::new());
-        assert_eq!(cell(&reported.unwrap_err()), Some((1, 40)));
-    }
 }
