@@ -5,9 +5,10 @@
 //!
 //! Rows go to the evaluator as they come, run after run in a file written so, not in the
 //! strips of 32 steps across the runs that `kalibra_eval::Evaluation::evaluate` feeds: a strip
-//! across all runs needs a row of every run, that is the whole file in memory, and one
-//! evaluator fed in strips is no faster anyway (`cargo xtask bench eval` prints the evaluate
-//! stage fed each way, the figures `npz: evaluate, run after run / ...`).
+//! across all runs needs a row of every run, that is the whole file in memory; strips across
+//! groups of whole runs would not, but their gain for one evaluator, which `cargo xtask bench
+//! eval` times (the figures `npz: evaluate, run after run / ...`), did not hold from one run
+//! to the next on a shared machine.
 //!
 //! Rows and columns in messages count from 1, the header being row 1, as a spreadsheet shows
 //! them. Rows may come in any order (run after run is the usual one); every (run, step) of the

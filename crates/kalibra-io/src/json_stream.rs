@@ -3,9 +3,9 @@
 //! holds the statistics and a few runs, never the file (`cargo xtask bench eval` prints the
 //! peak). The cells go run after run, not in the strips of 32 steps across the runs that
 //! `kalibra_eval::Evaluation::evaluate` feeds: a strip across all runs needs a part of every
-//! run, that is the whole file, and one evaluator fed in strips is no faster anyway (the same
-//! bench prints the evaluate stage fed each way, the figures `npz: evaluate, run after run /
-//! ...`).
+//! run, that is the whole file; strips across groups of whole runs would not, but their gain
+//! for one evaluator, which the same bench times (the figures `npz: evaluate, run after run /
+//! ...`), did not hold from one run to the next on a shared machine.
 //!
 //! A JSON log stores its arrays one after another (all the truths, then all the estimates,
 //! ...), so a first pass over the file finds where each array starts and counts its runs and
