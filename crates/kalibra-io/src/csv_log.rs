@@ -3,6 +3,13 @@
 //! the statistics (per step, and the `n + 1` numbers per valid cell that NCI needs), never the
 //! file; a large file shows a progress bar when stderr is a terminal.
 //!
+//! Rows go to the evaluator as they come, run after run in a file written so, not in the
+//! strips of 32 steps across the runs that `kalibra_eval::Evaluation::evaluate` feeds: a strip
+//! across all runs needs a row of every run, that is the whole file in memory; strips across
+//! groups of whole runs would not, but their gain for one evaluator, which `cargo xtask bench
+//! eval` times (the figures `npz: evaluate, run after run / ...`), did not hold from one run
+//! to the next on a shared machine.
+//!
 //! Rows and columns in messages count from 1, the header being row 1, as a spreadsheet shows
 //! them. Rows may come in any order (run after run is the usual one); every (run, step) of the
 //! runs-by-steps rectangle needs exactly one row.

@@ -1,7 +1,11 @@
 //! The JSON log streamed: the per-cell arrays are read run after run, all in step, each from
 //! its own handle on the file, and fed to a `kalibra_eval::Evaluator` as they come, so memory
 //! holds the statistics and a few runs, never the file (`cargo xtask bench eval` prints the
-//! peak).
+//! peak). The cells go run after run, not in the strips of 32 steps across the runs that
+//! `kalibra_eval::Evaluation::evaluate` feeds: a strip across all runs needs a part of every
+//! run, that is the whole file; strips across groups of whole runs would not, but their gain
+//! for one evaluator, which the same bench times (the figures `npz: evaluate, run after run /
+//! ...`), did not hold from one run to the next on a shared machine.
 //!
 //! A JSON log stores its arrays one after another (all the truths, then all the estimates,
 //! ...), so a first pass over the file finds where each array starts and counts its runs and

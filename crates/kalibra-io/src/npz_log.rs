@@ -10,6 +10,13 @@
 //! run after run, by a reader thread that hands batches of cells to the evaluation; memory
 //! holds the statistics and a few batches, never the arrays. The small arrays (`time`, `F`,
 //! `H`, `Q`, `R`) are read whole.
+//!
+//! The cells go to the evaluator run after run, not in the strips of 32 steps across the runs
+//! that `kalibra_eval::Evaluation::evaluate` feeds its blocks of steps: `cargo xtask bench
+//! eval` times one evaluator fed each way (the figures `npz: evaluate, run after run / ...`),
+//! and on a shared machine its gain did not hold from one run to the next; a strip across all
+//! runs needs a seek per run and array, and a reader feeding groups of whole runs in strips
+//! held more than a quarter of the bench's file and was no faster end to end.
 
 use std::collections::BTreeMap;
 use std::fs::File;

@@ -831,7 +831,7 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
 
     print_table(&rows, size.rows());
     print_goals(&rows);
-    let split = stage_split(&dir, size, window, &out_dir)?;
+    let split = stage_split(&dir, size, window, &out_dir, args.repeats)?;
     if !disagreements.is_empty() {
         bail!(
             "kalibra and a script disagree on {}: the timings compare different work",
@@ -844,6 +844,18 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
             if seconds.is_finite() {
                 figures.push(format!("{f}: stage {stage}"), *seconds, "s");
             }
+        }
+    }
+    if let Some((_, orders)) = split.iter().find(|(f, _)| *f == Format::Npz)
+        && let Some((_, base)) = orders.first()
+    {
+        for (label, seconds) in &orders[1..] {
+            let label = label.trim_start_matches("evaluate, ");
+            figures.push(
+                format!("npz: evaluate, run after run / {label}"),
+                base / seconds,
+                "x",
+            );
         }
     }
     for r in &rows {
@@ -882,13 +894,19 @@ pub(crate) fn run(args: &Args) -> Result<Figures> {
 }
 
 /// Per format, each stage's name and seconds.
-type StageSplit = Vec<(Format, Vec<(&'static str, f64)>)>;
+type StageSplit = Vec<(Format, Vec<(String, f64)>)>;
 
 /// The stage split of kalibra's CSV and JSON readers (`kalibra_io::stages`: each stage alone
 /// on one thread, the file in memory), with the report's writing (`kalibra eval`'s
 /// `Document` and report files) timed after them; printed, and returned per format as
 /// (stage, seconds).
-fn stage_split(dir: &Path, size: LogSize, window: usize, out_dir: &Path) -> Result<StageSplit> {
+fn stage_split(
+    dir: &Path,
+    size: LogSize,
+    window: usize,
+    out_dir: &Path,
+    repeats: usize,
+) -> Result<StageSplit> {
     let evaluation = kalibra_eval::Evaluation::new().window(window)?;
     let mut split = Vec::new();
     println!(
@@ -905,13 +923,16 @@ fn stage_split(dir: &Path, size: LogSize, window: usize, out_dir: &Path) -> Resu
         let doc = kalibra_io::document::Document::new(&log, &report);
         kalibra_io::output::Target::prepare(&target_dir)?.write(&report, &doc)?;
         let report_s = clock.elapsed().as_secs_f64();
-        let named = vec![
+        let named: Vec<(String, f64)> = [
             ("read", stages.read),
             ("tokenise", stages.tokenise),
             ("parse numbers", stages.parse),
             ("evaluate", stages.evaluate),
             ("report", report_s),
-        ];
+        ]
+        .into_iter()
+        .map(|(stage, s)| (stage.to_string(), s))
+        .collect();
         let shown: Vec<String> = named
             .iter()
             .filter(|(_, s)| s.is_finite())
@@ -930,6 +951,27 @@ fn stage_split(dir: &Path, size: LogSize, window: usize, out_dir: &Path) -> Resu
         println!("    {}: {} ({note})", format.ext(), shown.join(", "));
         split.push((format, named));
     }
+    let orders = feed_orders(
+        &dir.join(size.file_name(Format::Npz)),
+        size,
+        window,
+        repeats,
+    )?;
+    let base = orders.first().map_or(f64::NAN, |(_, s)| *s);
+    let shown: Vec<String> = orders
+        .iter()
+        .map(|(label, s)| format!("{label} {s:.3} s ({:.2}x)", base / s))
+        .collect();
+    println!(
+        "    npz, evaluate stage alone (the cells in memory, one thread, best of {repeats}, \
+         the same report; x = run after run / this): {}",
+        shown.join(", ")
+    );
+    let orders = orders
+        .into_iter()
+        .map(|(label, s)| (format!("evaluate, {label}"), s))
+        .collect();
+    split.push((Format::Npz, orders));
     Ok(split)
 }
 
@@ -996,6 +1038,180 @@ fn print_goals(rows: &[Row]) {
             verdict(r.kalibra.peak_bytes < limit)
         );
     }
+}
+
+/// Steps per strip of [`feed_orders`], as `Evaluation::evaluate` feeds its blocks.
+const STRIP_STEPS: usize = 32;
+
+/// The groups of runs of [`feed_orders`]' strips across some runs.
+const FEED_GROUPS: [usize; 3] = [64, 16, 4];
+
+/// Cells per `push_batch` call of [`feed_orders`]: below the evaluator's threshold for
+/// preparing a batch on several threads, so that every cell is prepared on this thread.
+const FEED_BATCH: usize = 256;
+
+/// A feeding order of [`feed_orders`]: calls its argument with each (run, step) in turn.
+type Order<'a> = dyn Fn(&mut dyn FnMut(usize, usize)) + 'a;
+
+/// The NPZ log's per-cell arrays, read whole (the bench wrote them: `<f8`, C order), in
+/// [`ARRAYS`] order.
+fn read_npz_arrays(path: &Path) -> Result<Vec<Vec<f64>>> {
+    use std::io::Read;
+    let mut zip = zip::ZipArchive::new(File::open(path)?)?;
+    ARRAYS
+        .iter()
+        .map(|array| {
+            let mut entry = zip.by_name(&format!("{}.npy", array.name()))?;
+            let mut bytes = Vec::new();
+            entry.read_to_end(&mut bytes)?;
+            ensure!(bytes.len() >= 10, "{}.npy is too short", array.name());
+            let header = 10 + usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
+            Ok(bytes[header..]
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
+                .collect())
+        })
+        .collect()
+}
+
+/// The evaluate stage of the NPZ log held in memory, on one thread, fed in several orders:
+/// run after run (every run's steps in turn, as `kalibra eval` streams a log), in strips of
+/// [`STRIP_STEPS`] steps across all runs, each strip run after run (as
+/// `kalibra_eval::Evaluation::evaluate` feeds a block), and in such strips across groups of
+/// [`FEED_GROUPS`] runs, group after group (what a reader holding a few whole runs can feed).
+/// Best of `repeats` alternations, each from a fresh evaluator to its report; every report
+/// must equal the first (the strips keep every sum's order). Returns each order's label and
+/// seconds, run after run first.
+fn feed_orders(
+    path: &Path,
+    size: LogSize,
+    window: usize,
+    repeats: usize,
+) -> Result<Vec<(String, f64)>> {
+    let arrays = read_npz_arrays(path)?;
+    let (runs, steps) = (size.runs, size.steps);
+    let widths: Vec<usize> = ARRAYS
+        .iter()
+        .map(|a| a.cell_shape().iter().product())
+        .collect();
+    for (array, (values, width)) in ARRAYS.iter().zip(arrays.iter().zip(&widths)) {
+        ensure!(
+            values.len() == runs * steps * width,
+            "{}.npy holds {} values, not {runs} x {steps} x {width}",
+            array.name(),
+            values.len()
+        );
+    }
+    let cell = |run: usize, step: usize| {
+        let at = |a: usize| {
+            let i = (run * steps + step) * widths[a];
+            &arrays[a][i..i + widths[a]]
+        };
+        kalibra_eval::Cell {
+            truth: Some(at(0)),
+            estimate: Some(at(1)),
+            covariance: Some(kalibra_eval::MatrixCell::Full(at(2))),
+            innovation: Some(at(3)),
+            innovation_cov: Some(kalibra_eval::MatrixCell::Full(at(4))),
+            model: None,
+        }
+    };
+    let contents = kalibra_eval::Contents {
+        truth: Some(4),
+        estimate: Some(4),
+        covariance: Some(4),
+        innovation: Some(2),
+        innovation_cov: Some(2),
+        model: None,
+    };
+    let evaluation = kalibra_eval::Evaluation::new().window(window)?;
+    let evaluate = |order: &Order<'_>| -> Result<(f64, Value)> {
+        let (seconds, report) = timed(|| -> Result<kalibra_eval::Report> {
+            let mut evaluator = evaluation.evaluator(contents)?;
+            let mut batch = Vec::with_capacity(FEED_BATCH);
+            let mut failed = None;
+            order(&mut |run, step| {
+                batch.push((run, step, cell(run, step)));
+                if batch.len() == FEED_BATCH {
+                    if let Err((_, e)) = evaluator.push_batch(&batch) {
+                        failed.get_or_insert(e);
+                    }
+                    batch.clear();
+                }
+            });
+            if let Err((_, e)) = evaluator.push_batch(&batch) {
+                failed.get_or_insert(e);
+            }
+            if let Some(e) = failed {
+                return Err(e.into());
+            }
+            Ok(evaluator.finish(None)?)
+        });
+        Ok((seconds, serde_json::to_value(report?)?))
+    };
+    // Strips of `group` runs at a time: every step still takes the runs in run order and
+    // every run its steps in step order, whatever the group.
+    let strips = |group: usize, visit: &mut dyn FnMut(usize, usize)| {
+        for first in (0..runs).step_by(group) {
+            let group = first..(first + group).min(runs);
+            for start in (0..steps).step_by(STRIP_STEPS) {
+                for run in group.clone() {
+                    for step in start..(start + STRIP_STEPS).min(steps) {
+                        visit(run, step);
+                    }
+                }
+            }
+        }
+    };
+    // (Run after run is one strip of every step.)
+    let orders: Vec<(String, usize, usize)> = [(runs, steps), (runs, STRIP_STEPS)]
+        .into_iter()
+        .chain(FEED_GROUPS.iter().map(|&g| (g, STRIP_STEPS)))
+        .filter(|&(g, _)| g <= runs)
+        .map(|(g, strip)| {
+            let label = if strip == steps {
+                "run after run".to_string()
+            } else if g == runs {
+                format!("in strips of {strip} steps across all runs")
+            } else {
+                format!("in strips of {strip} steps across {g} runs")
+            };
+            (label, g, strip)
+        })
+        .collect();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    pool.install(|| {
+        let mut best = vec![f64::INFINITY; orders.len()];
+        let mut first: Option<Value> = None;
+        for _ in 0..repeats.max(1) {
+            for ((label, group, strip), best) in orders.iter().zip(&mut best) {
+                let (seconds, report) = evaluate(&|visit: &mut dyn FnMut(usize, usize)| {
+                    if *strip == steps {
+                        for run in 0..runs {
+                            for step in 0..steps {
+                                visit(run, step);
+                            }
+                        }
+                    } else {
+                        strips(*group, visit);
+                    }
+                })?;
+                match &first {
+                    None => first = Some(report),
+                    Some(r) => ensure!(
+                        *r == report,
+                        "the NPZ log's report fed {label} differs from the one fed run after run"
+                    ),
+                }
+                *best = best.min(seconds);
+            }
+        }
+        Ok(orders
+            .into_iter()
+            .zip(best)
+            .map(|((label, _, _), s)| (label, s))
+            .collect())
+    })
 }
 
 #[cfg(test)]
