@@ -499,8 +499,11 @@ where
     /// A run-time choice between the prior and the posterior field instead makes the compiler
     /// read the prior through a pointer and keep less of the prediction in registers, which
     /// lengthens the step (`cargo xtask bench w1`, the scalar library).
+    ///
+    /// The saved fields come back by value, not boxed: a fixed-size step must not allocate,
+    /// even the first update of an update-first run (`tests/no_alloc.rs`).
     #[inline(always)]
-    pub(crate) fn begin_update(&mut self) -> Option<Box<SavedPrior<N>>> {
+    pub(crate) fn begin_update(&mut self) -> Option<SavedPrior<N>> {
         match self.phase {
             Phase::Prior => None,
             Phase::Posterior => Some(self.begin_update_cold()),
@@ -510,14 +513,14 @@ where
     /// [`KalmanCore::begin_update`] after an update, out of line.
     #[cold]
     #[inline(never)]
-    fn begin_update_cold(&mut self) -> Box<SavedPrior<N>> {
+    fn begin_update_cold(&mut self) -> SavedPrior<N> {
         let rec = &self.record;
-        let saved = Box::new(SavedPrior {
+        let saved = SavedPrior {
             prior: rec.prior.clone(),
             f: rec.f.clone(),
             propagated: rec.propagated.clone(),
             process_noise: rec.process_noise.clone(),
-        });
+        };
         self.begin_record();
         saved
     }

@@ -251,7 +251,7 @@ where
         Ok(()) => Ok(core.updated_record()),
         Err(e) => {
             if let Some(saved) = saved {
-                core.undo_begin_update(*saved);
+                core.undo_begin_update(saved);
             }
             Err(e)
         }
