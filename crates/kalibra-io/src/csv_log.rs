@@ -244,6 +244,7 @@ struct RowMeta {
 }
 
 /// A parsed block: its rows, and their values `width` per row.
+#[derive(Default)]
 struct Parsed {
     rows: Vec<RowMeta>,
     values: Vec<f64>,
@@ -349,8 +350,10 @@ impl Plan<'_> {
     /// number of fields, numbers in decimal notation (the form every writer of a large log
     /// uses). Each row is read once from start to end, the numbers parsed where they stand
     /// (fast-float2 tells where each ends). `None` where the block is not plain or holds an
-    /// error, which [`Plan::parse`] then reads and reports as it always did.
-    fn parse_plain(&self, block: &[u8], first_row: u64) -> Option<Parsed> {
+    /// error, which [`Plan::parse`] then reads and reports as it always did. The rows and
+    /// values go into `parsed`'s storage, emptied first (a recycled parse, or
+    /// `Parsed::default()`).
+    fn parse_plain(&self, block: &[u8], first_row: u64, recycled: Parsed) -> Option<Parsed> {
         // A quote needs the csv crate's reading; so does a `\r`, after which the csv crate
         // numbers the rows its own way, and its numbers are the ones messages give.
         if memchr::memchr2(b'"', b'\r', block).is_some() {
@@ -368,10 +371,15 @@ impl Plan<'_> {
         }
         // About 8 bytes a field in a log of floats; a guess, only for the first allocation.
         let rows_guess = block.len() / (8 * columns).max(1) + 1;
-        let mut parsed = Parsed {
-            rows: Vec::with_capacity(rows_guess),
-            values: Vec::with_capacity(rows_guess * self.width),
-        };
+        let Parsed {
+            mut rows,
+            mut values,
+        } = recycled;
+        rows.clear();
+        values.clear();
+        rows.reserve(rows_guess);
+        values.reserve(rows_guess * self.width);
+        let mut parsed = Parsed { rows, values };
         let mut line_no = first_row;
         let mut start = 0;
         while start < block.len() {
@@ -627,10 +635,12 @@ pub(crate) fn stages(
     let clock = std::time::Instant::now();
     let parsed = blocks
         .iter()
-        .map(|&(row, b)| match plan.parse_plain(b, row) {
-            Some(parsed) => Ok(parsed),
-            None => plan.parse(b, row),
-        })
+        .map(
+            |&(row, b)| match plan.parse_plain(b, row, Parsed::default()) {
+                Some(parsed) => Ok(parsed),
+                None => plan.parse(b, row),
+            },
+        )
         .collect::<Result<Vec<_>, _>>()?;
     let parse = clock.elapsed().as_secs_f64() - tokenise;
     let clock = std::time::Instant::now();
@@ -701,6 +711,12 @@ fn stream(
     let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>)>(workers);
     let work_rx = Mutex::new(work_rx);
     let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(workers + 1);
+    // Blocks parsed and parses evaluated come back to be filled again: a fresh allocation per
+    // block was paid again in page faults (`cargo xtask bench eval`, CSV). As many are in
+    // circulation as were in flight before.
+    let (blocks_back, blocks_back_rx) = mpsc::channel::<Vec<u8>>();
+    let (parses_back, parses_back_rx) = mpsc::channel::<Parsed>();
+    let parses_back_rx = Mutex::new(parses_back_rx);
     let mut times: Vec<Option<(f64, u64)>> = Vec::new();
     let mut any = false;
     let fed: Result<(), Error> = std::thread::scope(|scope| {
@@ -726,7 +742,10 @@ fn stream(
                     }
                 };
                 want = BLOCK_BYTES;
-                let rest = buf.split_off(cut);
+                let mut rest = blocks_back_rx.try_recv().unwrap_or_default();
+                rest.clear();
+                rest.extend_from_slice(&buf[cut..]);
+                buf.truncate(cut);
                 let block = std::mem::replace(&mut buf, rest);
                 let lines = memchr::memchr_iter(b'\n', &block).count() as u64;
                 if block.is_empty() || work_tx.send((index, row, block)).is_err() {
@@ -740,8 +759,8 @@ fn stream(
             }
         });
         for _ in 0..workers {
-            let done = done_tx.clone();
-            let (work_rx, plan) = (&work_rx, &plan);
+            let (done, blocks_back) = (done_tx.clone(), blocks_back.clone());
+            let (work_rx, plan, parses_back_rx) = (&work_rx, &plan, &parses_back_rx);
             scope.spawn(move || {
                 loop {
                     let next = work_rx
@@ -751,10 +770,17 @@ fn stream(
                     let Ok((index, row, block)) = next else {
                         return;
                     };
-                    let parsed = match plan.parse_plain(&block, row) {
+                    let recycled = parses_back_rx
+                        .lock()
+                        .ok()
+                        .and_then(|rx| rx.try_recv().ok())
+                        .unwrap_or_default();
+                    let parsed = match plan.parse_plain(&block, row, recycled) {
                         Some(parsed) => Ok(parsed),
                         None => plan.parse(&block, row),
                     };
+                    // The reader may have finished; then the block is dropped here.
+                    let _ = blocks_back.send(block);
                     if done.send((index, parsed)).is_err() {
                         return;
                     }
@@ -819,6 +845,8 @@ fn stream(
                 if let Some((_, message)) = time_error {
                     return Err(message);
                 }
+                drop(cells);
+                let _ = parses_back.send(parsed);
             }
         }
         Ok(())
@@ -1032,7 +1060,7 @@ mod tests {
         ];
         let block = plain.concat();
         let fast = plan
-            .parse_plain(block.as_bytes(), 2)
+            .parse_plain(block.as_bytes(), 2, Parsed::default())
             .expect("a plain block");
         let slow = plan.parse(block.as_bytes(), 2).unwrap();
         assert_eq!(bits(&fast), bits(&slow));
@@ -1056,7 +1084,11 @@ mod tests {
             "0,0,0.5,1,2,3,4,5,6\r0,1,0.5,1,2,3,4,5,6\n",
             "0,0,0.5,1,2,3,4,5,\u{a0}6\n",
         ] {
-            assert!(plan.parse_plain(odd.as_bytes(), 2).is_none(), "{odd:?}");
+            assert!(
+                plan.parse_plain(odd.as_bytes(), 2, Parsed::default())
+                    .is_none(),
+                "{odd:?}"
+            );
         }
     }
 }

@@ -34,6 +34,10 @@ use crate::raw::{
 /// Cells per batch handed from the reader thread to the evaluation.
 const BATCH_CELLS: usize = 4096;
 
+/// The read buffer of each handle on the archive: at most a batch's bytes of the smallest
+/// per-cell array of float64 (`BATCH_CELLS` values of a one-dimensional innovation).
+const BUFFER_BYTES: usize = BATCH_CELLS * 8;
+
 type Archive<R> = zip::ZipArchive<R>;
 
 /// Opens the archive on a new handle from `source` (each per-cell array streams from its own).
@@ -273,18 +277,31 @@ struct Stream<R: Read> {
 }
 
 impl<R: Read> Stream<R> {
-    /// Appends the next `cells` cells' values to `out`.
+    /// Sets `out` to the next `cells` cells' values (a recycled `out` of that length is
+    /// overwritten as it stands, not cleared and filled again).
     fn read(&mut self, cells: usize, out: &mut Vec<f64>) -> Result<(), (&'static str, String)> {
-        self.bytes.resize(cells * self.width * self.kind.size(), 0);
-        self.reader.read_exact(&mut self.bytes).map_err(|e| {
+        let array = self.array;
+        let cut_short = |e: std::io::Error| {
             (
-                self.array,
-                format!(
-                    "array {}: cannot read its values ({e}; truncated?)",
-                    self.array
-                ),
+                array,
+                format!("array {array}: cannot read its values ({e}; truncated?)"),
             )
-        })?;
+        };
+        let count = cells * self.width;
+        // float64 in this machine's byte order (numpy's `<f8` on x86 and ARM) is read
+        // straight into `out`: the copy through `self.bytes` and its decoding cost as much as
+        // the evaluation's own per-cell sums (`cargo xtask bench eval`, NPZ), and the bits
+        // are the same as `f64::from_le_bytes` gives.
+        if matches!(self.kind, Kind::F8) && self.big_endian == cfg!(target_endian = "big") {
+            out.resize(count, 0.0);
+            return self
+                .reader
+                .read_exact(bytemuck::cast_slice_mut(out.as_mut_slice()))
+                .map_err(cut_short);
+        }
+        self.bytes.resize(count * self.kind.size(), 0);
+        self.reader.read_exact(&mut self.bytes).map_err(cut_short)?;
+        out.clear();
         self.kind.decode(self.big_endian, &self.bytes, out);
         Ok(())
     }
@@ -312,7 +329,10 @@ struct Batch {
 
 /// Evaluates the NPZ log `file` with `evaluation`.
 pub(crate) fn evaluate(file: &Path, evaluation: &Evaluation) -> Result<Report, Error> {
-    let source = || File::open(file).map(|f| BufReader::with_capacity(1 << 20, f));
+    // No larger than a batch's read of one array, so that those reads bypass the buffer
+    // (`BufReader` hands a read at least its capacity straight to the file) instead of
+    // being copied through it.
+    let source = || File::open(file).map(|f| BufReader::with_capacity(BUFFER_BYTES, f));
     evaluate_from(file, &source, evaluation)
 }
 
@@ -478,18 +498,21 @@ fn evaluate_from<R: Read + Seek + Send>(
     let fed: Result<(), Error> = std::thread::scope(|scope| {
         // The reader: batches of cells, run-major, while this thread evaluates the last.
         let (tx, rx) = mpsc::sync_channel::<Result<Batch, (&'static str, String)>>(4);
+        // The values of evaluated batches come back to be filled again: a fresh allocation
+        // per batch and array was paid again in page faults (`cargo xtask bench eval`, NPZ).
+        let (back_tx, back_rx) = mpsc::channel::<Vec<Vec<f64>>>();
         scope.spawn(move || {
             let mut first = 0;
             while first < total {
                 let cells = BATCH_CELLS.min(total - first);
-                let mut values = Vec::with_capacity(streams.len());
-                for s in &mut streams {
-                    let mut out = Vec::with_capacity(cells * s.width);
-                    if let Err(e) = s.read(cells, &mut out) {
+                let mut values = back_rx
+                    .try_recv()
+                    .unwrap_or_else(|_| vec![Vec::new(); streams.len()]);
+                for (s, out) in streams.iter_mut().zip(&mut values) {
+                    if let Err(e) = s.read(cells, out) {
                         let _ = tx.send(Err(e));
                         return;
                     }
-                    values.push(out);
                 }
                 if tx
                     .send(Ok(Batch {
@@ -547,6 +570,9 @@ fn evaluate_from<R: Read + Seek + Send>(
                     file: Some(file.to_path_buf()),
                     source,
                 })?;
+            drop(cells);
+            // The reader may have finished; then the values are dropped here.
+            let _ = back_tx.send(batch.values);
         }
         Ok(())
     });
