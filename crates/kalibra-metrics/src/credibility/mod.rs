@@ -11,7 +11,9 @@ use crate::accumulate::assert_fits;
 use crate::{Merge, MetricsError, nees};
 
 mod nci;
+mod rows;
 use nci::{mse_matrix, nci_of_step};
+pub use rows::CredibilityRows;
 
 /// Per-step credibility of a filter over Monte Carlo runs: ANEES, the non-credibility index
 /// NCI of Li and Zhao, and the median NEES.
@@ -306,13 +308,20 @@ impl Credibility {
     #[inline]
     pub fn push_nees(&mut self, step: usize, error: &[f64], nees: f64) -> Result<(), MetricsError> {
         self.check(step, error)?;
+        Self::check_nees(nees)?;
+        self.store(step, error, nees);
+        Ok(())
+    }
+
+    /// Checks a NEES given by the caller: finite and non-negative.
+    #[inline]
+    fn check_nees(nees: f64) -> Result<(), MetricsError> {
         if !(nees.is_finite() && nees >= 0.0) {
             return Err(MetricsError::InvalidParameter {
                 name: "NEES",
                 value: nees,
             });
         }
-        self.store(step, error, nees);
         Ok(())
     }
 
