@@ -41,9 +41,10 @@ pub(super) struct InnovationSide {
 }
 
 /// Cells [`StateSide`] holds in its [`CredibilityRows`] before settling them into NCI's
-/// storage: few enough to stay in cache while settled, many enough that each settling
-/// appends a few kilobytes to each step's vector (`cargo xtask bench eval`, NPZ).
-const SETTLE_CELLS: usize = 1 << 16;
+/// storage: few enough to stay in cache while settled (0.6 MB for `n = 4`), many enough that
+/// each settling appends several runs' cells to each step's vector at once; `1 << 16` timed the
+/// same and faulted in more pages (`cargo xtask bench eval`, NPZ).
+const SETTLE_CELLS: usize = 1 << 14;
 
 impl StateSide {
     /// Moves the cells not yet settled into NCI's storage, `cred`.
