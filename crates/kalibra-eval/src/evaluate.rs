@@ -32,9 +32,10 @@ const STRIP_STEPS: usize = 32;
 /// a pass run after run gives, to the bit (the test
 /// `blocks_of_steps_give_one_pass_to_the_bit_for_any_thread_count`). Why strips: NCI keeps
 /// each step's errors in a vector of its own ([`kalibra_metrics::Credibility`]), so a run's
-/// pass over a whole block stores to places far apart, cell after cell, while a strip of 32
+/// pass over a whole block stored to places far apart, cell after cell, while a strip of 32
 /// steps stores to few places and still reads 32 cells of each array in a row
-/// (`cargo xtask bench eval` times it).
+/// (`cargo xtask bench eval` times it); the evaluator now buffers NCI's cells in a
+/// [`kalibra_metrics::CredibilityRows`] either way.
 ///
 /// # Errors
 /// The first failing cell in the order fed (not necessarily the first run after run).

@@ -70,7 +70,8 @@
 //!   [`time_average`].
 //! * `credibility`: the [`Credibility`] accumulator (ANEES, median NEES, per-step statistics);
 //!   its `nci` module holds the NCI numerics (`Sigma`, its pseudo-inverse quadratic forms, the
-//!   runs' log ratios).
+//!   runs' log ratios), its `rows` module [`CredibilityRows`] (runs pushed run after run into
+//!   one buffer, settled into the accumulator in blocks of steps).
 //! * `innovation`: `J1`/`J2` ([`j_step`], [`JHorizon`]) and the sweep's [`crossover`].
 //! * `whiteness`: the normalised innovations and their autocorrelation test.
 //! * `window`: RMSE and sliding-window statistics of one run.
@@ -110,8 +111,8 @@ mod window;
 pub use accumulate::{HORIZON_MAX, Merge, SquaredErrors, StepMean, time_average};
 pub use consistency::{CHI_SQUARE_MIN_DOF, ChiSquareBand, WILSON_HILFERTY_FROM, nees, nis};
 pub use credibility::{
-    Credibility, CredibilityAverage, CredibilityStep, RESERVE_RUNS_MAX, consistent_median_nees,
-    median,
+    Credibility, CredibilityAverage, CredibilityRows, CredibilityStep, RESERVE_RUNS_MAX,
+    consistent_median_nees, median,
 };
 pub use error::MetricsError;
 pub use hypothesis::{

@@ -581,7 +581,8 @@ impl Evaluator {
         };
         let mut bands = BandCache::new(self.options.confidence);
         let options = &self.options;
-        if let Some(side) = self.state {
+        if let Some(mut side) = self.state {
+            side.settle();
             let per_run = side.per_run.totals(runs);
             options.state_report(
                 side.n,

@@ -303,16 +303,19 @@ impl Evaluator {
                 .iter()
                 .map(|bits| Words(bits.clone()))
                 .collect(),
-            state: self.state.map(|s| StateData {
-                n: s.n,
-                per_run: PerRun::from_runs(&s.per_run, first_run),
-                window_series: Series::from_pairs(
-                    s.window_series.iter().map(|(k, v)| (*k, v.as_slice())),
-                ),
-                means: s.means,
-                cred: s.cred,
-                squared: s.squared,
-                findings: s.findings.into(),
+            state: self.state.map(|mut s| {
+                s.settle();
+                StateData {
+                    n: s.n,
+                    per_run: PerRun::from_runs(&s.per_run, first_run),
+                    window_series: Series::from_pairs(
+                        s.window_series.iter().map(|(k, v)| (*k, v.as_slice())),
+                    ),
+                    means: s.means,
+                    cred: s.cred,
+                    squared: s.squared,
+                    findings: s.findings.into(),
+                }
             }),
             innovation: self.innovation.map(|s| InnovationData {
                 m: s.m,
