@@ -94,8 +94,7 @@ struct Factor {
 }
 
 /// Column-major matrices of the loop, allocated once per evaluation.
-struct Buffers<N: Dim, M: Dim> {
-    mean: Mean<N, M>,
+struct Buffers {
     factor: Factor,
     p: Vec<f64>,
     fp: Vec<f64>,
@@ -107,16 +106,9 @@ struct Buffers<N: Dim, M: Dim> {
     kr: Vec<f64>,
 }
 
-impl<N: Dim, M: Dim> Buffers<N, M> {
-    fn new(dn: N, dm: M) -> Self {
-        let (n, m) = (dn.get(), dm.get());
+impl Buffers {
+    fn new(n: usize, m: usize) -> Self {
         Self {
-            mean: Mean {
-                x: dn.vector(),
-                xt: dn.vector(),
-                nu: dm.vector(),
-                w: dm.vector(),
-            },
             factor: Factor {
                 gain: vec![0.0; n * m],
                 l: vec![0.0; m * m],
@@ -244,16 +236,16 @@ fn cholesky(s: &[f64], l: &mut [f64], m: usize) -> Option<()> {
     Some(())
 }
 
-/// Solves `L y = b` in place.
+/// Solves `L y = b` into `y`.
 #[inline(always)]
-fn forward(l: &[f64], b: &mut [f64], m: usize) {
-    let (l, b) = (&l[..m * m], &mut b[..m]);
+fn forward(l: &[f64], b: &[f64], y: &mut [f64], m: usize) {
+    let (l, b, y) = (&l[..m * m], &b[..m], &mut y[..m]);
     for i in 0..m {
         let mut v = b[i];
         for k in 0..i {
-            v -= l[i + k * m] * b[k];
+            v -= l[i + k * m] * y[k];
         }
-        b[i] = v / l[i + i * m];
+        y[i] = v / l[i + i * m];
     }
 }
 
@@ -336,8 +328,15 @@ fn counted_in<N: Dim, M: Dim>(
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
 ) -> Option<(f64, usize)> {
-    let mut b = Buffers::new(n, m);
+    // The mean apart from the matrices, so that the compiler can keep it in registers.
+    let mut mean = Mean::<N, M> {
+        x: n.vector(),
+        xt: n.vector(),
+        nu: m.vector(),
+        w: m.vector(),
+    };
     let (n, m) = (n.get(), m.get());
+    let mut b = Buffers::new(n, m);
     let f = problem.f().as_slice();
     let h = problem.h().as_slice();
     let (q, r) = (q.as_slice(), r.as_slice());
@@ -346,7 +345,7 @@ fn counted_in<N: Dim, M: Dim>(
     let mut steady_updates = 0;
     let predict_first = problem.start() == Start::PredictFirst;
     for run in problem.runs() {
-        b.mean.x.as_mut().copy_from_slice(problem.x0().as_slice());
+        mean.x.as_mut().copy_from_slice(problem.x0().as_slice());
         b.p.copy_from_slice(problem.p0().as_slice());
         symmetrize(&mut b.p, n);
         // Whether `prev_prior` holds the prior of the last update, one prediction before the
@@ -358,10 +357,10 @@ fn counted_in<N: Dim, M: Dim>(
             let predict = i > 0 || predict_first;
             if predict && let Some(st) = &steady {
                 // x = F x; the covariance is the steady prior.
-                predict_mean(&mut b.mean, f, n);
+                predict_mean(&mut mean, f, n);
                 if let Some(z) = z {
                     steady_updates += 1;
-                    total += mean_update(&mut b.mean, &st.factor, h, z.as_slice(), n, m);
+                    total += mean_update(&mut mean, &st.factor, h, z.as_slice(), n, m);
                 } else {
                     // Back to the full recursion from the steady prior.
                     b.p.copy_from_slice(&st.prior);
@@ -372,7 +371,7 @@ fn counted_in<N: Dim, M: Dim>(
                 continue;
             }
             if predict {
-                predict_mean(&mut b.mean, f, n);
+                predict_mean(&mut mean, f, n);
                 mul(f, &b.p, &mut b.fp, n, n, n);
                 mul_t(&b.fp, f, &mut b.p, n, n, n);
                 for (pij, qij) in b.p.iter_mut().zip(q) {
@@ -405,12 +404,12 @@ fn counted_in<N: Dim, M: Dim>(
             let fac = &mut b.factor;
             cholesky(&b.s, &mut fac.l, m)?;
             // K^T = S^-1 (P H^T)^T, row by row of P H^T.
-            let w = &mut b.mean.w.as_mut()[..m];
+            let (row_c, w) = (&mut mean.nu.as_mut()[..m], &mut mean.w.as_mut()[..m]);
             for row in 0..n {
-                for (c, wc) in w.iter_mut().enumerate() {
-                    *wc = b.pht[row + c * n];
+                for (c, v) in row_c.iter_mut().enumerate() {
+                    *v = b.pht[row + c * n];
                 }
-                forward(&fac.l, w, m);
+                forward(&fac.l, row_c, w, m);
                 backward(&fac.l, w, m);
                 for (c, wc) in w.iter().enumerate() {
                     fac.gain[row + c * n] = *wc;
@@ -419,7 +418,7 @@ fn counted_in<N: Dim, M: Dim>(
             let log_det: f64 = 2.0 * (0..m).map(|j| fac.l[j + j * m].ln()).sum::<f64>();
             fac.constant = m_ln_2pi + log_det;
             // The mean's update with this step's gain.
-            total += mean_update(&mut b.mean, &b.factor, h, z.as_slice(), n, m);
+            total += mean_update(&mut mean, &b.factor, h, z.as_slice(), n, m);
             // Joseph: (I - K H) P (I - K H)^T + K R K^T, symmetrised.
             let gain = &b.factor.gain;
             mul(gain, h, &mut b.ikh, n, m, n);
@@ -437,8 +436,7 @@ fn counted_in<N: Dim, M: Dim>(
                 *pij = a + k;
             }
             symmetrize(&mut b.p, n);
-            if !(b.p.iter().all(|v| v.is_finite())
-                && b.mean.x.as_ref().iter().all(|v| v.is_finite()))
+            if !(b.p.iter().all(|v| v.is_finite()) && mean.x.as_ref().iter().all(|v| v.is_finite()))
             {
                 return None;
             }
@@ -478,8 +476,7 @@ fn mean_update<N: Dim, M: Dim>(
     for (v, zi) in nu.iter_mut().zip(z) {
         *v = zi - *v;
     }
-    w.copy_from_slice(nu);
-    forward(&factor.l, w, m);
+    forward(&factor.l, nu, w, m);
     let quad: f64 = w.iter().map(|v| v * v).sum();
     for (&nc, kc) in nu.iter().zip(gain.chunks_exact(n)) {
         for (xi, ki) in x.iter_mut().zip(kc) {
