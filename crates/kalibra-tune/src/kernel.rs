@@ -328,7 +328,8 @@ fn counted_in<N: Dim, M: Dim>(
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
 ) -> Option<(f64, usize)> {
-    // The mean apart from the matrices, so that the compiler can keep it in registers.
+    // The mean apart from the matrices, so that the compiler keeps it in registers through the
+    // steady state instead of storing and reloading it at every step (`cargo xtask bench tune`).
     let mut mean = Mean::<N, M> {
         x: n.vector(),
         xt: n.vector(),
