@@ -9,6 +9,13 @@
 //! time-invariant, so this loop keeps every matrix in buffers allocated once per evaluation
 //! and writes the products out by hand (`cargo xtask bench tune` times both).
 //!
+//! # Sizes
+//! The loop is compiled for each small system (up to 6 states and 3 measurements), the size
+//! chosen once per evaluation: with every length a constant the short products unroll, their
+//! bounds checks fold away and the mean stays in registers, which is what the steady state's
+//! few dozen operations per step need (`cargo xtask bench tune`). Other sizes run the same
+//! code on run-time lengths.
+//!
 //! # The steady state
 //! The covariance recursion does not depend on the measurements. Once the prior covariance at
 //! an update equals the prior at the previous update (one prediction apart, no missing
@@ -54,7 +61,9 @@ const STEADY_ULPS: f64 = 8.0;
 const STEADY_HITS: usize = 3;
 
 /// Whether the `n x n` prior `p` equals `prev` to [`STEADY_ULPS`] entry by entry.
+#[inline(always)]
 fn settled(p: &[f64], prev: &[f64], n: usize) -> bool {
+    let (p, prev) = (&p[..n * n], &prev[..n * n]);
     let tol = STEADY_ULPS * f64::EPSILON;
     (0..n).all(|j| {
         (0..n).all(|i| {
@@ -66,76 +75,129 @@ fn settled(p: &[f64], prev: &[f64], n: usize) -> bool {
     })
 }
 
+/// The mean and the vectors of its update, held by value for `Fixed` sizes so that the
+/// steady state keeps them in registers.
+struct Mean<N: Dim, M: Dim> {
+    x: N::Vector,
+    xt: N::Vector,
+    nu: M::Vector,
+    w: M::Vector,
+}
+
+/// What an update needs of `S` besides the innovation: the gain, the factor of `S` and the
+/// constant `m ln(2 pi) + ln det S` of the log-density.
+#[derive(Clone)]
+struct Factor {
+    gain: Vec<f64>,
+    l: Vec<f64>,
+    constant: f64,
+}
+
 /// Column-major matrices of the loop, allocated once per evaluation.
 struct Buffers {
-    x: Vec<f64>,
-    xt: Vec<f64>,
+    factor: Factor,
     p: Vec<f64>,
     fp: Vec<f64>,
     prev_prior: Vec<f64>,
     pht: Vec<f64>,
     s: Vec<f64>,
-    l: Vec<f64>,
-    gain: Vec<f64>,
     ikh: Vec<f64>,
     ap: Vec<f64>,
     kr: Vec<f64>,
-    nu: Vec<f64>,
-    w: Vec<f64>,
 }
 
 impl Buffers {
     fn new(n: usize, m: usize) -> Self {
         Self {
-            x: vec![0.0; n],
-            xt: vec![0.0; n],
+            factor: Factor {
+                gain: vec![0.0; n * m],
+                l: vec![0.0; m * m],
+                constant: 0.0,
+            },
             p: vec![0.0; n * n],
             fp: vec![0.0; n * n],
             prev_prior: vec![0.0; n * n],
             pht: vec![0.0; n * m],
             s: vec![0.0; m * m],
-            l: vec![0.0; m * m],
-            gain: vec![0.0; n * m],
             ikh: vec![0.0; n * n],
             ap: vec![0.0; n * n],
             kr: vec![0.0; n * m],
-            nu: vec![0.0; m],
-            w: vec![0.0; m],
         }
     }
 }
 
-/// `c = a b` for column-major `a` (`r x k`) and `b` (`k x c`), summing over `k` in order.
-/// Written over exact chunks, so that the short loops carry no bounds checks.
-#[inline]
-fn mul(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize) {
-    for (cj, bj) in c.chunks_exact_mut(r).zip(b.chunks_exact(k)) {
-        cj.fill(0.0);
-        for (al, &blj) in a.chunks_exact(r).zip(bj) {
-            for (ci, &ai) in cj.iter_mut().zip(al) {
-                *ci += ai * blj;
+/// A size of the loop's matrices: a constant (`Fixed`), so that the compiler unrolls the
+/// products of a small system, or a `usize` known at run time.
+trait Dim: Copy {
+    /// A vector of this length.
+    type Vector: AsRef<[f64]> + AsMut<[f64]>;
+    fn get(self) -> usize;
+    fn vector(self) -> Self::Vector;
+}
+
+#[derive(Clone, Copy)]
+struct Fixed<const D: usize>;
+
+impl<const D: usize> Dim for Fixed<D> {
+    type Vector = [f64; D];
+    #[inline(always)]
+    fn get(self) -> usize {
+        D
+    }
+    fn vector(self) -> [f64; D] {
+        [0.0; D]
+    }
+}
+
+impl Dim for usize {
+    type Vector = Vec<f64>;
+    #[inline(always)]
+    fn get(self) -> usize {
+        self
+    }
+    fn vector(self) -> Vec<f64> {
+        vec![0.0; self]
+    }
+}
+
+// The helpers below are inlined into [`counted_in`] and cut their slices to the exact sizes
+// first, so that with `Fixed` sizes every length is a constant: the loops unroll and their
+// bounds checks fold away.
+
+/// `c = a b` for column-major `a` (`r x k`) and `b` (`k x cols`), summing over `k` in order.
+#[inline(always)]
+fn mul(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize, cols: usize) {
+    let (a, b, c) = (&a[..r * k], &b[..k * cols], &mut c[..r * cols]);
+    for j in 0..cols {
+        for i in 0..r {
+            let mut v = 0.0;
+            for l in 0..k {
+                v += a[i + l * r] * b[l + j * k];
             }
+            c[i + j * r] = v;
         }
     }
 }
 
 /// `c = a b^T` for column-major `a` (`r x k`) and `b` (`cols x k`), summing over `k` in order.
-#[inline]
-fn mul_t(a: &[f64], b: &[f64], c: &mut [f64], r: usize, cols: usize) {
-    for (j, cj) in c.chunks_exact_mut(r).enumerate() {
-        cj.fill(0.0);
-        for (al, bl) in a.chunks_exact(r).zip(b.chunks_exact(cols)) {
-            let bjl = bl[j];
-            for (ci, &ai) in cj.iter_mut().zip(al) {
-                *ci += ai * bjl;
+#[inline(always)]
+fn mul_t(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize, cols: usize) {
+    let (a, b, c) = (&a[..r * k], &b[..cols * k], &mut c[..r * cols]);
+    for j in 0..cols {
+        for i in 0..r {
+            let mut v = 0.0;
+            for l in 0..k {
+                v += a[i + l * r] * b[j + l * cols];
             }
+            c[i + j * r] = v;
         }
     }
 }
 
 /// `(m + m^T) / 2` in place.
-#[inline]
+#[inline(always)]
 fn symmetrize(m: &mut [f64], n: usize) {
+    let m = &mut m[..n * n];
     for j in 0..n {
         for i in (j + 1)..n {
             let mean = 0.5 * (m[i + j * n] + m[j + i * n]);
@@ -147,8 +209,9 @@ fn symmetrize(m: &mut [f64], n: usize) {
 
 /// The lower Cholesky factor of the symmetric `s` into `l`; `None` unless every pivot is
 /// finite and above [`PIVOT_FLOOR`] of its diagonal entry.
-#[inline]
+#[inline(always)]
 fn cholesky(s: &[f64], l: &mut [f64], m: usize) -> Option<()> {
+    let (s, l) = (&s[..m * m], &mut l[..m * m]);
     l.fill(0.0);
     for j in 0..m {
         let mut d = s[j + j * m];
@@ -173,21 +236,23 @@ fn cholesky(s: &[f64], l: &mut [f64], m: usize) -> Option<()> {
     Some(())
 }
 
-/// Solves `L y = b` in place.
-#[inline]
-fn forward(l: &[f64], b: &mut [f64], m: usize) {
+/// Solves `L y = b` into `y`.
+#[inline(always)]
+fn forward(l: &[f64], b: &[f64], y: &mut [f64], m: usize) {
+    let (l, b, y) = (&l[..m * m], &b[..m], &mut y[..m]);
     for i in 0..m {
         let mut v = b[i];
         for k in 0..i {
-            v -= l[i + k * m] * b[k];
+            v -= l[i + k * m] * y[k];
         }
-        b[i] = v / l[i + i * m];
+        y[i] = v / l[i + i * m];
     }
 }
 
 /// Solves `L^T y = b` in place.
-#[inline]
+#[inline(always)]
 fn backward(l: &[f64], b: &mut [f64], m: usize) {
+    let (l, b) = (&l[..m * m], &mut b[..m]);
     for i in (0..m).rev() {
         let mut v = b[i];
         for k in (i + 1)..m {
@@ -197,12 +262,10 @@ fn backward(l: &[f64], b: &mut [f64], m: usize) {
     }
 }
 
-/// The steady state: the gain, the factor of `S`, `ln det S` and the prior covariance that
-/// repeat at every update.
+/// The steady state: the factor of the update and the prior covariance that repeat at every
+/// update.
 struct Steady {
-    gain: Vec<f64>,
-    l: Vec<f64>,
-    log_det: f64,
+    factor: Factor,
     prior: Vec<f64>,
 }
 
@@ -227,16 +290,63 @@ pub(crate) fn counted(
     if n > MAX_STATE {
         return None;
     }
+    // The loop compiled for each small size, chosen once per evaluation; other sizes run the
+    // same code on run-time sizes.
+    macro_rules! sized {
+        ($(($a:literal, $b:literal)),* $(,)?) => {
+            match (n, m) {
+                $(($a, $b) => counted_in(Fixed::<$a>, Fixed::<$b>, problem, q, r),)*
+                _ => counted_in(n, m, problem, q, r),
+            }
+        };
+    }
+    sized!(
+        (1, 1),
+        (2, 1),
+        (2, 2),
+        (3, 1),
+        (3, 2),
+        (3, 3),
+        (4, 1),
+        (4, 2),
+        (4, 3),
+        (4, 4),
+        (5, 1),
+        (5, 2),
+        (5, 3),
+        (6, 1),
+        (6, 2),
+        (6, 3),
+    )
+}
+
+/// [`counted`] with `n` states and `m` measurements.
+fn counted_in<N: Dim, M: Dim>(
+    n: N,
+    m: M,
+    problem: &NoiseProblem,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+) -> Option<(f64, usize)> {
+    // The mean apart from the matrices, so that the compiler keeps it in registers through the
+    // steady state instead of storing and reloading it at every step (`cargo xtask bench tune`).
+    let mut mean = Mean::<N, M> {
+        x: n.vector(),
+        xt: n.vector(),
+        nu: m.vector(),
+        w: m.vector(),
+    };
+    let (n, m) = (n.get(), m.get());
+    let mut b = Buffers::new(n, m);
     let f = problem.f().as_slice();
     let h = problem.h().as_slice();
     let (q, r) = (q.as_slice(), r.as_slice());
-    let ln_2pi = std::f64::consts::TAU.ln();
-    let mut b = Buffers::new(n, m);
+    let m_ln_2pi = m as f64 * std::f64::consts::TAU.ln();
     let mut total = 0.0;
     let mut steady_updates = 0;
     let predict_first = problem.start() == Start::PredictFirst;
     for run in problem.runs() {
-        b.x.copy_from_slice(problem.x0().as_slice());
+        mean.x.as_mut().copy_from_slice(problem.x0().as_slice());
         b.p.copy_from_slice(problem.p0().as_slice());
         symmetrize(&mut b.p, n);
         // Whether `prev_prior` holds the prior of the last update, one prediction before the
@@ -246,28 +356,25 @@ pub(crate) fn counted(
         let mut steady: Option<Steady> = None;
         for (i, z) in run.iter().enumerate() {
             let predict = i > 0 || predict_first;
-            if predict && let Some(st) = steady.take() {
+            if predict && let Some(st) = &steady {
                 // x = F x; the covariance is the steady prior.
-                mul(f, &b.x, &mut b.xt, n, n);
-                std::mem::swap(&mut b.x, &mut b.xt);
+                predict_mean(&mut mean, f, n);
                 if let Some(z) = z {
                     steady_updates += 1;
-                    total +=
-                        mean_update(&mut b, &st.gain, &st.l, st.log_det, h, z.as_slice(), ln_2pi);
-                    steady = Some(st);
+                    total += mean_update(&mut mean, &st.factor, h, z.as_slice(), n, m);
                 } else {
                     // Back to the full recursion from the steady prior.
                     b.p.copy_from_slice(&st.prior);
+                    steady = None;
                     chained = false;
                     hits = 0;
                 }
                 continue;
             }
             if predict {
-                mul(f, &b.x, &mut b.xt, n, n);
-                std::mem::swap(&mut b.x, &mut b.xt);
-                mul(f, &b.p, &mut b.fp, n, n);
-                mul_t(&b.fp, f, &mut b.p, n, n);
+                predict_mean(&mut mean, f, n);
+                mul(f, &b.p, &mut b.fp, n, n, n);
+                mul_t(&b.fp, f, &mut b.p, n, n, n);
                 for (pij, qij) in b.p.iter_mut().zip(q) {
                     *pij += qij;
                 }
@@ -289,53 +396,54 @@ pub(crate) fn counted(
             b.prev_prior.copy_from_slice(&b.p);
             chained = true;
             // P H^T, S = H P H^T + R.
-            mul_t(&b.p, h, &mut b.pht, n, m);
-            mul(h, &b.pht, &mut b.s, m, n);
+            mul_t(&b.p, h, &mut b.pht, n, n, m);
+            mul(h, &b.pht, &mut b.s, m, n, m);
             for (sij, rij) in b.s.iter_mut().zip(r) {
                 *sij += rij;
             }
             symmetrize(&mut b.s, m);
-            cholesky(&b.s, &mut b.l, m)?;
+            let fac = &mut b.factor;
+            cholesky(&b.s, &mut fac.l, m)?;
             // K^T = S^-1 (P H^T)^T, row by row of P H^T.
+            let (row_c, w) = (&mut mean.nu.as_mut()[..m], &mut mean.w.as_mut()[..m]);
             for row in 0..n {
-                for c in 0..m {
-                    b.w[c] = b.pht[row + c * n];
+                for (c, v) in row_c.iter_mut().enumerate() {
+                    *v = b.pht[row + c * n];
                 }
-                forward(&b.l, &mut b.w, m);
-                backward(&b.l, &mut b.w, m);
-                for c in 0..m {
-                    b.gain[row + c * n] = b.w[c];
+                forward(&fac.l, row_c, w, m);
+                backward(&fac.l, w, m);
+                for (c, wc) in w.iter().enumerate() {
+                    fac.gain[row + c * n] = *wc;
                 }
             }
-            let log_det: f64 = 2.0 * (0..m).map(|j| b.l[j + j * m].ln()).sum::<f64>();
+            let log_det: f64 = 2.0 * (0..m).map(|j| fac.l[j + j * m].ln()).sum::<f64>();
+            fac.constant = m_ln_2pi + log_det;
             // The mean's update with this step's gain.
-            let (gain, l) = (std::mem::take(&mut b.gain), std::mem::take(&mut b.l));
-            total += mean_update(&mut b, &gain, &l, log_det, h, z.as_slice(), ln_2pi);
-            (b.gain, b.l) = (gain, l);
+            total += mean_update(&mut mean, &b.factor, h, z.as_slice(), n, m);
             // Joseph: (I - K H) P (I - K H)^T + K R K^T, symmetrised.
-            mul(&b.gain, h, &mut b.ikh, n, m);
+            let gain = &b.factor.gain;
+            mul(gain, h, &mut b.ikh, n, m, n);
             for v in b.ikh.iter_mut() {
                 *v = -*v;
             }
             for d in 0..n {
                 b.ikh[d + d * n] += 1.0;
             }
-            mul(&b.ikh, &b.p, &mut b.ap, n, n);
-            mul_t(&b.ap, &b.ikh, &mut b.fp, n, n);
-            mul(&b.gain, r, &mut b.kr, n, m);
-            mul_t(&b.kr, &b.gain, &mut b.ap, n, n);
+            mul(&b.ikh, &b.p, &mut b.ap, n, n, n);
+            mul_t(&b.ap, &b.ikh, &mut b.fp, n, n, n);
+            mul(gain, r, &mut b.kr, n, m, m);
+            mul_t(&b.kr, gain, &mut b.ap, n, m, n);
             for (pij, (a, k)) in b.p.iter_mut().zip(b.fp.iter().zip(&b.ap)) {
                 *pij = a + k;
             }
             symmetrize(&mut b.p, n);
-            if !(b.p.iter().all(|v| v.is_finite()) && b.x.iter().all(|v| v.is_finite())) {
+            if !(b.p.iter().all(|v| v.is_finite()) && mean.x.as_ref().iter().all(|v| v.is_finite()))
+            {
                 return None;
             }
             if converged {
                 steady = Some(Steady {
-                    gain: b.gain.clone(),
-                    l: b.l.clone(),
-                    log_det,
+                    factor: b.factor.clone(),
                     prior: b.prev_prior.clone(),
                 });
             }
@@ -344,33 +452,39 @@ pub(crate) fn counted(
     total.is_finite().then_some((total, steady_updates))
 }
 
-/// `x += K nu` with `nu = z - H x`, the gain `K` and the factor `L` of `S`; returns the
-/// update's log-density.
-#[inline]
-fn mean_update(
-    b: &mut Buffers,
-    gain: &[f64],
-    l: &[f64],
-    log_det: f64,
+/// `x = F x`.
+#[inline(always)]
+fn predict_mean<N: Dim, M: Dim>(mean: &mut Mean<N, M>, f: &[f64], n: usize) {
+    mul(f, mean.x.as_ref(), mean.xt.as_mut(), n, n, 1);
+    std::mem::swap(&mut mean.x, &mut mean.xt);
+}
+
+/// `x += K nu` with `nu = z - H x` and the update's factor; returns the update's
+/// log-density.
+#[inline(always)]
+fn mean_update<N: Dim, M: Dim>(
+    mean: &mut Mean<N, M>,
+    factor: &Factor,
     h: &[f64],
     z: &[f64],
-    ln_2pi: f64,
+    n: usize,
+    m: usize,
 ) -> f64 {
-    let (n, m) = (b.x.len(), b.nu.len());
-    mul(h, &b.x, &mut b.nu, m, n);
-    for (v, zi) in b.nu.iter_mut().zip(z) {
+    let (z, gain) = (&z[..m], &factor.gain[..n * m]);
+    let (x, nu, w) = (mean.x.as_mut(), mean.nu.as_mut(), mean.w.as_mut());
+    let (x, nu, w) = (&mut x[..n], &mut nu[..m], &mut w[..m]);
+    mul(h, x, nu, m, n, 1);
+    for (v, zi) in nu.iter_mut().zip(z) {
         *v = zi - *v;
     }
-    b.w.copy_from_slice(&b.nu);
-    forward(l, &mut b.w, m);
-    let quad: f64 = b.w.iter().map(|v| v * v).sum();
-    for c in 0..m {
-        let nc = b.nu[c];
-        for (xi, ki) in b.x.iter_mut().zip(&gain[c * n..(c + 1) * n]) {
+    forward(&factor.l, nu, w, m);
+    let quad: f64 = w.iter().map(|v| v * v).sum();
+    for (&nc, kc) in nu.iter().zip(gain.chunks_exact(n)) {
+        for (xi, ki) in x.iter_mut().zip(kc) {
             *xi += ki * nc;
         }
     }
-    -0.5 * (m as f64 * ln_2pi + log_det + quad)
+    -0.5 * (factor.constant + quad)
 }
 
 #[cfg(test)]
@@ -426,6 +540,9 @@ mod tests {
         let dynamics = LinearGaussian::new(problem.f().clone(), m.q.clone()).unwrap();
         let sensor = LinearObservation::new(problem.h().clone(), m.r.clone()).unwrap();
         let fast = counted(problem, &m.q, &m.r).unwrap();
+        // The same code on run-time sizes does the same operations in the same order.
+        let (n, k) = (problem.f().nrows(), problem.h().nrows());
+        assert_eq!(counted_in(n, k, problem, &m.q, &m.r), Some(fast));
         (
             fast,
             filter_log_likelihood(problem, &dynamics, &sensor).unwrap(),
