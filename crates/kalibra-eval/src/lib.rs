@@ -107,4 +107,5 @@ pub use report::{
 };
 pub use stream::{
     Cell, Contents, Evaluator, EvaluatorState, MAX_RUNS, MAX_STEPS, MatrixCell, ModelCell,
+    PreparedBatch,
 };

@@ -24,7 +24,9 @@ use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 use std::sync::mpsc;
 
-use kalibra_eval::{Cell, Contents, EvalError, Evaluation, MatrixCell, ModelCell, Report};
+use kalibra_eval::{
+    Cell, Contents, EvalError, Evaluation, MatrixCell, ModelCell, PreparedBatch, Report,
+};
 
 use crate::error::Error;
 use crate::raw::{
@@ -491,13 +493,20 @@ fn evaluate_from<R: Read + Seek + Send>(
     }
     let evaluate_error = |e: EvalError| Error::evaluate(file, e);
     let mut evaluator = evaluation.evaluator(contents).map_err(evaluate_error)?;
+    // The pure part of each batch (checks and factorisations) is computed on the reader's
+    // thread by a second evaluator of the same contents, while this thread adds the sums of
+    // the batch before: the two halves overlap.
+    let preparer = evaluation.evaluator(contents).map_err(evaluate_error)?;
 
     // Every array's values fit in its entry (`check_fits`) and the evaluation refused cells of
     // no values, so this product is at most the archive's size.
     let total = runs.saturating_mul(steps);
+    let (present, model) = (&present, model.as_ref());
     let fed: Result<(), Error> = std::thread::scope(|scope| {
-        // The reader: batches of cells, run-major, while this thread evaluates the last.
-        let (tx, rx) = mpsc::sync_channel::<Result<Batch, (&'static str, String)>>(4);
+        // The reader: batches of cells, run-major, each with its pure part, while this thread
+        // adds the sums of the last.
+        let (tx, rx) =
+            mpsc::sync_channel::<Result<(Batch, PreparedBatch), (&'static str, String)>>(4);
         // The values of evaluated batches come back to be filled again: a fresh allocation
         // per batch and array was paid again in page faults (`cargo xtask bench eval`, NPZ).
         let (back_tx, back_rx) = mpsc::channel::<Vec<Vec<f64>>>();
@@ -514,14 +523,13 @@ fn evaluate_from<R: Read + Seek + Send>(
                         return;
                     }
                 }
-                if tx
-                    .send(Ok(Batch {
-                        first,
-                        cells,
-                        values,
-                    }))
-                    .is_err()
-                {
+                let batch = Batch {
+                    first,
+                    cells,
+                    values,
+                };
+                let prepared = preparer.prepare_batch(&cells_of(&batch, present, model, steps));
+                if tx.send(Ok((batch, prepared))).is_err() {
                     return;
                 }
                 first += cells;
@@ -534,38 +542,11 @@ fn evaluate_from<R: Read + Seek + Send>(
             }
         });
         while let Ok(batch) = rx.recv() {
-            let batch =
+            let (batch, prepared) =
                 batch.map_err(|(array, message)| Error::array(array, message).in_file(file))?;
-            let cells: Vec<_> = (0..batch.cells)
-                .map(|i| {
-                    let (run, step) = ((batch.first + i) / steps, (batch.first + i) % steps);
-                    let mut cell = Cell::default();
-                    for (a, &array) in present.iter().enumerate() {
-                        let width = batch.values[a].len() / batch.cells;
-                        let v = &batch.values[a][i * width..(i + 1) * width];
-                        // A cell of all NaN was not logged (numpy has no null).
-                        if v.iter().all(|x| x.is_nan()) {
-                            continue;
-                        }
-                        match array {
-                            "truth" => cell.truth = Some(v),
-                            "estimate" => cell.estimate = Some(v),
-                            "innovation" => cell.innovation = Some(v),
-                            "covariance" => cell.covariance = Some(MatrixCell::Full(v)),
-                            _ => cell.innovation_cov = Some(MatrixCell::Full(v)),
-                        }
-                    }
-                    cell.model = model.as_ref().map(|[f, h, q, r]| ModelCell {
-                        f: f.cell(run, step, steps),
-                        h: h.cell(run, step, steps),
-                        q: q.cell(run, step, steps),
-                        r: r.cell(run, step, steps),
-                    });
-                    (run, step, cell)
-                })
-                .collect();
+            let cells = cells_of(&batch, present, model, steps);
             evaluator
-                .push_batch(&cells)
+                .push_prepared(&cells, prepared)
                 .map_err(|(_, source)| Error::Refused {
                     file: Some(file.to_path_buf()),
                     source,
@@ -584,6 +565,44 @@ fn evaluate_from<R: Read + Seek + Send>(
         },
         other => evaluate_error(other),
     })
+}
+
+/// The cells of `batch` (of a log of `steps` steps whose per-cell arrays are `present`, in
+/// the batch's order, and whose model is `model`), each with its run and step.
+fn cells_of<'a>(
+    batch: &'a Batch,
+    present: &[&str],
+    model: Option<&'a [ModelArray; 4]>,
+    steps: usize,
+) -> Vec<(usize, usize, Cell<'a>)> {
+    (0..batch.cells)
+        .map(|i| {
+            let (run, step) = ((batch.first + i) / steps, (batch.first + i) % steps);
+            let mut cell = Cell::default();
+            for (a, &array) in present.iter().enumerate() {
+                let width = batch.values[a].len() / batch.cells;
+                let v = &batch.values[a][i * width..(i + 1) * width];
+                // A cell of all NaN was not logged (numpy has no null).
+                if v.iter().all(|x| x.is_nan()) {
+                    continue;
+                }
+                match array {
+                    "truth" => cell.truth = Some(v),
+                    "estimate" => cell.estimate = Some(v),
+                    "innovation" => cell.innovation = Some(v),
+                    "covariance" => cell.covariance = Some(MatrixCell::Full(v)),
+                    _ => cell.innovation_cov = Some(MatrixCell::Full(v)),
+                }
+            }
+            cell.model = model.map(|[f, h, q, r]| ModelCell {
+                f: f.cell(run, step, steps),
+                h: h.cell(run, step, steps),
+                q: q.cell(run, step, steps),
+                r: r.cell(run, step, steps),
+            });
+            (run, step, cell)
+        })
+        .collect()
 }
 
 /// The model arrays `F`, `H`, `Q`, `R`, all or none, with their shapes checked.

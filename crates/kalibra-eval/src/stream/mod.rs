@@ -134,6 +134,15 @@ struct Prepared {
     model: bool,
 }
 
+/// The pure part of a batch of cells, computed by [`Evaluator::prepare_batch`] (on any
+/// thread) and fed with the cells by [`Evaluator::push_prepared`].
+pub struct PreparedBatch {
+    contents: Contents,
+    /// Each cell's run and step.
+    at: Vec<(usize, usize)>,
+    prepared: Vec<Result<Prepared, EvalError>>,
+}
+
 /// The factorisation storage of one thread.
 pub(crate) struct Scratch {
     p: Factor,
@@ -198,24 +207,79 @@ impl Evaluator {
         cells: &[(usize, usize, Cell<'_>)],
     ) -> Result<(), (usize, EvalError)> {
         let this = &*self;
-        let prepare = |chunk: &[(usize, usize, Cell<'_>)]| -> Vec<Result<Prepared, EvalError>> {
-            let mut scratch = this.scratch();
-            chunk
-                .iter()
-                .map(|(run, step, cell)| this.prepare((*run, *step), cell, &mut scratch))
-                .collect()
-        };
-        let prepared: Vec<Result<Prepared, EvalError>> = if cells.len() < PARALLEL_FROM {
-            prepare(cells)
+        let prepared = if cells.len() < PARALLEL_FROM {
+            this.prepare_serial(cells)
         } else {
             cells
                 .par_chunks(PARALLEL_FROM / 2)
-                .map(prepare)
+                .map(|chunk| this.prepare_serial(chunk))
                 .collect::<Vec<_>>()
                 .into_iter()
                 .flatten()
                 .collect()
         };
+        self.accept_all(cells, prepared)
+    }
+
+    /// The pure part of [`Evaluator::push_batch`] on `cells` (every check, and the
+    /// factorisations), on the calling thread, changing nothing: an evaluator of the same
+    /// [`Contents`] computes it on a reader's thread while this one adds the previous
+    /// batch's sums, and [`Evaluator::push_prepared`] then feeds the cells with it. The two
+    /// halves overlap where `push_batch` leaves every core but one idle while the sums are
+    /// added (`cargo xtask bench eval`, NPZ).
+    pub fn prepare_batch(&self, cells: &[(usize, usize, Cell<'_>)]) -> PreparedBatch {
+        PreparedBatch {
+            contents: self.contents,
+            at: cells.iter().map(|(run, step, _)| (*run, *step)).collect(),
+            prepared: self.prepare_serial(cells),
+        }
+    }
+
+    /// [`Evaluator::push_batch`] of `cells` with their pure part computed before by
+    /// [`Evaluator::prepare_batch`] on the same cells (by this evaluator or another of the
+    /// same [`Contents`]): the same outcome and the same report as `push_batch` (the test
+    /// `prepared_batches_give_the_same_report`). A `prepared` of other contents, or of other
+    /// runs and steps, is set aside and the cells are prepared here.
+    ///
+    /// # Errors
+    /// As [`Evaluator::push_batch`].
+    pub fn push_prepared(
+        &mut self,
+        cells: &[(usize, usize, Cell<'_>)],
+        prepared: PreparedBatch,
+    ) -> Result<(), (usize, EvalError)> {
+        let matches = prepared.contents == self.contents
+            && prepared.at.len() == cells.len()
+            && prepared
+                .at
+                .iter()
+                .zip(cells)
+                .all(|(at, (run, step, _))| *at == (*run, *step));
+        if !matches {
+            return self.push_batch(cells);
+        }
+        self.accept_all(cells, prepared.prepared)
+    }
+
+    /// [`Evaluator::prepare`] of each cell in turn, with one scratch.
+    fn prepare_serial(
+        &self,
+        cells: &[(usize, usize, Cell<'_>)],
+    ) -> Vec<Result<Prepared, EvalError>> {
+        let mut scratch = self.scratch();
+        cells
+            .iter()
+            .map(|(run, step, cell)| self.prepare((*run, *step), cell, &mut scratch))
+            .collect()
+    }
+
+    /// The stateful part of [`Evaluator::push_batch`]: the `J1`/`J2` steps, then each cell's
+    /// sums in order, up to the first failing cell.
+    fn accept_all(
+        &mut self,
+        cells: &[(usize, usize, Cell<'_>)],
+        prepared: Vec<Result<Prepared, EvalError>>,
+    ) -> Result<(), (usize, EvalError)> {
         let mut computed = self.j_pass(cells, &prepared).into_iter();
         for (i, ((run, step, cell), p)) in cells.iter().zip(prepared).enumerate() {
             let p = p.map_err(|e| (i, e))?;

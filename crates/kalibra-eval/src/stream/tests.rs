@@ -1,5 +1,6 @@
 //! The bit-for-bit checks of the fixed-size paths against the `Dyn` ones and the metrics
-//! crate: [`Factor`](super::factor::Factor)'s NEES and NIS, and the `J1`/`J2` step.
+//! crate: [`Factor`](super::factor::Factor)'s NEES and NIS, and the `J1`/`J2` step; and of a
+//! batch prepared apart ([`super::Evaluator::prepare_batch`]) against `push_batch`.
 
 use kalibra_linalg::{DMatrix, DVector, LinalgError};
 use kalibra_metrics::{MetricsError, j_step};
@@ -119,4 +120,95 @@ proptest! {
             (x, y) => prop_assert!(false, "fixed {x:?}, dyn {y:?}"),
         }
     }
+}
+
+/// Cells fed as prepared batches, prepared by a second evaluator, give `push_batch`'s report
+/// to the bit, and its error with the same index; a batch prepared for other cells is set
+/// aside.
+#[test]
+fn prepared_batches_give_the_same_report() {
+    use super::cell::{Cell, Contents};
+    use crate::Evaluation;
+    let contents = Contents {
+        truth: Some(2),
+        estimate: Some(2),
+        covariance: Some(2),
+        innovation: Some(1),
+        innovation_cov: Some(1),
+        model: None,
+    };
+    let (runs, steps) = (3, 700);
+    // Truth, estimate, covariance, innovation and its covariance of each cell.
+    type Values = (Vec<f64>, Vec<f64>, Vec<f64>, [f64; 1], [f64; 1]);
+    let values: Vec<Values> = (0..runs * steps)
+        .map(|i| {
+            let t = i as f64 * 0.37;
+            // Every 97th covariance is indefinite: a finding, not an error.
+            let d = if i % 97 == 5 {
+                -1.0
+            } else {
+                1.0 + t.sin().abs()
+            };
+            (
+                vec![t.cos(), t.sin()],
+                vec![
+                    t.cos() + 0.1 * (3.0 * t).sin(),
+                    t.sin() - 0.2 * (5.0 * t).cos(),
+                ],
+                vec![d, 0.1, 0.1, 2.0],
+                [(7.0 * t).sin()],
+                [1.5],
+            )
+        })
+        .collect();
+    let cells: Vec<(usize, usize, Cell<'_>)> = values
+        .iter()
+        .enumerate()
+        .map(|(i, (x, xhat, p, nu, s))| {
+            let cell = Cell {
+                truth: Some(x),
+                estimate: Some(xhat),
+                covariance: Some(MatrixCell::Full(p)),
+                innovation: Some(nu),
+                innovation_cov: Some(MatrixCell::Full(s)),
+                model: None,
+            };
+            (i / steps, i % steps, cell)
+        })
+        .collect();
+    let evaluation = Evaluation::new().window(10).unwrap();
+    let report = |prepared: bool, cells: &[(usize, usize, Cell<'_>)]| {
+        let mut evaluator = evaluation.evaluator(contents).unwrap();
+        let preparer = evaluation.evaluator(contents).unwrap();
+        for batch in cells.chunks(600) {
+            let fed = if prepared {
+                evaluator.push_prepared(batch, preparer.prepare_batch(batch))
+            } else {
+                evaluator.push_batch(batch)
+            };
+            if let Err((i, e)) = fed {
+                return Err((i, e.to_string()));
+            }
+        }
+        Ok(serde_json::to_string(&evaluator.finish(None).unwrap()).unwrap())
+    };
+    let batched = report(false, &cells).unwrap();
+    assert_eq!(report(true, &cells).unwrap(), batched);
+    // A cell of the wrong length: the same error at the same index.
+    let mut bad = cells.clone();
+    bad[1234].2.truth = Some(&values[0].3);
+    let err = report(false, &bad).unwrap_err();
+    assert_eq!(report(true, &bad).unwrap_err(), err);
+    // A batch prepared for other cells is not used.
+    let mut evaluator = evaluation.evaluator(contents).unwrap();
+    evaluator
+        .push_prepared(&cells[..600], evaluator.prepare_batch(&cells[600..1200]))
+        .unwrap();
+    for batch in cells[600..].chunks(600) {
+        evaluator.push_batch(batch).unwrap();
+    }
+    assert_eq!(
+        serde_json::to_string(&evaluator.finish(None).unwrap()).unwrap(),
+        batched
+    );
 }
