@@ -29,10 +29,10 @@ use kalibra::linalg::{
 };
 use kalibra::linalg::{Matrix4, Vector3, Vector4};
 use kalibra::metrics::{
-    ChiSquareBand, Credibility, SquaredErrors, StepMean, batch_means, instantaneous_errors, itse,
-    j_step, ks_asymptotic_p, ks_two_sample, ks_two_sample_exact_p, median, nees, nis,
-    normalized_innovation, paired_t_test, rmse, rmse_per_state, runs_test, sliding_window,
-    time_average, whiteness,
+    ChiSquareBand, Credibility, CredibilityRows, SquaredErrors, StepMean, batch_means,
+    instantaneous_errors, itse, j_step, ks_asymptotic_p, ks_two_sample, ks_two_sample_exact_p,
+    median, nees, nis, normalized_innovation, paired_t_test, rmse, rmse_per_state, runs_test,
+    sliding_window, time_average, whiteness,
 };
 use kalibra::models::{
     AccelAxis, AngularTarget, Ballistic, BallisticParams, BearingReference, ConvertedPosition,
@@ -370,6 +370,10 @@ proptest! {
         let mut cred = Credibility::new(1, 2);
         let _ = cred.push(0, &e, &m2);
         let _ = cred.push_nees(0, e.as_slice(), 2.0);
+        let mut rows = CredibilityRows::new();
+        if rows.push_nees(&cred, 0, e.as_slice(), 2.0).is_ok() {
+            cred.settle(&mut rows);
+        }
         if let Ok(s) = cred.step_summary(0) {
             // The NCI is NaN, as documented, when every run was skipped (a singular MSE).
             let nci_defined = s.nci_skipped < s.runs;
@@ -1136,6 +1140,7 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("ChiSquareBand::contains", Cover::Driven),
     ("Credibility::push", Cover::Driven),
     ("Credibility::push_nees", Cover::Driven),
+    ("CredibilityRows::push_nees", Cover::Driven),
     ("median", Cover::Driven),
     ("batch_means", Cover::Driven),
     ("BatchMeans::push", Cover::Driven),

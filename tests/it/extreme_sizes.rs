@@ -30,8 +30,9 @@ use kalibra::linalg::{
     DMatrix, DVector, Dyn, KernelPolicy, Matrix1, Matrix2, SVector, Vector1, Vector2, check_dim,
 };
 use kalibra::metrics::{
-    BatchMeans, ChiSquareBand, Credibility, JHorizon, SquaredErrors, StepMean, batch_means,
-    consistent_median_nees, ks_asymptotic_p, ks_two_sample_exact_p, sliding_window, whiteness,
+    BatchMeans, ChiSquareBand, Credibility, CredibilityRows, JHorizon, SquaredErrors, StepMean,
+    batch_means, consistent_median_nees, ks_asymptotic_p, ks_two_sample_exact_p, sliding_window,
+    whiteness,
 };
 use kalibra::models::{
     AccelAxis, Bearing, BearingReference, Kinematic, Order, Simulator, Stationary, Target3dParams,
@@ -308,6 +309,28 @@ fn calls() -> Vec<(&'static str, Option<&'static str>, Call)> {
             }),
         ),
         (
+            "Evaluator::prepare_batch",
+            None,
+            c(move |a, b| {
+                let log = small_log();
+                let mut e = Evaluation::new().evaluator(log.contents()).unwrap();
+                let cells = [(a, b, log.cell(0, 0))];
+                let prepared = e.prepare_batch(&cells);
+                text(e.push_prepared(&cells, prepared))
+            }),
+        ),
+        (
+            "Evaluator::push_prepared",
+            None,
+            c(move |a, b| {
+                let log = small_log();
+                let mut e = Evaluation::new().evaluator(log.contents()).unwrap();
+                // Prepared for other cells: set aside, and the cells prepared again.
+                let prepared = e.prepare_batch(&[(0, 0, log.cell(0, 0))]);
+                text(e.push_prepared(&[(a, b, log.cell(0, 0))], prepared))
+            }),
+        ),
+        (
             "Tuning::threads",
             None,
             c(|a, _| text(Tuning::new().threads(a))),
@@ -529,6 +552,14 @@ fn calls() -> Vec<(&'static str, Option<&'static str>, Call)> {
             "Credibility::push_nees",
             None,
             c(|a, _| text(Credibility::new(3, 2).push_nees(a, &[1.0, 0.0], 1.0))),
+        ),
+        (
+            "CredibilityRows::push_nees",
+            None,
+            c(|a, _| {
+                let cred = Credibility::new(3, 2);
+                text(CredibilityRows::new().push_nees(&cred, a, &[1.0, 0.0], 1.0))
+            }),
         ),
         (
             "Credibility::step_summary",
@@ -1048,6 +1079,8 @@ pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
     ("FilterLog::cell", Cover::Driven),
     ("Evaluator::push", Cover::Driven),
     ("Evaluator::push_batch", Cover::Driven),
+    ("Evaluator::prepare_batch", Cover::Driven),
+    ("Evaluator::push_prepared", Cover::Driven),
     ("Tuning::threads", Cover::Driven),
     ("Tuning::position", Cover::Driven),
     // kalibra-filters
@@ -1144,6 +1177,7 @@ pub const SIZE_FUNCTIONS: &[(&str, Cover)] = &[
     ("Credibility::runs", Cover::Driven),
     ("Credibility::push", Cover::Driven),
     ("Credibility::push_nees", Cover::Driven),
+    ("CredibilityRows::push_nees", Cover::Driven),
     ("Credibility::step_summary", Cover::Driven),
     ("Credibility::step_nci", Cover::Driven),
     ("Credibility::reserve_runs", Cover::Driven),
