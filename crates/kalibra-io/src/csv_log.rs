@@ -385,6 +385,7 @@ impl Plan<'_> {
         while start < block.len() {
             let end = memchr::memchr(b'\n', &block[start..]).map_or(block.len(), |e| start + e);
             let line = &block[start..end];
+            let line_start = start;
             start = end + 1;
             if line.is_empty() {
                 return None;
@@ -405,10 +406,10 @@ impl Plan<'_> {
                 match *slot {
                     Slot::Run => (run, i) = plain_index(line, i)?,
                     Slot::Step => (step, i) = plain_index(line, i)?,
-                    Slot::Time => (time, i) = plain_number(line, i)?,
+                    Slot::Time => (time, i) = number_at(block, line_start, line, i)?,
                     Slot::Value(k, array) => {
                         let value;
-                        (value, i) = plain_number(line, i)?;
+                        (value, i) = number_at(block, line_start, line, i)?;
                         match value {
                             Some(v) => {
                                 parsed.values[at + k] = v;
@@ -503,6 +504,22 @@ fn plain_number(line: &[u8], i: usize) -> Option<(Option<f64>, usize)> {
             value.is_finite().then_some((Some(value), i + used))
         }
         Some(_) => None,
+    }
+}
+
+/// [`plain_number`] at `i` of `line`, which starts at `line_start` of `block`: the common
+/// forms read by [`crate::decimal::quick_number`] (the same value and end), the others by
+/// fast-float2. The quick reading never passes the line's end (a newline is no digit).
+#[inline(always)]
+fn number_at(
+    block: &[u8],
+    line_start: usize,
+    line: &[u8],
+    i: usize,
+) -> Option<(Option<f64>, usize)> {
+    match crate::decimal::quick_number(block, line_start + i) {
+        Some((value, end)) => Some((Some(value), end - line_start)),
+        None => plain_number(line, i),
     }
 }
 
