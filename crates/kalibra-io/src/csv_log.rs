@@ -223,6 +223,10 @@ struct Plan<'f> {
     time_col: Option<usize>,
     /// Per array, where its values start in a parsed row (`None` if not in the file).
     offsets: [Option<usize>; ARRAYS.len()],
+    /// Per array, the range of its values in a parsed row and whether it is a diagonal
+    /// matrix: [`Plan::cell`] runs once per row on the evaluating thread, so it looks up
+    /// nothing in `layouts` (callgrind, `kalibra eval` on the bench's CSV log).
+    spans: [Option<(std::ops::Range<usize>, bool)>; ARRAYS.len()],
     /// Values per parsed row: every array's cell side by side.
     width: usize,
     /// The most rows the file can hold, when its size is known: a row has at least one byte
@@ -447,12 +451,11 @@ impl Plan<'_> {
     /// The cell of a parsed row whose values are `values`.
     fn cell<'a>(&self, row: &RowMeta, values: &'a [f64]) -> Cell<'a> {
         let slice = |a: usize| -> Option<&'a [f64]> {
-            let start = self.offsets[a]?;
-            let layout = self.layouts.iter().find(|l| l.array == a)?;
-            row.logged[a].then(|| &values[start..start + layout.columns.len()])
+            let (range, _) = self.spans[a].as_ref()?;
+            row.logged[a].then(|| &values[range.clone()])
         };
         let matrix = |a: usize| {
-            let diagonal = self.layouts.iter().any(|l| l.array == a && l.diagonal);
+            let diagonal = self.spans[a].as_ref().is_some_and(|(_, d)| *d);
             slice(a).map(|v| {
                 if diagonal {
                     MatrixCell::Diagonal(v)
@@ -541,8 +544,9 @@ fn plain_index(line: &[u8], i: usize) -> Option<(usize, usize)> {
 /// Where `buf` (starting at a record) can be cut after a whole record: just after its last
 /// newline outside quotes, `None` if it has none.
 fn last_record_end(buf: &[u8]) -> Option<usize> {
-    if !buf.contains(&b'"') {
-        return buf.iter().rposition(|&b| b == b'\n').map(|i| i + 1);
+    // The memchr crate's search: `<[u8]>::contains` was a slower scan (callgrind).
+    if memchr::memchr(b'"', buf).is_none() {
+        return memchr::memrchr(b'\n', buf).map(|i| i + 1);
     }
     // A quoted field may hold a newline; quotes toggle (an escaped "" toggles twice).
     let mut quoted = false;
@@ -558,25 +562,17 @@ fn last_record_end(buf: &[u8]) -> Option<usize> {
 }
 
 /// Reads `source` until `buf` holds at least `want` bytes or the end; returns whether the end
-/// was reached.
+/// was reached. `read_to_end` reads into the spare capacity without zeroing it first (the
+/// blocks come back to be filled again, so zeroing them was pure cost: callgrind, `kalibra
+/// eval` on the bench's CSV log).
 fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Result<bool> {
-    while buf.len() < want {
-        let start = buf.len();
-        buf.resize(want, 0);
-        match source.read(&mut buf[start..]) {
-            Ok(0) => {
-                buf.truncate(start);
-                return Ok(true);
-            }
-            Ok(got) => buf.truncate(start + got),
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => buf.truncate(start),
-            Err(e) => {
-                buf.truncate(start);
-                return Err(e);
-            }
-        }
+    let missing = want.saturating_sub(buf.len());
+    if missing == 0 {
+        return Ok(false);
     }
-    Ok(false)
+    buf.reserve(missing);
+    source.by_ref().take(missing as u64).read_to_end(buf)?;
+    Ok(buf.len() < want)
 }
 
 /// The plan of a CSV log whose header is `header` (the file's first record) and whose size is
@@ -594,6 +590,7 @@ fn plan<'f>(
     };
     let mut contents = Contents::default();
     let mut offsets = [None; ARRAYS.len()];
+    let mut spans = [const { None }; ARRAYS.len()];
     let mut width = 0;
     for l in &layouts {
         *match ARRAYS[l.array] {
@@ -604,6 +601,7 @@ fn plan<'f>(
             _ => &mut contents.innovation_cov,
         } = Some(l.dim);
         offsets[l.array] = Some(width);
+        spans[l.array] = Some((width..width + l.columns.len(), l.diagonal));
         width += l.columns.len();
     }
     let plan = Plan {
@@ -614,6 +612,7 @@ fn plan<'f>(
         step_col,
         time_col: find(Column::Time),
         offsets,
+        spans,
         width,
         max_rows: size.map(|s| s / (rows.header.len().max(1) as u64)),
     };
