@@ -145,16 +145,17 @@ pub(crate) fn quick_number(block: &[u8], i: usize) -> Option<(f64, usize)> {
             x = word(window, at);
             n = leading_digits(x);
         }
-        if n == 0 {
+        if n > 0 {
+            if whole + fraction + n > MAX_DIGITS {
+                return None;
+            }
+            mantissa = mantissa * POW10_U64[n as usize] + first_digits(x, n);
+            at += n as usize;
+            fraction += n;
+        } else if fraction == 0 {
             // `5.`, which fast-float2 reads too, but rare: left to it.
             return None;
         }
-        if whole + fraction + n > MAX_DIGITS {
-            return None;
-        }
-        mantissa = mantissa * POW10_U64[n as usize] + first_digits(x, n);
-        at += n as usize;
-        fraction += n;
     }
     if window[at] | 0x20 == b'e' {
         return None;
