@@ -363,6 +363,12 @@ impl Plan<'_> {
         if memchr::memchr2(b'"', b'\r', block).is_some() {
             return None;
         }
+        self.parse_plain_rows(block, first_row, recycled)
+    }
+
+    /// [`Plan::parse_plain`] of a block known to hold no quote and no `\r` (the reader
+    /// thread, which scans each block for quotes anyway, looks for both in one pass).
+    fn parse_plain_rows(&self, block: &[u8], first_row: u64, recycled: Parsed) -> Option<Parsed> {
         let columns = self.header.len();
         let mut slots = vec![Slot::Time; columns];
         slots[self.run_col] = Slot::Run;
@@ -556,16 +562,21 @@ fn plain_index(line: &[u8], i: usize) -> Option<(usize, usize)> {
 /// newline outside quotes, `None` if it has none.
 fn last_record_end(buf: &[u8]) -> Option<usize> {
     // The memchr crate's search: `<[u8]>::contains` was a slower scan (callgrind).
-    if memchr::memchr(b'"', buf).is_none() {
+    record_end_before(buf, memchr::memchr(b'"', buf).is_some())
+}
+
+/// [`last_record_end`] of `buf`, which holds a quote if `quoted`.
+fn record_end_before(buf: &[u8], quoted: bool) -> Option<usize> {
+    if !quoted {
         return memchr::memrchr(b'\n', buf).map(|i| i + 1);
     }
     // A quoted field may hold a newline; quotes toggle (an escaped "" toggles twice).
-    let mut quoted = false;
+    let mut inside = false;
     let mut end = None;
     for (i, &b) in buf.iter().enumerate() {
         match b {
-            b'"' => quoted = !quoted,
-            b'\n' if !quoted => end = Some(i + 1),
+            b'"' => inside = !inside,
+            b'\n' if !inside => end = Some(i + 1),
             _ => {}
         }
     }
@@ -735,7 +746,7 @@ fn stream(
     buf.drain(..header_end);
 
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get().clamp(1, 4));
-    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>)>(workers);
+    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>, bool)>(workers);
     let work_rx = Mutex::new(work_rx);
     let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(workers + 1);
     // Blocks parsed and parses evaluated come back to be filled again: a fresh allocation per
@@ -759,7 +770,11 @@ fn stream(
                         return;
                     }
                 };
-                let cut = match (end, last_record_end(&buf)) {
+                // One scan tells whether a quote may hide a newline (then the cut needs a
+                // closer look) and whether the rows can be read plain (no quote, no `\r`).
+                let odd = memchr::memchr2(b'"', b'\r', &buf).is_some();
+                let quoted = odd && memchr::memchr(b'"', &buf).is_some();
+                let cut = match (end, record_end_before(&buf, quoted)) {
                     (true, _) => buf.len(),
                     (false, Some(cut)) => cut,
                     // A record longer than the block: read on.
@@ -775,7 +790,7 @@ fn stream(
                 buf.truncate(cut);
                 let block = std::mem::replace(&mut buf, rest);
                 let lines = memchr::memchr_iter(b'\n', &block).count() as u64;
-                if block.is_empty() || work_tx.send((index, row, block)).is_err() {
+                if block.is_empty() || work_tx.send((index, row, block, !odd)).is_err() {
                     return;
                 }
                 row += lines;
@@ -794,7 +809,7 @@ fn stream(
                         .lock()
                         .map_err(|_| ())
                         .and_then(|rx| rx.recv().map_err(|_| ()));
-                    let Ok((index, row, block)) = next else {
+                    let Ok((index, row, block, plain)) = next else {
                         return;
                     };
                     let recycled = parses_back_rx
@@ -802,7 +817,11 @@ fn stream(
                         .ok()
                         .and_then(|rx| rx.try_recv().ok())
                         .unwrap_or_default();
-                    let parsed = match plan.parse_plain(&block, row, recycled) {
+                    let parsed = match if plain {
+                        plan.parse_plain_rows(&block, row, recycled)
+                    } else {
+                        plan.parse_plain(&block, row, recycled)
+                    } {
                         Some(parsed) => Ok(parsed),
                         None => plan.parse(&block, row),
                     };
