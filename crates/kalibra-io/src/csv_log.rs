@@ -223,6 +223,10 @@ struct Plan<'f> {
     time_col: Option<usize>,
     /// Per array, where its values start in a parsed row (`None` if not in the file).
     offsets: [Option<usize>; ARRAYS.len()],
+    /// Per array, the range of its values in a parsed row and whether it is a diagonal
+    /// matrix: [`Plan::cell`] runs once per row on the evaluating thread, so it looks up
+    /// nothing in `layouts` (callgrind, `kalibra eval` on the bench's CSV log).
+    spans: [Option<(std::ops::Range<usize>, bool)>; ARRAYS.len()],
     /// Values per parsed row: every array's cell side by side.
     width: usize,
     /// The most rows the file can hold, when its size is known: a row has at least one byte
@@ -359,6 +363,12 @@ impl Plan<'_> {
         if memchr::memchr2(b'"', b'\r', block).is_some() {
             return None;
         }
+        self.parse_plain_rows(block, first_row, recycled)
+    }
+
+    /// [`Plan::parse_plain`] of a block known to hold no quote and no `\r` (the reader
+    /// thread, which scans each block for quotes anyway, looks for both in one pass).
+    fn parse_plain_rows(&self, block: &[u8], first_row: u64, recycled: Parsed) -> Option<Parsed> {
         let columns = self.header.len();
         let mut slots = vec![Slot::Time; columns];
         slots[self.run_col] = Slot::Run;
@@ -385,6 +395,7 @@ impl Plan<'_> {
         while start < block.len() {
             let end = memchr::memchr(b'\n', &block[start..]).map_or(block.len(), |e| start + e);
             let line = &block[start..end];
+            let line_start = start;
             start = end + 1;
             if line.is_empty() {
                 return None;
@@ -394,21 +405,29 @@ impl Plan<'_> {
             let (mut run, mut step, mut time) = (0, 0, None);
             let (mut present, mut empty) = ([false; ARRAYS.len()], [false; ARRAYS.len()]);
             let mut i = 0;
+            // Blanks around a field are skipped where they stand: a value read by
+            // `quick_number` starts with a digit or `-`, so none precede it.
             for (c, slot) in slots.iter().enumerate() {
                 if c > 0 {
                     if line.get(i) != Some(&b',') {
-                        return None;
+                        i = blanks(line, i);
+                        if line.get(i) != Some(&b',') {
+                            return None;
+                        }
                     }
                     i += 1;
                 }
-                i = blanks(line, i);
                 match *slot {
-                    Slot::Run => (run, i) = plain_index(line, i)?,
-                    Slot::Step => (step, i) = plain_index(line, i)?,
-                    Slot::Time => (time, i) = plain_number(line, i)?,
                     Slot::Value(k, array) => {
+                        if let Some((v, end)) = crate::decimal::quick_number(block, line_start + i)
+                        {
+                            parsed.values[at + k] = v;
+                            present[array] = true;
+                            i = end - line_start;
+                            continue;
+                        }
                         let value;
-                        (value, i) = plain_number(line, i)?;
+                        (value, i) = plain_number(line, blanks(line, i))?;
                         match value {
                             Some(v) => {
                                 parsed.values[at + k] = v;
@@ -417,9 +436,12 @@ impl Plan<'_> {
                             None => empty[array] = true,
                         }
                     }
+                    Slot::Run => (run, i) = plain_index(line, blanks(line, i))?,
+                    Slot::Step => (step, i) = plain_index(line, blanks(line, i))?,
+                    Slot::Time => (time, i) = number_at(block, line_start, line, blanks(line, i))?,
                 }
-                i = blanks(line, i);
             }
+            i = blanks(line, i);
             if i != line.len() {
                 return None;
             }
@@ -446,12 +468,11 @@ impl Plan<'_> {
     /// The cell of a parsed row whose values are `values`.
     fn cell<'a>(&self, row: &RowMeta, values: &'a [f64]) -> Cell<'a> {
         let slice = |a: usize| -> Option<&'a [f64]> {
-            let start = self.offsets[a]?;
-            let layout = self.layouts.iter().find(|l| l.array == a)?;
-            row.logged[a].then(|| &values[start..start + layout.columns.len()])
+            let (range, _) = self.spans[a].as_ref()?;
+            row.logged[a].then(|| &values[range.clone()])
         };
         let matrix = |a: usize| {
-            let diagonal = self.layouts.iter().any(|l| l.array == a && l.diagonal);
+            let diagonal = self.spans[a].as_ref().is_some_and(|(_, d)| *d);
             slice(a).map(|v| {
                 if diagonal {
                     MatrixCell::Diagonal(v)
@@ -506,6 +527,22 @@ fn plain_number(line: &[u8], i: usize) -> Option<(Option<f64>, usize)> {
     }
 }
 
+/// [`plain_number`] at `i` of `line`, which starts at `line_start` of `block`: the common
+/// forms read by [`crate::decimal::quick_number`] (the same value and end), the others by
+/// fast-float2. The quick reading never passes the line's end (a newline is no digit).
+#[inline(always)]
+fn number_at(
+    block: &[u8],
+    line_start: usize,
+    line: &[u8],
+    i: usize,
+) -> Option<(Option<f64>, usize)> {
+    match crate::decimal::quick_number(block, line_start + i) {
+        Some((value, end)) => Some((Some(value), end - line_start)),
+        None => plain_number(line, i),
+    }
+}
+
 /// The whole number (digits only) at `i` in `line`, and where it ends.
 fn plain_index(line: &[u8], i: usize) -> Option<(usize, usize)> {
     let digits = line[i.min(line.len())..]
@@ -524,16 +561,22 @@ fn plain_index(line: &[u8], i: usize) -> Option<(usize, usize)> {
 /// Where `buf` (starting at a record) can be cut after a whole record: just after its last
 /// newline outside quotes, `None` if it has none.
 fn last_record_end(buf: &[u8]) -> Option<usize> {
-    if !buf.contains(&b'"') {
-        return buf.iter().rposition(|&b| b == b'\n').map(|i| i + 1);
+    // The memchr crate's search: `<[u8]>::contains` was a slower scan (callgrind).
+    record_end_before(buf, memchr::memchr(b'"', buf).is_some())
+}
+
+/// [`last_record_end`] of `buf`, which holds a quote if `quoted`.
+fn record_end_before(buf: &[u8], quoted: bool) -> Option<usize> {
+    if !quoted {
+        return memchr::memrchr(b'\n', buf).map(|i| i + 1);
     }
     // A quoted field may hold a newline; quotes toggle (an escaped "" toggles twice).
-    let mut quoted = false;
+    let mut inside = false;
     let mut end = None;
     for (i, &b) in buf.iter().enumerate() {
         match b {
-            b'"' => quoted = !quoted,
-            b'\n' if !quoted => end = Some(i + 1),
+            b'"' => inside = !inside,
+            b'\n' if !inside => end = Some(i + 1),
             _ => {}
         }
     }
@@ -541,25 +584,17 @@ fn last_record_end(buf: &[u8]) -> Option<usize> {
 }
 
 /// Reads `source` until `buf` holds at least `want` bytes or the end; returns whether the end
-/// was reached.
+/// was reached. `read_to_end` reads into the spare capacity without zeroing it first (the
+/// blocks come back to be filled again, so zeroing them was pure cost: callgrind, `kalibra
+/// eval` on the bench's CSV log).
 fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Result<bool> {
-    while buf.len() < want {
-        let start = buf.len();
-        buf.resize(want, 0);
-        match source.read(&mut buf[start..]) {
-            Ok(0) => {
-                buf.truncate(start);
-                return Ok(true);
-            }
-            Ok(got) => buf.truncate(start + got),
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => buf.truncate(start),
-            Err(e) => {
-                buf.truncate(start);
-                return Err(e);
-            }
-        }
+    let missing = want.saturating_sub(buf.len());
+    if missing == 0 {
+        return Ok(false);
     }
-    Ok(false)
+    buf.reserve(missing);
+    source.by_ref().take(missing as u64).read_to_end(buf)?;
+    Ok(buf.len() < want)
 }
 
 /// The plan of a CSV log whose header is `header` (the file's first record) and whose size is
@@ -577,6 +612,7 @@ fn plan<'f>(
     };
     let mut contents = Contents::default();
     let mut offsets = [None; ARRAYS.len()];
+    let mut spans = [const { None }; ARRAYS.len()];
     let mut width = 0;
     for l in &layouts {
         *match ARRAYS[l.array] {
@@ -587,6 +623,7 @@ fn plan<'f>(
             _ => &mut contents.innovation_cov,
         } = Some(l.dim);
         offsets[l.array] = Some(width);
+        spans[l.array] = Some((width..width + l.columns.len(), l.diagonal));
         width += l.columns.len();
     }
     let plan = Plan {
@@ -597,6 +634,7 @@ fn plan<'f>(
         step_col,
         time_col: find(Column::Time),
         offsets,
+        spans,
         width,
         max_rows: size.map(|s| s / (rows.header.len().max(1) as u64)),
     };
@@ -708,7 +746,7 @@ fn stream(
     buf.drain(..header_end);
 
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get().clamp(1, 4));
-    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>)>(workers);
+    let (work_tx, work_rx) = mpsc::sync_channel::<(usize, u64, Vec<u8>, bool)>(workers);
     let work_rx = Mutex::new(work_rx);
     let (done_tx, done_rx) = mpsc::sync_channel::<BlockResult>(workers + 1);
     // Blocks parsed and parses evaluated come back to be filled again: a fresh allocation per
@@ -732,7 +770,11 @@ fn stream(
                         return;
                     }
                 };
-                let cut = match (end, last_record_end(&buf)) {
+                // One scan tells whether a quote may hide a newline (then the cut needs a
+                // closer look) and whether the rows can be read plain (no quote, no `\r`).
+                let odd = memchr::memchr2(b'"', b'\r', &buf).is_some();
+                let quoted = odd && memchr::memchr(b'"', &buf).is_some();
+                let cut = match (end, record_end_before(&buf, quoted)) {
                     (true, _) => buf.len(),
                     (false, Some(cut)) => cut,
                     // A record longer than the block: read on.
@@ -748,7 +790,7 @@ fn stream(
                 buf.truncate(cut);
                 let block = std::mem::replace(&mut buf, rest);
                 let lines = memchr::memchr_iter(b'\n', &block).count() as u64;
-                if block.is_empty() || work_tx.send((index, row, block)).is_err() {
+                if block.is_empty() || work_tx.send((index, row, block, !odd)).is_err() {
                     return;
                 }
                 row += lines;
@@ -767,7 +809,7 @@ fn stream(
                         .lock()
                         .map_err(|_| ())
                         .and_then(|rx| rx.recv().map_err(|_| ()));
-                    let Ok((index, row, block)) = next else {
+                    let Ok((index, row, block, plain)) = next else {
                         return;
                     };
                     let recycled = parses_back_rx
@@ -775,7 +817,11 @@ fn stream(
                         .ok()
                         .and_then(|rx| rx.try_recv().ok())
                         .unwrap_or_default();
-                    let parsed = match plan.parse_plain(&block, row, recycled) {
+                    let parsed = match if plain {
+                        plan.parse_plain_rows(&block, row, recycled)
+                    } else {
+                        plan.parse_plain(&block, row, recycled)
+                    } {
                         Some(parsed) => Ok(parsed),
                         None => plan.parse(&block, row),
                     };
@@ -1086,6 +1132,51 @@ mod tests {
         ] {
             assert!(
                 plan.parse_plain(odd.as_bytes(), 2, Parsed::default())
+                    .is_none(),
+                "{odd:?}"
+            );
+        }
+    }
+
+    /// As `plain_rows_are_read_as_the_csv_crate_reads_them`, with the rows in the middle of
+    /// a long block, where `decimal::quick_number` reads the numbers (it needs 40 bytes from
+    /// a number's start): blanks around fields, empty cells, every form of number.
+    #[test]
+    fn plain_rows_mid_block_are_read_as_the_csv_crate_reads_them() {
+        let header =
+            "run,step,time,truth_0,truth_1,estimate_0,estimate_1,covariance_0_0,covariance_1_1\n";
+        let plan = plan_of(header);
+        let filler = "9,9,9.5,1,2,3,4,5,6\n".repeat(4);
+        let rows = [
+            "0,0,0.5,1,2,3,4,5,6\n",
+            "0,1,1.5,-7.399621529173474,26.541660839191493,0,-0,49.99999999999999,25\n",
+            "0, 1 ,1.5,\t-0, +1.5 ,.5,5.,1e5,1E-300\n",
+            " 0 ,\t2\t, 2.5 ,0.30000000000000004 , 123456789012345678901234,,, 4.9e-324,2.2\n",
+            "1,0,,1.7976931348623157e308,-2.5e-3,0.1000000000000000055511151231257827021181583404541015625,7,8,9\n",
+            "1,1,3,1234567.1234567891,12345678.5,9007199254740993,9007199254740992,0.000001,-0.5\n",
+            "1,2,3,1 ,2\t,3 , 4,5\t,\t6 \n",
+        ];
+        let block = format!("{}{}", rows.concat(), filler);
+        let fast = plan
+            .parse_plain(block.as_bytes(), 2, Parsed::default())
+            .expect("a plain block");
+        let slow = plan.parse(block.as_bytes(), 2).unwrap();
+        assert_eq!(bits(&fast), bits(&slow));
+        assert_eq!(fast.rows.len(), rows.len() + 4);
+        for odd in [
+            "0,0,0.5,1,2,3,4,5,6 7\n",
+            "0,0,0.5,1,2,3,4,5,6,\n",
+            "0,0,0.5,1,2,3,4,5\n",
+            "0,0,0.5,1.5x,2,3,4,5,6\n",
+            "0,0,0.5,1.5e,2,3,4,5,6\n",
+            "0,0,0.5,1,2,3,,5,6\n",
+            "0,0,0.5,1;2,3,4,5,6,7\n",
+            "0,0,0.5,--1,2,3,4,5,6\n",
+            "0,0,0.5,1,2,3,4,5,6\t\u{a0}\n",
+        ] {
+            let block = format!("{odd}{filler}");
+            assert!(
+                plan.parse_plain(block.as_bytes(), 2, Parsed::default())
                     .is_none(),
                 "{odd:?}"
             );

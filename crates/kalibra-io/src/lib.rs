@@ -44,6 +44,7 @@
 mod arrays;
 mod csv_log;
 mod csv_rows;
+mod decimal;
 pub mod document;
 pub mod error;
 pub mod finite;
