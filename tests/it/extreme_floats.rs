@@ -1098,6 +1098,7 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("Gaussian::new", Cover::Driven),
     ("propagate", Cover::Reason(KERNEL)),
     ("product", Cover::Reason(KERNEL)),
+    ("product_transpose", Cover::Reason(KERNEL)),
     ("innovation_covariance", Cover::Reason(KERNEL)),
     ("add_scatter", Cover::Reason(KERNEL)),
     ("add_cross_scatter", Cover::Reason(KERNEL)),

@@ -68,8 +68,61 @@ where
     if let Some(par) = backend::route(a.shape_generic().0, p.shape_generic().0) {
         return backend::propagate(a, p, par);
     }
+    // Fixed sizes: written out and inlined, the same sums in the same order as nalgebra's
+    // out-of-line product (`cargo xtask bench smooth`).
+    if is_fixed::<N>() && is_fixed::<R>() {
+        let ap = mul_fixed(a, p);
+        return mul_fixed_t(&ap, a);
+    }
     let ap = a * p;
     ap * a.transpose()
+}
+
+/// `a b` for fixed sizes, each entry summed over `k` from left to right as nalgebra's product
+/// sums it (so the bits are its bits), written out so that it inlines into its caller.
+#[inline(always)]
+fn mul_fixed<R: Dim, K: Dim, C: Dim>(
+    a: &OMatrix<f64, R, K>,
+    b: &OMatrix<f64, K, C>,
+) -> OMatrix<f64, R, C>
+where
+    DefaultAllocator: Allocator<R, K> + Allocator<K, C> + Allocator<R, C>,
+{
+    let mut out = OMatrix::zeros_generic(a.shape_generic().0, b.shape_generic().1);
+    for j in 0..b.ncols() {
+        for i in 0..a.nrows() {
+            let mut acc = 0.0;
+            for k in 0..a.ncols() {
+                let term = a[(i, k)] * b[(k, j)];
+                acc = if k == 0 { term } else { acc + term };
+            }
+            out[(i, j)] = acc;
+        }
+    }
+    out
+}
+
+/// `a b^T` for fixed sizes, in [`mul_fixed`]'s order.
+#[inline(always)]
+fn mul_fixed_t<R: Dim, K: Dim, C: Dim>(
+    a: &OMatrix<f64, R, K>,
+    b: &OMatrix<f64, C, K>,
+) -> OMatrix<f64, R, C>
+where
+    DefaultAllocator: Allocator<R, K> + Allocator<C, K> + Allocator<R, C>,
+{
+    let mut out = OMatrix::zeros_generic(a.shape_generic().0, b.shape_generic().0);
+    for j in 0..b.nrows() {
+        for i in 0..a.nrows() {
+            let mut acc = 0.0;
+            for k in 0..a.ncols() {
+                let term = a[(i, k)] * b[(j, k)];
+                acc = if k == 0 { term } else { acc + term };
+            }
+            out[(i, j)] = acc;
+        }
+    }
+    out
 }
 
 /// The product `a b`: nalgebra's `a * b`, or faer's for large `Dyn` sizes.
@@ -95,10 +148,47 @@ where
 {
     assert_shape("product: B", b.shape(), (a.ncols(), b.ncols()));
     let (r, k) = a.shape_generic();
+    if is_fixed::<R>() && is_fixed::<K>() && is_fixed::<C>() {
+        return mul_fixed(a, b);
+    }
     if let Some(par) = backend::route3(r, k, b.shape_generic().1) {
         return backend::product(a, b, par);
     }
     a * b
+}
+
+/// The product `a b^T`, as [`product`] of `a` and `b`'s transpose computes it, without forming
+/// the transpose for fixed sizes.
+///
+/// ```
+/// use kalibra_linalg::{product_transpose, Matrix2};
+/// let a = Matrix2::new(1.0, 2.0, 3.0, 4.0);
+/// assert_eq!(product_transpose(&a, &a), a * a.transpose());
+/// ```
+///
+/// # Panics
+/// If the `Dyn` sizes do not fit (`a` and `b` differ in their number of columns): these are
+/// the filters' hot-path kernels, and take sizes already checked where they entered (a caller
+/// with outside data checks with [`check_dim`] first). Fixed sizes cannot disagree.
+#[inline]
+pub fn product_transpose<R: Dim, K: Dim, C: Dim>(
+    a: &OMatrix<f64, R, K>,
+    b: &OMatrix<f64, C, K>,
+) -> OMatrix<f64, R, C>
+where
+    DefaultAllocator: Allocator<R, K> + Allocator<C, K> + Allocator<K, C> + Allocator<R, C>,
+{
+    assert_shape("product_transpose: B", b.shape(), (b.nrows(), a.ncols()));
+    if is_fixed::<R>() && is_fixed::<K>() && is_fixed::<C>() {
+        return mul_fixed_t(a, b);
+    }
+    product(a, &b.transpose())
+}
+
+/// Whether `D` is a compile-time size.
+#[inline(always)]
+fn is_fixed<D: Dim>() -> bool {
+    D::try_to_usize().is_some()
 }
 
 /// `(P H^T, S)` with the innovation covariance `S = H P H^T + R` symmetrised: the first half
@@ -134,8 +224,8 @@ where
     if let Some(par) = backend::route(p.shape_generic().0, r.shape_generic().0) {
         return backend::innovation_covariance(p, h, r, par);
     }
-    let pht = p * h.transpose();
-    let mut s = h * &pht + r;
+    let pht = product_transpose(p, h);
+    let mut s = product(h, &pht) + r;
     symmetrize(&mut s);
     (pht, s)
 }
@@ -263,7 +353,7 @@ where
     if let Some(par) = backend::route(p.shape_generic().0, r.shape_generic().0) {
         return backend::joseph_update(p, k, h, r, par);
     }
-    let mut ikh = -(k * h);
+    let mut ikh = -product(k, h);
     for i in 0..ikh.nrows() {
         ikh[(i, i)] += 1.0;
     }
@@ -364,6 +454,72 @@ mod tests {
             standard_update(&p, &k, &h),
             epsilon = 1e-12
         );
+    }
+
+    /// Entries spread over many binades and both signs (with zeros, signed zeros and
+    /// infinities among them), from a 64-bit linear congruential sequence.
+    fn entries<R: Dim, C: Dim>(seed: u64, r: R, c: C) -> OMatrix<f64, R, C>
+    where
+        DefaultAllocator: Allocator<R, C>,
+    {
+        let mut state = seed;
+        OMatrix::from_fn_generic(r, c, |_, _| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            match state >> 60 {
+                0 => 0.0,
+                1 => -0.0,
+                2 if seed % 2 == 1 => f64::INFINITY,
+                _ => {
+                    let mantissa = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                    mantissa * f64::powi(2.0, ((state >> 4) % 40) as i32 - 20)
+                }
+            }
+        })
+    }
+
+    /// The bits of every entry, NaN as one pattern (its payload is not part of the promise).
+    fn bits<R: Dim, C: Dim>(m: &OMatrix<f64, R, C>) -> Vec<u64>
+    where
+        DefaultAllocator: Allocator<R, C>,
+    {
+        m.iter()
+            .map(|v| if v.is_nan() { u64::MAX } else { v.to_bits() })
+            .collect()
+    }
+
+    /// The written-out fixed-size products give nalgebra's bits, so that the filters' numbers
+    /// do not depend on which of the two computed them.
+    fn fixed_products_are_nalgebras<const R: usize, const K: usize, const C: usize>() {
+        use nalgebra::Const;
+        for seed in 0..64 {
+            let a = entries(seed, Const::<R>, Const::<K>);
+            let b = entries(seed + 1000, Const::<K>, Const::<C>);
+            let bt = b.transpose();
+            let p = entries(seed + 2000, Const::<K>, Const::<K>);
+            assert_eq!(bits(&product(&a, &b)), bits(&(a * b)), "a b, seed {seed}");
+            assert_eq!(
+                bits(&product_transpose(&a, &bt)),
+                bits(&(a * b)),
+                "a b^T, seed {seed}"
+            );
+            assert_eq!(
+                bits(&propagate(&a, &p)),
+                bits(&(a * p * a.transpose())),
+                "a p a^T, seed {seed}"
+            );
+        }
+    }
+
+    #[test]
+    fn fixed_products_equal_nalgebras_to_the_bit() {
+        fixed_products_are_nalgebras::<4, 4, 4>();
+        fixed_products_are_nalgebras::<2, 4, 4>();
+        fixed_products_are_nalgebras::<4, 2, 1>();
+        fixed_products_are_nalgebras::<3, 5, 2>();
+        fixed_products_are_nalgebras::<1, 1, 1>();
+        fixed_products_are_nalgebras::<6, 3, 6>();
     }
 
     #[test]

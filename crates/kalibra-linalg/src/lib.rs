@@ -101,7 +101,7 @@ pub use error::LinalgError;
 pub use gaussian::Gaussian;
 pub use kernels::{
     add_cross_scatter, add_scatter, all_finite, check_dim, check_finite, innovation_covariance,
-    joseph_update, product, propagate, standard_update, symmetrize,
+    joseph_update, product, product_transpose, propagate, standard_update, symmetrize,
 };
 pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,

@@ -22,7 +22,7 @@
 //! (`tests/smooth.rs`, `a_non_finite_measurement_fails_smooth_as_forward`).
 
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, joseph_update, propagate};
-use kalibra_linalg::{all_finite, symmetrize};
+use kalibra_linalg::{all_finite, innovation_covariance, product, product_transpose, symmetrize};
 use kalibra_models::{LinearDynamics, LinearMeasurement};
 use nalgebra::Cholesky;
 
@@ -140,13 +140,11 @@ where
             let zhat = measurement.measure(k, &x);
             let innovation = measurement.residual(z, &zhat);
             let (h, r) = (measurement.matrix(k), measurement.noise_cov(k, &x));
-            let pht = &p * h.transpose();
-            let mut s = &h * &pht + &r;
-            symmetrize(&mut s);
+            let (pht, s) = innovation_covariance(&p, &h, &r);
             let chol = Cholesky::new(s)?;
             sum_m += chol.l_dirty().diagonal();
             let gain = chol.solve(&pht.transpose()).transpose();
-            x = &x + &gain * &innovation;
+            x = &x + product(&gain, &innovation);
             p = joseph_update(&p, &gain, &h, &r);
         }
         updated = z.is_some();
@@ -187,14 +185,14 @@ where
     for (i, prior) in priors.iter().enumerate().rev() {
         let (head, tail) = steps.split_at_mut(i + 1);
         let (current, next) = (&mut head[i], &mut tail[0]);
-        let cross = &current.estimate.cov * dynamics.matrix(current.step).transpose();
+        let cross = product_transpose(&current.estimate.cov, &dynamics.matrix(current.step));
         let current = &mut current.estimate;
         let chol = Cholesky::new(prior.cov.clone())?;
         let gain = chol.solve(&cross.transpose()).transpose();
-        current.mean += &gain * (&next.estimate.mean - &prior.mean);
+        current.mean += product(&gain, &(&next.estimate.mean - &prior.mean));
         current.cov += propagate(&gain, &(&next.estimate.cov - &prior.cov));
         symmetrize(&mut current.cov);
-        next.lag_one = Some(&next.estimate.cov * gain.transpose());
+        next.lag_one = Some(product_transpose(&next.estimate.cov, &gain));
     }
     // Where every non-finite entry ends (see the module docs); a predicted covariance's factor
     // has a finite diagonal when the covariance is finite.
