@@ -2,6 +2,9 @@
 //! `fixtures/smooth/make_fixtures.py` wrote (run once; its JSON output is committed, so the
 //! tests need no Python): every smoothed mean, covariance and lag-one covariance to 1e-10.
 
+// Each test prints the differences it measured (`-- --nocapture`), for the record.
+#![allow(clippy::print_stderr)]
+
 use kalibra_filters::smooth::{Smoothable, Smoothed};
 use kalibra_filters::{AngleComponents, Kf, SigmaSet, Start, Ukf};
 use kalibra_linalg::{DMatrix, DVector, Dyn, Matrix2, OMatrix, U1, U2, Vector1, Vector2};
@@ -116,6 +119,9 @@ fn kf_matches_filterpy_rts_smoother() {
         .smooth(z.iter().map(Option::as_ref), Start::PredictFirst)
         .unwrap();
     let (mean, cov) = differences(&smoothed, 1, &fx, &[]);
+    eprintln!(
+        "KF smoother against FilterPy rts_smoother: max |diff| mean {mean:.2e}, covariance {cov:.2e}"
+    );
     assert!(
         mean < TOLERANCE && cov < TOLERANCE,
         "mean {mean:e}, covariance {cov:e}"
@@ -146,6 +152,9 @@ fn kf_matches_pykalman_smooth_and_pairwise_covariances() {
     for (step, expected) in smoothed.steps().iter().zip(pairwise).skip(1) {
         lag_one = lag_one.max((step.lag_one().unwrap() - matrix(expected)).amax());
     }
+    eprintln!(
+        "KF smoother against pykalman smooth: max |diff| mean {mean:.2e}, covariance {cov:.2e}, lag-one {lag_one:.2e}"
+    );
     assert!(
         mean < TOLERANCE && cov < TOLERANCE && lag_one < TOLERANCE,
         "mean {mean:e}, covariance {cov:e}, lag-one {lag_one:e}"
@@ -226,6 +235,9 @@ fn ukf_matches_filterpy_rts_smoother_across_pi() {
         .smooth(z.iter().map(Option::as_ref), Start::PredictFirst)
         .unwrap();
     let (mean, cov) = differences(&smoothed, 1, &fx, &[0]);
+    eprintln!(
+        "UKF smoother against FilterPy (angle across pi): max |diff| mean {mean:.2e}, covariance {cov:.2e}"
+    );
     assert!(
         mean < TOLERANCE && cov < TOLERANCE,
         "mean {mean:e}, covariance {cov:e}"
@@ -311,6 +323,9 @@ fn ukf_matches_filterpy_rts_smoother_on_the_pendulum() {
         .smooth(z.iter().map(Option::as_ref), Start::PredictFirst)
         .unwrap();
     let (mean, cov) = differences(&smoothed, 1, &fx, &[]);
+    eprintln!(
+        "UKF smoother against FilterPy (pendulum): max |diff| mean {mean:.2e}, covariance {cov:.2e}"
+    );
     assert!(
         mean < TOLERANCE && cov < TOLERANCE,
         "mean {mean:e}, covariance {cov:e}"

@@ -26,6 +26,9 @@
 //! Smoothing the run: the covariance form's backward pass fails in both filters, the
 //! square-root backward pass of the `SqrtKf` carries on (the last test).
 
+// Each test prints what the filters returned (`-- --nocapture`), for the record.
+#![allow(clippy::print_stderr)]
+
 use kalibra_filters::smooth::{Smoothable, Smoothed};
 use kalibra_filters::{Filter, FilterError, Kf, SigmaSet, SqrtKf, SqrtUkf, Start, StepRecord, Ukf};
 use kalibra_linalg::{Matrix1, Matrix3, OMatrix, OVector, U1, U3, Vector1, Vector3};
@@ -145,6 +148,20 @@ fn the_joseph_kf_loses_definiteness_where_the_square_root_kf_carries_on() {
 
     let (sqrt, records) = run(SqrtKf::new(&still, NearlyCollinear, x0, p0).unwrap());
     let records = records.unwrap();
+    eprintln!(
+        "Kf: {}, P+ eigenvalues {:?}; SqrtKf: mean {:?} against the exact {:?} (relative error \
+         {:.1e}), P+ eigenvalues {:?}",
+        kf_records
+            .as_ref()
+            .map_or_else(|e| e.to_string(), |_| "Ok".into()),
+        kf.covariance().symmetric_eigenvalues().as_slice(),
+        sqrt.mean().as_slice(),
+        exact.as_slice(),
+        relative_error(sqrt.mean(), &exact),
+        (sqrt.factor() * sqrt.factor().transpose())
+            .symmetric_eigenvalues()
+            .as_slice(),
+    );
     assert!(positive_factor(sqrt.factor()), "{}", sqrt.factor());
     // About 1e-16 / d of rounding reaches the estimate through H S- (nearly collinear rows).
     assert!(
@@ -183,6 +200,16 @@ fn the_ukf_loses_the_second_measurement_where_the_square_root_ukf_carries_on() {
 
     let (sqrt, records) = run(SqrtUkf::new(&still, NearlyCollinear, x0, p0, set).unwrap());
     records.unwrap();
+    eprintln!(
+        "Ukf: {}, mean {:?}; SqrtUkf: mean {:?} against the exact {:?} (relative error {:.1e})",
+        ukf_records
+            .as_ref()
+            .map_or_else(|e| e.to_string(), |_| "Ok".into()),
+        ukf.mean().as_slice(),
+        sqrt.mean().as_slice(),
+        exact.as_slice(),
+        relative_error(sqrt.mean(), &exact),
+    );
     assert!(positive_factor(sqrt.factor()), "{}", sqrt.factor());
     assert!(
         relative_error(sqrt.mean(), &exact) < 1e-6,
