@@ -5,6 +5,11 @@
 //!
 //! `cargo run --release -p kalibra-filters --example smooth_w1 -- [kalibra|hand] [runs] [steps]`
 //!
+//! Run it with `MALLOC_MMAP_THRESHOLD_=1000000000 MALLOC_TRIM_THRESHOLD_=1000000000`: otherwise
+//! glibc maps the hand loop's zeroed vector afresh for every run, and its page faults (a tenth
+//! of its time under `perf record -e cpu-clock`) are a cost the bench, whose earlier
+//! allocations have raised glibc's thresholds, does not see.
+//!
 //! The measurements are a cheap deterministic sequence around a zero truth: the instruction
 //! count does not depend on the values, only on the model's sizes.
 
