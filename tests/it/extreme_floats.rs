@@ -1099,6 +1099,7 @@ pub const FLOAT_FUNCTIONS: &[(&str, Cover)] = &[
     ("propagate", Cover::Reason(KERNEL)),
     ("product", Cover::Reason(KERNEL)),
     ("product_transpose", Cover::Reason(KERNEL)),
+    ("cholesky_solve_right", Cover::Reason(KERNEL)),
     ("innovation_covariance", Cover::Reason(KERNEL)),
     ("add_scatter", Cover::Reason(KERNEL)),
     ("add_cross_scatter", Cover::Reason(KERNEL)),

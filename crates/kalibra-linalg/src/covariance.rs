@@ -180,7 +180,7 @@ where
             backend::cholesky_solve_right_in_place(self.chol.l_dirty(), &mut x, par);
             x
         } else {
-            self.chol.solve(&b.transpose()).transpose()
+            crate::cholesky_solve_right(&self.chol, b)
         };
         finite_solution(x, crate::all_finite(b))
     }

@@ -100,8 +100,9 @@ pub use covariance::{
 pub use error::LinalgError;
 pub use gaussian::Gaussian;
 pub use kernels::{
-    add_cross_scatter, add_scatter, all_finite, check_dim, check_finite, innovation_covariance,
-    joseph_update, product, product_transpose, propagate, standard_update, symmetrize,
+    add_cross_scatter, add_scatter, all_finite, check_dim, check_finite, cholesky_solve_right,
+    innovation_covariance, joseph_update, product, product_transpose, propagate, standard_update,
+    symmetrize,
 };
 pub use lyapunov::{
     LYAPUNOV_MAX_DOUBLINGS, SPECTRAL_MAX_SQUARINGS, discrete_lyapunov, spectral_radius,

@@ -22,7 +22,9 @@
 //! (`tests/smooth.rs`, `a_non_finite_measurement_fails_smooth_as_forward`).
 
 use kalibra_linalg::{Alloc, DefaultAllocator, Dim, OMatrix, OVector, joseph_update, propagate};
-use kalibra_linalg::{all_finite, innovation_covariance, product, product_transpose, symmetrize};
+use kalibra_linalg::{
+    all_finite, cholesky_solve_right, innovation_covariance, product, product_transpose, symmetrize,
+};
 use kalibra_models::{LinearDynamics, LinearMeasurement};
 use nalgebra::Cholesky;
 
@@ -143,7 +145,7 @@ where
             let (pht, s) = innovation_covariance(&p, &h, &r);
             let chol = Cholesky::new(s)?;
             sum_m += chol.l_dirty().diagonal();
-            let gain = chol.solve(&pht.transpose()).transpose();
+            let gain = cholesky_solve_right(&chol, &pht);
             x = &x + product(&gain, &innovation);
             p = joseph_update(&p, &gain, &h, &r);
         }
@@ -188,7 +190,7 @@ where
         let cross = product_transpose(&current.estimate.cov, &dynamics.matrix(current.step));
         let current = &mut current.estimate;
         let chol = Cholesky::new(prior.cov.clone())?;
-        let gain = chol.solve(&cross.transpose()).transpose();
+        let gain = cholesky_solve_right(&chol, &cross);
         current.mean += product(&gain, &(&next.estimate.mean - &prior.mean));
         current.cov += propagate(&gain, &(&next.estimate.cov - &prior.cov));
         symmetrize(&mut current.cov);
