@@ -18,9 +18,15 @@
 //!   factor, for process noise that is often rank-deficient (`Q = G G^T`).
 //! * Kernels for the filter algebra: [`propagate`] (`F P F^T`), [`innovation_covariance`]
 //!   (`P H^T` and `S`), the gain by [`Covariance::solve_right`], [`joseph_update`],
-//!   [`standard_update`], [`product`], [`symmetrize`], [`sigma_sqrt`], a matrix square root
-//!   for sigma points with a documented fallback, and the unscented transform's sums of outer
-//!   products [`add_scatter`] and [`add_cross_scatter`].
+//!   [`standard_update`], [`product`], [`product_transpose`], [`cholesky_solve_right`],
+//!   [`symmetrize`], [`sigma_sqrt`], a matrix square root for sigma points with a documented
+//!   fallback, and the unscented transform's sums of outer products [`add_scatter`] and
+//!   [`add_cross_scatter`]. For fixed sizes the products and the Cholesky solves are written
+//!   out in the loops they inline into, in nalgebra's order of operations, so their bits are
+//!   nalgebra's (the unit tests `fixed_products_equal_nalgebras_to_the_bit` and
+//!   `fixed_solves_equal_nalgebras_to_the_bit`): nalgebra's out-of-line calls return small
+//!   matrices through memory, where the next step waits to read them back (`cargo xtask bench
+//!   smooth`).
 //! * [`discrete_lyapunov`]: the stationary covariance `X = A X A^T + Q` by Smith's doubling,
 //!   with a typed error when the series diverges, and [`spectral_radius`] (Gelfand's formula
 //!   by repeated squaring).
