@@ -225,7 +225,7 @@ struct Plan<'f> {
     offsets: [Option<usize>; ARRAYS.len()],
     /// Per array, the range of its values in a parsed row and whether it is a diagonal
     /// matrix: [`Plan::cell`] runs once per row on the evaluating thread, so it looks up
-    /// nothing in `layouts` (callgrind, `kalibra eval` on the bench's CSV log).
+    /// nothing in `layouts` (`cargo xtask bench eval`).
     spans: [Option<(std::ops::Range<usize>, bool)>; ARRAYS.len()],
     /// Values per parsed row: every array's cell side by side.
     width: usize,
@@ -584,9 +584,9 @@ fn record_end_before(buf: &[u8], quoted: bool) -> Option<usize> {
 }
 
 /// Reads `source` until `buf` holds at least `want` bytes or the end; returns whether the end
-/// was reached. `read_to_end` reads into the spare capacity without zeroing it first (the
-/// blocks come back to be filled again, so zeroing them was pure cost: callgrind, `kalibra
-/// eval` on the bench's CSV log).
+/// was reached. `read_to_end` reads into the spare capacity without zeroing it first: the
+/// blocks come back to be filled again, so zeroing them is work for nothing (`cargo xtask bench
+/// eval`).
 fn fill(source: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> std::io::Result<bool> {
     let missing = want.saturating_sub(buf.len());
     if missing == 0 {

@@ -88,18 +88,7 @@ fn mul_fixed<R: Dim, K: Dim, C: Dim>(
 where
     DefaultAllocator: Allocator<R, K> + Allocator<K, C> + Allocator<R, C>,
 {
-    let mut out = OMatrix::zeros_generic(a.shape_generic().0, b.shape_generic().1);
-    for j in 0..b.ncols() {
-        for i in 0..a.nrows() {
-            let mut acc = 0.0;
-            for k in 0..a.ncols() {
-                let term = a[(i, k)] * b[(k, j)];
-                acc = if k == 0 { term } else { acc + term };
-            }
-            out[(i, j)] = acc;
-        }
-    }
-    out
+    mul_fixed_by(a, b.shape_generic().1, |k, j| b[(k, j)])
 }
 
 /// `a b^T` for fixed sizes, in [`mul_fixed`]'s order.
@@ -111,12 +100,26 @@ fn mul_fixed_t<R: Dim, K: Dim, C: Dim>(
 where
     DefaultAllocator: Allocator<R, K> + Allocator<C, K> + Allocator<R, C>,
 {
-    let mut out = OMatrix::zeros_generic(a.shape_generic().0, b.shape_generic().0);
-    for j in 0..b.nrows() {
+    mul_fixed_by(a, b.shape_generic().0, |k, j| b[(j, k)])
+}
+
+/// `a B` for the `k x cols` matrix whose entry `(k, j)` is `b(k, j)`: [`mul_fixed`] and
+/// [`mul_fixed_t`] read their right factor through it.
+#[inline(always)]
+fn mul_fixed_by<R: Dim, K: Dim, C: Dim>(
+    a: &OMatrix<f64, R, K>,
+    cols: C,
+    b: impl Fn(usize, usize) -> f64,
+) -> OMatrix<f64, R, C>
+where
+    DefaultAllocator: Allocator<R, K> + Allocator<R, C>,
+{
+    let mut out = OMatrix::zeros_generic(a.shape_generic().0, cols);
+    for j in 0..out.ncols() {
         for i in 0..a.nrows() {
             let mut acc = 0.0;
             for k in 0..a.ncols() {
-                let term = a[(i, k)] * b[(j, k)];
+                let term = a[(i, k)] * b(k, j);
                 acc = if k == 0 { term } else { acc + term };
             }
             out[(i, j)] = acc;

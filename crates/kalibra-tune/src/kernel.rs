@@ -167,27 +167,33 @@ impl Dim for usize {
 /// `c = a b` for column-major `a` (`r x k`) and `b` (`k x cols`), summing over `k` in order.
 #[inline(always)]
 fn mul(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize, cols: usize) {
-    let (a, b, c) = (&a[..r * k], &b[..k * cols], &mut c[..r * cols]);
-    for j in 0..cols {
-        for i in 0..r {
-            let mut v = 0.0;
-            for l in 0..k {
-                v += a[i + l * r] * b[l + j * k];
-            }
-            c[i + j * r] = v;
-        }
-    }
+    mul_strided(a, b, c, r, k, cols, (1, k));
 }
 
 /// `c = a b^T` for column-major `a` (`r x k`) and `b` (`cols x k`), summing over `k` in order.
 #[inline(always)]
 fn mul_t(a: &[f64], b: &[f64], c: &mut [f64], r: usize, k: usize, cols: usize) {
-    let (a, b, c) = (&a[..r * k], &b[..cols * k], &mut c[..r * cols]);
+    mul_strided(a, b, c, r, k, cols, (cols, 1));
+}
+
+/// `c = a B` where `B[l, j]` is `b[l * step.0 + j * step.1]` (`k x cols`, `b` holding
+/// `k * cols` values), summing over `k` in order: [`mul`] and [`mul_t`] read `b` by these steps.
+#[inline(always)]
+fn mul_strided(
+    a: &[f64],
+    b: &[f64],
+    c: &mut [f64],
+    r: usize,
+    k: usize,
+    cols: usize,
+    step: (usize, usize),
+) {
+    let (a, b, c) = (&a[..r * k], &b[..k * cols], &mut c[..r * cols]);
     for j in 0..cols {
         for i in 0..r {
             let mut v = 0.0;
             for l in 0..k {
-                v += a[i + l * r] * b[j + l * cols];
+                v += a[i + l * r] * b[l * step.0 + j * step.1];
             }
             c[i + j * r] = v;
         }
