@@ -4,8 +4,8 @@
 
 use kalibra_linalg::{
     Alloc, Covariance, DefaultAllocator, Dim, LinalgError, OMatrix, OVector, all_finite, check_dim,
-    check_finite, check_symmetric, innovation_covariance, joseph_update, propagate,
-    standard_update, symmetrize,
+    check_finite, check_symmetric, cholesky_solve_right, innovation_covariance, joseph_update,
+    propagate, standard_update, symmetrize,
 };
 
 use crate::as_given::lu_solve;
@@ -28,19 +28,6 @@ pub(crate) fn check_model_output<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R,
     check_dim(rows, m.nrows(), what)
         .and_then(|()| check_dim(cols, m.ncols(), what))
         .map_err(|e| FilterError::at(k, e))
-}
-
-/// `F P F^T` for a fixed-size prediction, as [`propagate`] computes it (the same products in
-/// the same order, so the same bits), but always inlined: the compiler keeps [`propagate`] out
-/// of line in the scalar KF's step, and the call, which clobbers every vector register,
-/// lengthens the step (`cargo xtask bench w1`, the scalar library).
-#[inline(always)]
-fn propagate_inline<N: Dim>(f: &OMatrix<f64, N, N>, p: &OMatrix<f64, N, N>) -> OMatrix<f64, N, N>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    let fp = f * p;
-    fp * f.transpose()
 }
 
 /// Which covariance update a filter applies.
@@ -323,11 +310,7 @@ where
         f: OMatrix<f64, N, N>,
         q: OMatrix<f64, N, N>,
     ) -> Result<(), FilterError> {
-        let propagated = if N::try_to_usize().is_some() {
-            propagate_inline(&f, &self.record.posterior.cov)
-        } else {
-            propagate(&f, &self.record.posterior.cov)
-        };
+        let propagated = propagate(&f, &self.record.posterior.cov);
         self.predict_split::<AS_GIVEN>(x_pred, f, propagated, q)
     }
 
@@ -632,19 +615,12 @@ where
         let at = |e| FilterError::at(k, e);
         let form = self.update;
         let prior = &self.record.prior;
-        // Run-time sizes go through the kernels, which may hand them to faer. Fixed sizes keep
-        // the expressions written out: the same arithmetic as the kernels' nalgebra branch,
-        // in a shorter step than through the kernel calls (`cargo xtask bench w1`), whose faer
-        // branches are dead for fixed sizes yet change how the compiler inlines the update.
+        // The kernels write fixed sizes out in nalgebra's order and are always inlined, so the
+        // step keeps its matrices in registers instead of passing them through memory to
+        // out-of-line products (`cargo xtask bench w1`, the scalar library); run-time sizes may
+        // go to faer.
         let dynamic = N::try_to_usize().is_none() || M::try_to_usize().is_none();
-        let (pht, mut s);
-        if dynamic {
-            (pht, s) = innovation_covariance(&prior.cov, &h, &r);
-        } else {
-            pht = &prior.cov * h.transpose();
-            s = &h * &pht + &r;
-            symmetrize(&mut s);
-        }
+        let (pht, s) = innovation_covariance(&prior.cov, &h, &r);
         let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(|e| {
             // NaN in H or R makes the factorisation fail too: name the real culprit.
             let culprit = check_finite(&h, "measurement Jacobian H")
@@ -655,8 +631,9 @@ where
             Some(gain) => gain.clone(),
             // K = P H^T S^-1: a solve with the factor of S (sizes agree by construction).
             None if dynamic => s.solve_right(&pht).map_err(at)?,
-            // K = P H^T S^-1 as the transpose of S^-1 (H P).
-            None => s.cholesky().solve(&pht.transpose()).transpose(),
+            // The same solve for fixed sizes, whose non-finite results the posterior check
+            // below catches.
+            None => cholesky_solve_right(s.cholesky(), &pht),
         };
         let x_post = &prior.mean + &gain * &innovation;
         let p_post = match form {

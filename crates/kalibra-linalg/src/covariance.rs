@@ -6,7 +6,7 @@ use crate::{Alloc, LinalgError, backend, check_finite};
 
 /// The Cholesky factorisation of `m` (its lower triangle), by nalgebra or, for large `Dyn`
 /// sizes, by faer ([`crate::backend`]); `None` for a non-positive or NaN pivot.
-#[inline]
+#[inline(always)]
 pub(crate) fn cholesky<D: Dim>(m: OMatrix<f64, D, D>) -> Option<Cholesky<f64, D>>
 where
     DefaultAllocator: Alloc<D>,
@@ -80,6 +80,7 @@ where
     /// # Errors
     /// [`LinalgError::NotPositiveDefinite`] if the Cholesky factorisation fails, which includes
     /// NaN entries.
+    #[inline(always)]
     pub fn from_symmetric(
         matrix: OMatrix<f64, D, D>,
         what: &'static str,
@@ -300,6 +301,7 @@ where
 /// [`LinalgError::DimensionMismatch`] or [`LinalgError::NonFinite`] for the vector,
 /// [`LinalgError::NotPositiveDefinite`] if the factorisation fails (which includes NaN
 /// entries the caller let through).
+#[inline(always)]
 pub fn quad_form_symmetric<D: Dim, S: Storage<f64, D> + IsContiguous>(
     cov: &OMatrix<f64, D, D>,
     v: &Matrix<f64, D, U1, S>,

@@ -26,7 +26,10 @@
 //!   nalgebra's (the unit tests `fixed_products_equal_nalgebras_to_the_bit` and
 //!   `fixed_solves_equal_nalgebras_to_the_bit`): nalgebra's out-of-line calls return small
 //!   matrices through memory, where the next step waits to read them back (`cargo xtask bench
-//!   smooth`).
+//!   smooth`). For the same reason these kernels, the Cholesky factorisation of
+//!   [`Covariance::from_symmetric`] and [`quad_form_symmetric`] are always inlined: left to
+//!   the compiler, a Monte Carlo study's scalar step kept some of them out of line (`cargo
+//!   xtask bench w1`, the scalar library).
 //! * [`discrete_lyapunov`]: the stationary covariance `X = A X A^T + Q` by Smith's doubling,
 //!   with a typed error when the series diverges, and [`spectral_radius`] (Gelfand's formula
 //!   by repeated squaring).
