@@ -89,6 +89,8 @@ where
     fn noise_cov(&self, _k: usize) -> OMatrix<f64, N, N> {
         self.q.matrix().clone()
     }
+    // Always inlined, as `sample_with_factor` (which says why).
+    #[inline(always)]
     fn sample_noise<R: Rng + ?Sized>(
         &self,
         _k: usize,
@@ -196,6 +198,8 @@ where
     fn noise_cov(&self, _k: usize, _x: &OVector<f64, N>) -> OMatrix<f64, M, M> {
         self.r.matrix().clone()
     }
+    // Always inlined, as `sample_with_factor` (which says why).
+    #[inline(always)]
     fn sample_noise<R: Rng + ?Sized>(
         &self,
         _k: usize,

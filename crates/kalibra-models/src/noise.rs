@@ -25,7 +25,10 @@ where
 
 /// A draw of `N(0, L L^T)` as `L n`, `n` standard normal. `L` may be rank-deficient (a
 /// semi-definite factor), which samples exactly from a singular covariance.
-#[inline]
+// Always inlined, as the linear models' `sample_noise` that call it: out of line, a simulated
+// step gets its noise back through memory and waits on it (`cargo xtask bench w1`, the scalar
+// library).
+#[inline(always)]
 pub fn sample_with_factor<D: Dim, R: Rng + ?Sized>(
     l: &OMatrix<f64, D, D>,
     rng: &mut R,

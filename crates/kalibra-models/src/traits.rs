@@ -193,6 +193,9 @@ where
     fn noise_cov(&self, k: usize) -> OMatrix<f64, N, N> {
         (**self).noise_cov(k)
     }
+    // Always inlined, so that a borrowed linear model's draw inlines as its own does
+    // (`sample_with_factor`).
+    #[inline(always)]
     fn sample_noise<R: Rng + ?Sized>(
         &self,
         k: usize,
@@ -236,6 +239,9 @@ where
     fn normalize(&self, z: &mut OVector<f64, M>) {
         (**self).normalize(z)
     }
+    // Always inlined, so that a borrowed linear model's draw inlines as its own does
+    // (`sample_with_factor`).
+    #[inline(always)]
     fn sample_noise<R: Rng + ?Sized>(
         &self,
         k: usize,
