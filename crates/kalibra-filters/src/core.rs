@@ -619,7 +619,6 @@ where
         // step keeps its matrices in registers instead of passing them through memory to
         // out-of-line products (`cargo xtask bench w1`, the scalar library); run-time sizes may
         // go to faer.
-        let dynamic = N::try_to_usize().is_none() || M::try_to_usize().is_none();
         let (pht, s) = innovation_covariance(&prior.cov, &h, &r);
         let s = Covariance::from_symmetric(s, "innovation covariance S").map_err(|e| {
             // NaN in H or R makes the factorisation fail too: name the real culprit.
@@ -629,10 +628,8 @@ where
         })?;
         let gain = match fixed_gain {
             Some(gain) => gain.clone(),
-            // K = P H^T S^-1: a solve with the factor of S (sizes agree by construction).
-            None if dynamic => s.solve_right(&pht).map_err(at)?,
-            // The same solve for fixed sizes, whose non-finite results the posterior check
-            // below catches.
+            // K = P H^T S^-1: a solve with the factor of S (sizes agree by construction),
+            // whose non-finite results the posterior check below catches.
             None => cholesky_solve_right(s.cholesky(), &pht),
         };
         let x_post = &prior.mean + &gain * &innovation;

@@ -3,8 +3,8 @@
 //! Every kernel of this crate that carries the cost of a large filter step ([`propagate`],
 //! [`product`], [`innovation_covariance`], [`joseph_update`], [`standard_update`], the
 //! Cholesky factorisations behind [`Covariance`], [`quad_form_symmetric`] and [`sigma_sqrt`],
-//! the solves with a matrix right-hand side [`Covariance::solve`] and
-//! [`Covariance::solve_right`], the products of [`discrete_lyapunov`] and
+//! the solves with a matrix right-hand side [`Covariance::solve`],
+//! [`Covariance::solve_right`] and [`cholesky_solve_right`], the products of [`discrete_lyapunov`] and
 //! [`spectral_radius`], and the UKF's sums [`add_scatter`] and [`add_cross_scatter`]) asks
 //! `route` once which code to run. Solves with one vector (the quadratic forms after their
 //! factorisation) stay with nalgebra: `O(n^2)` work that faer does not speed up measurably.
@@ -29,6 +29,7 @@
 //! [`innovation_covariance`]: crate::innovation_covariance
 //! [`Covariance::solve`]: crate::Covariance::solve
 //! [`Covariance::solve_right`]: crate::Covariance::solve_right
+//! [`cholesky_solve_right`]: crate::cholesky_solve_right
 //! [`Covariance`]: crate::Covariance
 //! [`joseph_update`]: crate::joseph_update
 //! [`standard_update`]: crate::standard_update

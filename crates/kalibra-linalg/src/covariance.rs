@@ -176,13 +176,7 @@ where
             nalgebra::allocator::Allocator<R, D> + nalgebra::allocator::Allocator<D, R>,
     {
         crate::check_dim(self.dim(), b.ncols(), "right-hand side columns")?;
-        let x = if let Some(par) = backend::route(b.shape_generic().0, b.shape_generic().1) {
-            let mut x = b.clone();
-            backend::cholesky_solve_right_in_place(self.chol.l_dirty(), &mut x, par);
-            x
-        } else {
-            crate::cholesky_solve_right(&self.chol, b)
-        };
+        let x = crate::cholesky_solve_right(&self.chol, b);
         finite_solution(x, crate::all_finite(b))
     }
 

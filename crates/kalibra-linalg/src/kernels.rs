@@ -193,7 +193,8 @@ where
 /// `b C^-1` from the Cholesky factorisation `C = L L^T`: what
 /// `chol.solve(&b.transpose()).transpose()` returns, to the bit (each row of `b` through
 /// nalgebra's forward and back substitution, in its order of operations), written out for
-/// fixed sizes up to 8 so that it inlines into its caller; nalgebra's own solve otherwise.
+/// fixed sizes up to 8 so that it inlines into its caller; nalgebra's own solve for other sizes
+/// below [`FAER_MIN_DIM`](crate::FAER_MIN_DIM), faer's from there on ([`crate::backend`]).
 /// The Kalman gain `K = P H^T S^-1` and the smoother's gain `G = C P-^-1` are such solves.
 ///
 /// ```
@@ -217,6 +218,11 @@ where
     let l = chol.l_dirty();
     let n = l.nrows();
     assert_shape("cholesky_solve_right: B", b.shape(), (b.nrows(), n));
+    if let Some(par) = backend::route(b.shape_generic().0, b.shape_generic().1) {
+        let mut x = b.clone();
+        backend::cholesky_solve_right_in_place(l, &mut x, par);
+        return x;
+    }
     if !(is_fixed::<R>() && is_fixed::<D>() && n <= 8) {
         return chol.solve(&b.transpose()).transpose();
     }
